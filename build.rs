@@ -1,0 +1,156 @@
+//! Build script: finds the system Embree (4 if its headers exist, else 3), generates Rust
+//! bindings for it and for our own C ABI in `ffi/`, and compiles the thin C++ layer in `cpp/`
+//! against the Debian packages of tinygltf, stb, nlohmann-json and OpenImageIO.
+
+use std::env;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn main() {
+    for watched in ["ffi", "cpp", "build.rs"] {
+        println!("cargo:rerun-if-changed={watched}");
+    }
+    println!("cargo:rerun-if-env-changed=EMBREE_DIR");
+    println!("cargo::rustc-check-cfg=cfg(embree4)");
+
+    let out = PathBuf::from(env::var("OUT_DIR").expect("cargo sets OUT_DIR"));
+    let embree = find_embree();
+    generate_embree_bindings(&embree, &out);
+    generate_abi_bindings(&out);
+    compile_cpp();
+}
+
+struct Embree {
+    include_dir: PathBuf,
+    version4: bool,
+}
+
+/// Embree 4 changed the ray query API (no intersect context), so the Rust wrapper needs to know
+/// which one it talks to; we prefer 4 where both are installed.
+fn find_embree() -> Embree {
+    let mut roots: Vec<PathBuf> = Vec::new();
+    if let Ok(dir) = env::var("EMBREE_DIR") {
+        roots.push(Path::new(&dir).join("include"));
+    }
+    roots.extend(["/usr/include", "/usr/local/include", "/opt/embree/include"].map(PathBuf::from));
+    for version4 in [true, false] {
+        let sub = if version4 { "embree4" } else { "embree3" };
+        for root in &roots {
+            if root.join(sub).join("rtcore.h").is_file() {
+                let lib_root = root.parent().unwrap_or(root);
+                for lib in ["lib", "lib64", "lib/x86_64-linux-gnu"] {
+                    println!(
+                        "cargo:rustc-link-search=native={}",
+                        lib_root.join(lib).display()
+                    );
+                }
+                println!("cargo:rustc-link-lib=dylib={sub}");
+                if version4 {
+                    println!("cargo:rustc-cfg=embree4");
+                }
+                return Embree {
+                    include_dir: root.clone(),
+                    version4,
+                };
+            }
+        }
+    }
+    panic!(
+        "Embree headers not found (looked for embree4/rtcore.h and embree3/rtcore.h in {roots:?}); \
+         run scripts/install-deps.sh or set EMBREE_DIR"
+    );
+}
+
+fn generate_embree_bindings(embree: &Embree, out: &Path) {
+    let mut builder = bindgen::Builder::default()
+        .header("ffi/embree.h")
+        .clang_arg(format!("-I{}", embree.include_dir.display()))
+        .allowlist_function("rtc.*")
+        .allowlist_type("RTC.*")
+        .allowlist_var("RTC.*")
+        .default_enum_style(bindgen::EnumVariation::Consts)
+        .prepend_enum_name(false)
+        .derive_default(true)
+        .layout_tests(false);
+    if embree.version4 {
+        builder = builder.clang_arg("-DICR_EMBREE4");
+    }
+    builder
+        .generate()
+        .expect("bindgen failed on the Embree header")
+        .write_to_file(out.join("embree_bindings.rs"))
+        .expect("writing Embree bindings");
+}
+
+fn generate_abi_bindings(out: &Path) {
+    bindgen::Builder::default()
+        .header("ffi/scene_io.h")
+        .header("ffi/image_io.h")
+        .allowlist_function("icr_.*")
+        .allowlist_type("icr_.*")
+        .default_enum_style(bindgen::EnumVariation::Consts)
+        .layout_tests(false)
+        .generate()
+        .expect("bindgen failed on ffi/scene_io.h or ffi/image_io.h")
+        .write_to_file(out.join("abi_bindings.rs"))
+        .expect("writing ABI bindings");
+}
+
+/// Include directories and libraries of OpenImageIO from pkg-config, with the Debian layout as
+/// the fallback so a machine without the .pc file still builds.
+fn openimageio_flags() -> (Vec<String>, Vec<String>) {
+    let query = |arg: &str| {
+        Command::new("pkg-config")
+            .args([arg, "OpenImageIO"])
+            .output()
+            .ok()
+            .filter(|o| o.status.success())
+            .map(|o| {
+                String::from_utf8_lossy(&o.stdout)
+                    .split_whitespace()
+                    .map(String::from)
+                    .collect::<Vec<_>>()
+            })
+    };
+    let includes = query("--cflags-only-I")
+        .map(|v| {
+            v.into_iter()
+                .filter_map(|f| f.strip_prefix("-I").map(String::from))
+                .collect()
+        })
+        .unwrap_or_default();
+    let mut libs: Vec<String> = query("--libs-only-l")
+        .map(|v| {
+            v.into_iter()
+                .filter_map(|f| f.strip_prefix("-l").map(String::from))
+                .collect()
+        })
+        .unwrap_or_else(|| vec!["OpenImageIO".into()]);
+    if !libs.iter().any(|l| l == "OpenImageIO_Util") {
+        libs.push("OpenImageIO_Util".into());
+    }
+    (includes, libs)
+}
+
+fn compile_cpp() {
+    let (oiio_includes, oiio_libs) = openimageio_flags();
+    let mut build = cc::Build::new();
+    build
+        .cpp(true)
+        .std("c++17")
+        .include("ffi")
+        .include("/usr/include/stb")
+        .file("cpp/scene_io.cpp")
+        .file("cpp/image_io.cpp")
+        .flag_if_supported("-Wno-unused-parameter")
+        .flag_if_supported("-Wno-missing-field-initializers")
+        .opt_level(2);
+    for dir in &oiio_includes {
+        build.include(dir);
+    }
+    build.compile("icrender_cpp");
+    for lib in &oiio_libs {
+        println!("cargo:rustc-link-lib=dylib={lib}");
+    }
+    println!("cargo:rustc-link-lib=dylib=stdc++");
+}

@@ -1,0 +1,285 @@
+// Image files for icrender (implements ffi/image_io.h on top of OpenImageIO 2.4).
+//
+// Rust decides names, layers and paths; this file only moves pixels between Rust's planar float
+// buffers and OIIO. Nothing may escape across the ABI, so every entry point catches everything.
+
+#include "../ffi/image_io.h"
+
+#include <OpenImageIO/imageio.h>
+#include <strings.h>
+
+#include <algorithm>
+#include <climits>
+#include <cstring>
+#include <exception>
+#include <map>
+#include <memory>
+#include <new>
+#include <string>
+#include <vector>
+
+namespace {
+
+// OIIO error text can span several lines; callers want one.
+std::string one_line(const std::string &text) {
+    std::string out;
+    bool pending_sep = false;
+    for (char c : text) {
+        if (c == '\n' || c == '\r') {
+            pending_sep = !out.empty();
+            continue;
+        }
+        if (pending_sep) {
+            out += "; ";
+            pending_sep = false;
+        }
+        out.push_back(static_cast<unsigned char>(c) < 0x20 ? ' ' : c);
+    }
+    return out;
+}
+
+int write_error(char *err, size_t err_len, const std::string &msg) {
+    if (err && err_len) {
+        std::string line = one_line(msg);
+        if (line.empty()) line = "unknown error";
+        size_t n = std::min(line.size(), err_len - 1);
+        // Do not cut a UTF-8 sequence in half: Rust reads this as a str.
+        if (n < line.size())
+            while (n > 0 && (static_cast<unsigned char>(line[n]) & 0xC0) == 0x80) --n;
+        std::memcpy(err, line.data(), n);
+        err[n] = '\0';
+    }
+    return 1;
+}
+
+void clear_error(char *err, size_t err_len) {
+    if (err && err_len) err[0] = '\0';
+}
+
+// OIIO keeps errors per thread and per object; fall back to a fixed text when both are empty.
+std::string oiio_error(const std::string &what, const std::string &detail) {
+    std::string d = detail.empty() ? OIIO::geterror() : detail;
+    return d.empty() ? what : what + ": " + d;
+}
+
+bool pixel_count(uint32_t width, uint32_t height, size_t channels, size_t *out) {
+    size_t wh;
+    if (__builtin_mul_overflow(size_t(width), size_t(height), &wh)) return false;
+    return !__builtin_mul_overflow(wh, channels, out);
+}
+
+// Rows per write_scanlines call: a multiple of the 16-line blocks EXR ZIP compresses, and small
+// enough that the interleaved copy stays far below the size of a many-layer frame.
+constexpr uint32_t kStripRows = 64;
+
+}  // namespace
+
+extern "C" int icr_exr_write(const char *path, uint32_t width, uint32_t height, const icr_channel *channels,
+                             size_t channel_count, const icr_attribute *attributes, size_t attribute_count,
+                             int half_float, char *err, size_t err_len) {
+    clear_error(err, err_len);
+    try {
+        if (!path || !*path) return write_error(err, err_len, "empty path");
+        if (width == 0 || height == 0 || width > uint32_t(INT_MAX) || height > uint32_t(INT_MAX))
+            return write_error(err, err_len, "invalid image size " + std::to_string(width) + "x" + std::to_string(height));
+        if (!channels || channel_count == 0) return write_error(err, err_len, "no channels to write");
+        if (channel_count > size_t(INT_MAX)) return write_error(err, err_len, "too many channels");
+        size_t total;
+        if (!pixel_count(width, height, channel_count, &total)) return write_error(err, err_len, "image too large");
+        if (attribute_count && !attributes) return write_error(err, err_len, "attributes missing");
+
+        OIIO::ImageSpec spec(int(width), int(height), int(channel_count),
+                             half_float ? OIIO::TypeDesc::HALF : OIIO::TypeDesc::FLOAT);
+        spec.channelnames.clear();
+        spec.alpha_channel = -1;
+        spec.z_channel = -1;
+        for (size_t c = 0; c < channel_count; ++c) {
+            if (!channels[c].name || !*channels[c].name)
+                return write_error(err, err_len, "channel " + std::to_string(c) + " has no name");
+            if (!channels[c].data)
+                return write_error(err, err_len, std::string("channel ") + channels[c].name + " has no data");
+            // OpenEXR keeps channels in a map by name, so a duplicate would silently replace
+            // the earlier plane.
+            if (std::find(spec.channelnames.begin(), spec.channelnames.end(), channels[c].name) !=
+                spec.channelnames.end())
+                return write_error(err, err_len, std::string("duplicate channel name ") + channels[c].name);
+            spec.channelnames.emplace_back(channels[c].name);
+            // The ImageSpec constructor guesses alpha from the channel count; only a channel
+            // really named A (or Z) should be treated specially.
+            if (spec.channelnames.back() == "A") spec.alpha_channel = int(c);
+            if (spec.channelnames.back() == "Z") spec.z_channel = int(c);
+        }
+        spec.attribute("compression", "zip");
+        for (size_t i = 0; i < attribute_count; ++i) {
+            if (!attributes[i].name || !*attributes[i].name)
+                return write_error(err, err_len, "attribute " + std::to_string(i) + " has no name");
+            spec.attribute(attributes[i].name, attributes[i].value ? attributes[i].value : "");
+        }
+
+        // By format name: the path is a temporary name whose extension says nothing.
+        std::unique_ptr<OIIO::ImageOutput> out = OIIO::ImageOutput::create("openexr");
+        if (!out) return write_error(err, err_len, oiio_error("OpenEXR writer unavailable", ""));
+        if (!out->open(path, spec)) return write_error(err, err_len, oiio_error("cannot open for writing", out->geterror()));
+
+        const size_t w = width, nch = channel_count;
+        std::vector<float> strip(w * nch * std::min<size_t>(kStripRows, height));
+        for (uint32_t y0 = 0; y0 < height; y0 += kStripRows) {
+            const uint32_t y1 = std::min<uint32_t>(height, y0 + kStripRows);
+            for (uint32_t y = y0; y < y1; ++y) {
+                float *row = strip.data() + size_t(y - y0) * w * nch;
+                const size_t src = size_t(y) * w;
+                for (size_t c = 0; c < nch; ++c) {
+                    const float *plane = channels[c].data + src;
+                    for (size_t x = 0; x < w; ++x) row[x * nch + c] = plane[x];
+                }
+            }
+            if (!out->write_scanlines(int(y0), int(y1), 0, OIIO::TypeDesc::FLOAT, strip.data())) {
+                std::string e = oiio_error("write failed", out->geterror());
+                out->close();
+                return write_error(err, err_len, e);
+            }
+        }
+        if (!out->close()) return write_error(err, err_len, oiio_error("close failed", out->geterror()));
+        return 0;
+    } catch (const std::bad_alloc &) {
+        return write_error(err, err_len, "out of memory");
+    } catch (const std::exception &e) {
+        return write_error(err, err_len, std::string("EXR write failed: ") + e.what());
+    } catch (...) {
+        return write_error(err, err_len, "EXR write failed: unknown exception");
+    }
+}
+
+extern "C" int icr_png_write(const char *path, uint32_t width, uint32_t height, const uint8_t *rgb, char *err,
+                             size_t err_len) {
+    clear_error(err, err_len);
+    try {
+        if (!path || !*path) return write_error(err, err_len, "empty path");
+        if (width == 0 || height == 0 || width > uint32_t(INT_MAX) || height > uint32_t(INT_MAX))
+            return write_error(err, err_len, "invalid image size " + std::to_string(width) + "x" + std::to_string(height));
+        size_t total;
+        if (!pixel_count(width, height, 3, &total)) return write_error(err, err_len, "image too large");
+        if (!rgb) return write_error(err, err_len, "no pixel data");
+
+        OIIO::ImageSpec spec(int(width), int(height), 3, OIIO::TypeDesc::UINT8);
+        // By format name, for the same reason as the EXR writer.
+        std::unique_ptr<OIIO::ImageOutput> out = OIIO::ImageOutput::create("png");
+        if (!out) return write_error(err, err_len, oiio_error("PNG writer unavailable", ""));
+        if (!out->open(path, spec)) return write_error(err, err_len, oiio_error("cannot open for writing", out->geterror()));
+        if (!out->write_image(OIIO::TypeDesc::UINT8, rgb)) {
+            std::string e = oiio_error("write failed", out->geterror());
+            out->close();
+            return write_error(err, err_len, e);
+        }
+        if (!out->close()) return write_error(err, err_len, oiio_error("close failed", out->geterror()));
+        return 0;
+    } catch (const std::bad_alloc &) {
+        return write_error(err, err_len, "out of memory");
+    } catch (const std::exception &e) {
+        return write_error(err, err_len, std::string("PNG write failed: ") + e.what());
+    } catch (...) {
+        return write_error(err, err_len, "PNG write failed: unknown exception");
+    }
+}
+
+struct icr_image {
+    uint32_t width = 0, height = 0;
+    std::vector<std::string> names;
+    std::vector<std::vector<float>> planes;
+    // Rendered to text once at read time, so lookups never mutate the image and can run from
+    // several threads on a shared handle.
+    std::map<std::string, std::string> attributes;
+};
+
+extern "C" icr_image *icr_image_read(const char *path, char *err, size_t err_len) {
+    clear_error(err, err_len);
+    try {
+        if (!path || !*path) {
+            write_error(err, err_len, "empty path");
+            return nullptr;
+        }
+        std::unique_ptr<OIIO::ImageInput> in = OIIO::ImageInput::open(path);
+        if (!in) {
+            write_error(err, err_len, oiio_error("cannot open image", ""));
+            return nullptr;
+        }
+        const OIIO::ImageSpec &spec = in->spec();
+        if (spec.deep) {
+            write_error(err, err_len, "deep images are not supported");
+            return nullptr;
+        }
+        if (spec.depth > 1) {
+            write_error(err, err_len, "volume images are not supported");
+            return nullptr;
+        }
+        if (spec.width <= 0 || spec.height <= 0 || spec.nchannels <= 0) {
+            write_error(err, err_len, "image has no pixels");
+            return nullptr;
+        }
+        const size_t w = size_t(spec.width), h = size_t(spec.height), nch = size_t(spec.nchannels);
+        size_t total;
+        if (!pixel_count(uint32_t(w), uint32_t(h), nch, &total)) {
+            write_error(err, err_len, "image too large");
+            return nullptr;
+        }
+
+        std::unique_ptr<icr_image> img(new icr_image());
+        img->width = uint32_t(w);
+        img->height = uint32_t(h);
+        std::vector<float> interleaved(total);
+        if (!in->read_image(0, 0, 0, int(nch), OIIO::TypeDesc::FLOAT, interleaved.data())) {
+            write_error(err, err_len, oiio_error("read failed", in->geterror()));
+            return nullptr;
+        }
+        in->close();
+
+        img->names.reserve(nch);
+        img->planes.resize(nch);
+        for (size_t c = 0; c < nch; ++c) {
+            img->names.push_back(c < spec.channelnames.size() ? spec.channelnames[c] : "channel" + std::to_string(c));
+            std::vector<float> &plane = img->planes[c];
+            plane.resize(w * h);
+            for (size_t i = 0; i < w * h; ++i) plane[i] = interleaved[i * nch + c];
+        }
+        for (const OIIO::ParamValue &p : spec.extra_attribs) {
+            // Large arrays would otherwise be elided with "..." after 64 values.
+            img->attributes[p.name().string()] = p.get_string(1 << 16);
+        }
+        return img.release();
+    } catch (const std::bad_alloc &) {
+        write_error(err, err_len, "out of memory");
+    } catch (const std::exception &e) {
+        write_error(err, err_len, std::string("image read failed: ") + e.what());
+    } catch (...) {
+        write_error(err, err_len, "image read failed: unknown exception");
+    }
+    return nullptr;
+}
+
+extern "C" uint32_t icr_image_width(const icr_image *image) { return image ? image->width : 0; }
+
+extern "C" uint32_t icr_image_height(const icr_image *image) { return image ? image->height : 0; }
+
+extern "C" size_t icr_image_channel_count(const icr_image *image) { return image ? image->names.size() : 0; }
+
+extern "C" const char *icr_image_channel_name(const icr_image *image, size_t i) {
+    if (!image || i >= image->names.size()) return nullptr;
+    return image->names[i].c_str();
+}
+
+extern "C" const float *icr_image_channel_data(const icr_image *image, size_t i) {
+    if (!image || i >= image->planes.size()) return nullptr;
+    return image->planes[i].data();
+}
+
+extern "C" const char *icr_image_attribute(const icr_image *image, const char *name) {
+    if (!image || !name) return nullptr;
+    auto it = image->attributes.find(name);
+    if (it != image->attributes.end()) return it->second.c_str();
+    // OIIO matches attribute names case-insensitively; do the same as a fallback.
+    for (const auto &kv : image->attributes)
+        if (strcasecmp(kv.first.c_str(), name) == 0) return kv.second.c_str();
+    return nullptr;
+}
+
+extern "C" void icr_image_free(icr_image *image) { delete image; }

@@ -1,0 +1,1089 @@
+// glTF loading for icrender (implements ffi/scene_io.h on top of tinygltf 2.7).
+//
+// This file is only an adapter: it validates what it reads, converts to the flat arrays of the C
+// ABI and leaves every rendering decision (degenerate triangles, NaNs, units, light models) to
+// Rust. Nothing may escape across the ABI: every entry point catches all exceptions, and every
+// index, offset and size taken from the file is checked before memory is touched.
+
+#include "../ffi/scene_io.h"
+
+#include <sys/stat.h>
+
+#include <algorithm>
+#include <array>
+#include <cerrno>
+#include <cmath>
+#include <cstdint>
+#include <cstdio>
+#include <cstring>
+#include <deque>
+#include <exception>
+#include <limits>
+#include <memory>
+#include <new>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#if !defined(__BYTE_ORDER__) || __BYTE_ORDER__ != __ORDER_LITTLE_ENDIAN__
+// glTF buffers are little-endian and are read here with memcpy.
+#error "scene_io.cpp assumes a little-endian target"
+#endif
+
+// stb_image is compiled static so that this object cannot clash with another copy of stb linked
+// into the final binary by some other crate; tinygltf is the only caller and lives in this TU.
+#define STB_IMAGE_STATIC
+// Readable decode errors ("Corrupt PNG") instead of stb's terse codes; they reach the user.
+#define STBI_FAILURE_USERMSG
+#define STB_IMAGE_IMPLEMENTATION
+#define TINYGLTF_IMPLEMENTATION
+#define TINYGLTF_NO_STB_IMAGE_WRITE
+#if defined(__GNUC__)
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wunused-function"
+#pragma GCC diagnostic ignored "-Wunused-parameter"
+#pragma GCC diagnostic ignored "-Wmissing-field-initializers"
+#pragma GCC diagnostic ignored "-Wsign-compare"
+#pragma GCC diagnostic ignored "-Wimplicit-fallthrough"
+#pragma GCC diagnostic ignored "-Wtype-limits"
+#endif
+#include <tiny_gltf.h>
+#if defined(__GNUC__)
+#pragma GCC diagnostic pop
+#endif
+
+namespace {
+
+// Internal failure; turned into the one-line error message at the ABI boundary.
+struct LoadError : std::runtime_error {
+    using std::runtime_error::runtime_error;
+};
+
+[[noreturn]] void fail(const std::string &msg) { throw LoadError(msg); }
+
+constexpr size_t kMaxNodeDepth = 1024;
+// A node graph that reuses subtrees (invalid glTF, but loadable) can expand exponentially;
+// this bounds the walk so such a file fails instead of hanging.
+constexpr uint64_t kMaxNodeVisits = uint64_t(1) << 22;
+// tinygltf converts "extensions" objects to its Value type recursively; deep nesting there would
+// overflow the stack, so the JSON is screened before tinygltf sees it.
+constexpr size_t kMaxJsonDepth = 256;
+
+// tinygltf messages are newline-terminated lines; callers want single lines.
+std::vector<std::string> split_lines(const std::string &text) {
+    std::vector<std::string> lines;
+    std::string cur;
+    auto flush = [&]() {
+        size_t b = cur.find_first_not_of(" \t");
+        size_t e = cur.find_last_not_of(" \t");
+        if (b != std::string::npos) lines.push_back(cur.substr(b, e - b + 1));
+        cur.clear();
+    };
+    for (char c : text) {
+        if (c == '\n' || c == '\r') {
+            flush();
+        } else {
+            cur.push_back(static_cast<unsigned char>(c) < 0x20 ? ' ' : c);
+        }
+    }
+    flush();
+    return lines;
+}
+
+std::string join(const std::vector<std::string> &parts, const char *sep) {
+    std::string out;
+    for (size_t i = 0; i < parts.size(); ++i) {
+        if (i) out += sep;
+        out += parts[i];
+    }
+    return out;
+}
+
+std::string one_line(const std::string &text) { return join(split_lines(text), "; "); }
+
+void write_error(char *err, size_t err_len, const std::string &msg) {
+    if (!err || err_len == 0) return;
+    std::string line = one_line(msg);
+    if (line.empty()) line = "unknown error";
+    size_t n = std::min(line.size(), err_len - 1);
+    // Do not cut a UTF-8 sequence in half: Rust reads this as a str.
+    if (n < line.size()) {
+        while (n > 0 && (static_cast<unsigned char>(line[n]) & 0xC0) == 0x80) --n;
+    }
+    std::memcpy(err, line.data(), n);
+    err[n] = '\0';
+}
+
+// 64-bit checked arithmetic: offsets and counts come straight from the file.
+uint64_t add_checked(uint64_t a, uint64_t b, const std::string &what) {
+    uint64_t r;
+    if (__builtin_add_overflow(a, b, &r)) fail(what + ": size overflow");
+    return r;
+}
+uint64_t mul_checked(uint64_t a, uint64_t b, const std::string &what) {
+    uint64_t r;
+    if (__builtin_mul_overflow(a, b, &r)) fail(what + ": size overflow");
+    return r;
+}
+
+bool ends_with_ci(const std::string &s, const char *suffix) {
+    size_t n = std::strlen(suffix);
+    if (s.size() < n) return false;
+    for (size_t i = 0; i < n; ++i) {
+        char a = s[s.size() - n + i];
+        if (a >= 'A' && a <= 'Z') a = char(a - 'A' + 'a');
+        if (a != suffix[i]) return false;
+    }
+    return true;
+}
+
+bool is_regular_file(const std::string &path) {
+    struct stat st;
+    return ::stat(path.c_str(), &st) == 0 && S_ISREG(st.st_mode);
+}
+
+std::vector<unsigned char> read_file(const std::string &path) {
+    struct stat st;
+    if (::stat(path.c_str(), &st) != 0) fail(std::string("cannot open file: ") + std::strerror(errno));
+    if (!S_ISREG(st.st_mode)) fail("not a regular file");
+    FILE *f = std::fopen(path.c_str(), "rb");
+    if (!f) fail(std::string("cannot open file: ") + std::strerror(errno));
+    std::vector<unsigned char> data;
+    unsigned char chunk[1 << 16];
+    size_t n;
+    try {
+        while ((n = std::fread(chunk, 1, sizeof chunk, f)) > 0) data.insert(data.end(), chunk, chunk + n);
+    } catch (...) {
+        std::fclose(f);
+        throw;
+    }
+    bool bad = std::ferror(f) != 0;
+    std::fclose(f);
+    if (bad) fail("read error");
+    return data;
+}
+
+// Rejects JSON nested deeper than kMaxJsonDepth (see there for why). Brackets inside strings are
+// skipped; anything malformed is left for the real parser to report.
+void check_json_depth(const unsigned char *p, size_t n) {
+    size_t depth = 0;
+    bool in_string = false, escaped = false;
+    for (size_t i = 0; i < n; ++i) {
+        unsigned char c = p[i];
+        if (in_string) {
+            if (escaped) escaped = false;
+            else if (c == '\\') escaped = true;
+            else if (c == '"') in_string = false;
+        } else if (c == '"') {
+            in_string = true;
+        } else if (c == '{' || c == '[') {
+            if (++depth > kMaxJsonDepth) fail("JSON nested deeper than " + std::to_string(kMaxJsonDepth) + " levels");
+        } else if (c == '}' || c == ']') {
+            if (depth > 0) --depth;
+        }
+    }
+}
+
+// tinygltf 2.7 forms &buffer.data[bufferView.byteOffset] for an image stored in a bufferView
+// before anything checks that range; under _GLIBCXX_ASSERTIONS (hardened toolchains) that alone
+// aborts the process. Such files are refused from the JSON first. Once tinygltf accepts a buffer
+// its data size equals the declared byteLength, so the declared values are what matters.
+void check_image_buffer_views(const unsigned char *text, size_t n) {
+    using nlohmann::json;
+    // Only the few members involved are kept (not, say, a buffer's base64 uri); everything else
+    // is discarded while parsing.
+    json::parser_callback_t keep_needed = [](int depth, json::parse_event_t event, json &parsed) {
+        if (event != json::parse_event_t::key || !parsed.is_string()) return true;
+        const std::string &k = parsed.get_ref<const std::string &>();
+        if (depth == 1) return k == "images" || k == "bufferViews" || k == "buffers";
+        if (depth == 3) return k == "bufferView" || k == "buffer" || k == "byteOffset" || k == "byteLength";
+        return true;
+    };
+    json doc = json::parse(text, text + n, keep_needed, /*allow_exceptions=*/false);
+    if (!doc.is_object()) return;  // tinygltf reports malformed JSON in its own words
+    auto array = [&](const char *key) -> const json * {
+        auto it = doc.find(key);
+        return it != doc.end() && it->is_array() ? &*it : nullptr;
+    };
+    const json *images = array("images"), *views = array("bufferViews"), *buffers = array("buffers");
+    if (!images || !views || !buffers) return;
+    auto unsigned_member = [](const json &o, const char *key, uint64_t dflt) -> uint64_t {
+        auto it = o.find(key);
+        return it != o.end() && it->is_number_unsigned() ? it->get<uint64_t>() : dflt;
+    };
+    for (size_t i = 0; i < images->size(); ++i) {
+        const json &img = (*images)[i];
+        if (!img.is_object()) continue;
+        auto bv_it = img.find("bufferView");
+        if (bv_it == img.end() || !bv_it->is_number_unsigned()) continue;
+        uint64_t bvi = bv_it->get<uint64_t>();
+        if (bvi >= views->size() || !(*views)[bvi].is_object()) continue;  // tinygltf checks this
+        const json &bv = (*views)[bvi];
+        uint64_t bi = unsigned_member(bv, "buffer", UINT64_MAX);
+        if (bi >= buffers->size() || !(*buffers)[bi].is_object()) continue;  // tinygltf checks this
+        uint64_t buffer_len = unsigned_member((*buffers)[bi], "byteLength", 0);
+        uint64_t off = unsigned_member(bv, "byteOffset", 0), len = unsigned_member(bv, "byteLength", 0);
+        uint64_t end;
+        if (off >= buffer_len || __builtin_add_overflow(off, len, &end) || end > buffer_len)
+            fail("image[" + std::to_string(i) + "]: bufferView " + std::to_string(bvi) + " (offset " +
+                 std::to_string(off) + ", length " + std::to_string(len) + ") exceeds buffer " + std::to_string(bi) +
+                 " of " + std::to_string(buffer_len) + " bytes");
+    }
+}
+
+// Directory part of the path as tinygltf expects it (it joins with '/').
+std::string base_dir_of(const std::string &path) {
+    size_t slash = path.find_last_of('/');
+    if (slash == std::string::npos) return ".";
+    if (slash == 0) return "/";
+    return path.substr(0, slash);
+}
+
+// tinygltf looks for external files first next to the asset and then in the process's current
+// directory; the second lookup would let a missing texture be silently replaced by an unrelated
+// file, so only paths under the asset's directory are admitted (and only regular files).
+bool file_exists_in_asset_dir(const std::string &abs_filename, void *user) {
+    const std::string &prefix = *static_cast<const std::string *>(user);
+    if (abs_filename.compare(0, prefix.size(), prefix) != 0) return false;
+    return is_regular_file(abs_filename);
+}
+
+// Image "loader" that decodes nothing. tinygltf 2.7 hands image bytes from a bufferView without
+// checking byteOffset/byteLength against the buffer, so those bytes are not touched here; they
+// are decoded later from a validated range. Bytes from files and data URIs come from a real
+// vector and are kept as-is. Deferring also means only base-colour images get decoded at all.
+bool defer_image_decode(tinygltf::Image *image, const int, std::string *, std::string *, int, int,
+                        const unsigned char *bytes, int size, void *) {
+    if (image->bufferView >= 0) return true;
+    if (bytes && size > 0) image->image.assign(bytes, bytes + size);
+    image->as_is = true;
+    return true;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Accessors
+
+struct AccessorView {
+    const unsigned char *first = nullptr;  // element 0
+    uint64_t stride = 0;
+    uint64_t count = 0;
+    int component_type = 0;
+    int components = 0;
+    bool normalized = false;
+};
+
+const char *type_name(int type) {
+    switch (type) {
+        case TINYGLTF_TYPE_SCALAR: return "SCALAR";
+        case TINYGLTF_TYPE_VEC2: return "VEC2";
+        case TINYGLTF_TYPE_VEC3: return "VEC3";
+        case TINYGLTF_TYPE_VEC4: return "VEC4";
+        case TINYGLTF_TYPE_MAT2: return "MAT2";
+        case TINYGLTF_TYPE_MAT3: return "MAT3";
+        case TINYGLTF_TYPE_MAT4: return "MAT4";
+        default: return "unknown type";
+    }
+}
+
+const char *component_name(int ct) {
+    switch (ct) {
+        case TINYGLTF_COMPONENT_TYPE_BYTE: return "byte";
+        case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE: return "unsigned byte";
+        case TINYGLTF_COMPONENT_TYPE_SHORT: return "short";
+        case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT: return "unsigned short";
+        case TINYGLTF_COMPONENT_TYPE_INT: return "int";
+        case TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT: return "unsigned int";
+        case TINYGLTF_COMPONENT_TYPE_FLOAT: return "float";
+        case TINYGLTF_COMPONENT_TYPE_DOUBLE: return "double";
+        default: return "unknown component type";
+    }
+}
+
+// Every byte an accessor can address is proven to lie inside its bufferView and its buffer
+// before a view is returned.
+AccessorView view_accessor(const tinygltf::Model &model, int index, const std::string &ctx) {
+    if (index < 0 || size_t(index) >= model.accessors.size())
+        fail(ctx + ": accessor " + std::to_string(index) + " out of range");
+    const tinygltf::Accessor &acc = model.accessors[size_t(index)];
+    const std::string what = ctx + ": accessor " + std::to_string(index);
+    if (acc.sparse.isSparse) fail(what + " is sparse, which is not supported");
+    if (acc.bufferView < 0) fail(what + " has no bufferView, which is not supported");
+    if (size_t(acc.bufferView) >= model.bufferViews.size())
+        fail(what + ": bufferView " + std::to_string(acc.bufferView) + " out of range");
+    const tinygltf::BufferView &bv = model.bufferViews[size_t(acc.bufferView)];
+    if (bv.buffer < 0 || size_t(bv.buffer) >= model.buffers.size())
+        fail(what + ": buffer " + std::to_string(bv.buffer) + " out of range");
+    const tinygltf::Buffer &buf = model.buffers[size_t(bv.buffer)];
+
+    int csize = tinygltf::GetComponentSizeInBytes(uint32_t(acc.componentType));
+    int ncomp = tinygltf::GetNumComponentsInType(uint32_t(acc.type));
+    if (csize <= 0 || ncomp <= 0) fail(what + " has an invalid type or component type");
+    uint64_t elem = uint64_t(csize) * uint64_t(ncomp);
+    uint64_t stride = bv.byteStride ? uint64_t(bv.byteStride) : elem;
+    if (stride < elem)
+        fail(what + ": byteStride " + std::to_string(stride) + " is smaller than the element size " +
+             std::to_string(elem));
+
+    uint64_t view_end = add_checked(bv.byteOffset, bv.byteLength, what);
+    if (view_end > buf.data.size())
+        fail(what + ": bufferView " + std::to_string(acc.bufferView) + " (offset " + std::to_string(bv.byteOffset) +
+             ", length " + std::to_string(bv.byteLength) + ") exceeds buffer " + std::to_string(bv.buffer) +
+             " of " + std::to_string(buf.data.size()) + " bytes");
+    if (acc.count > 0) {
+        uint64_t span = add_checked(mul_checked(stride, uint64_t(acc.count) - 1, what), elem, what);
+        uint64_t end_in_view = add_checked(acc.byteOffset, span, what);
+        if (end_in_view > bv.byteLength)
+            fail(what + " (offset " + std::to_string(acc.byteOffset) + ", count " + std::to_string(acc.count) +
+                 ", stride " + std::to_string(stride) + ") exceeds its bufferView of " +
+                 std::to_string(bv.byteLength) + " bytes");
+    }
+
+    AccessorView v;
+    v.first = buf.data.data() + bv.byteOffset + acc.byteOffset;
+    v.stride = stride;
+    v.count = acc.count;
+    v.component_type = acc.componentType;
+    v.components = ncomp;
+    v.normalized = acc.normalized;
+    return v;
+}
+
+template <typename T>
+T load(const unsigned char *p) {
+    T v;
+    std::memcpy(&v, p, sizeof v);
+    return v;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Matrices: column-major 4x4 in double, as glTF stores them.
+
+using Mat4 = std::array<double, 16>;
+
+Mat4 identity() {
+    Mat4 m{};
+    m[0] = m[5] = m[10] = m[15] = 1.0;
+    return m;
+}
+
+Mat4 mul(const Mat4 &a, const Mat4 &b) {
+    Mat4 r{};
+    for (int c = 0; c < 4; ++c)
+        for (int row = 0; row < 4; ++row) {
+            double s = 0.0;
+            for (int k = 0; k < 4; ++k) s += a[size_t(k * 4 + row)] * b[size_t(c * 4 + k)];
+            r[size_t(c * 4 + row)] = s;
+        }
+    return r;
+}
+
+void transform_dir(const Mat4 &m, double x, double y, double z, float out[3]) {
+    double v[3];
+    for (int r = 0; r < 3; ++r) v[r] = m[size_t(r)] * x + m[size_t(4 + r)] * y + m[size_t(8 + r)] * z;
+    double len = std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+    // A singular transform has no direction; pass the raw (zero/NaN) vector on for Rust to judge.
+    if (len > 0.0 && std::isfinite(len))
+        for (double &c : v) c /= len;
+    for (int i = 0; i < 3; ++i) out[i] = float(v[i]);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Scene under construction / owned result
+
+struct MeshData {
+    std::vector<float> positions, normals, texcoords;
+    std::vector<uint32_t> indices;
+    bool has_normals = false, has_texcoords = false;
+    int32_t material = -1;
+};
+
+}  // namespace
+
+struct icr_scene {
+    // deque: element addresses (and so c_str() of short strings) stay put as names are added.
+    std::deque<std::string> strings;
+    std::vector<MeshData> mesh_data;
+    std::vector<std::vector<uint8_t>> pixels;  // decoded images, shared by textures
+    std::vector<icr_mesh> meshes;
+    std::vector<icr_instance> instances;
+    std::vector<icr_material> materials;
+    std::vector<icr_texture> textures;
+    std::vector<icr_light> lights;
+    std::vector<icr_camera> cameras;
+    std::string warnings;
+
+    const char *keep(std::string s) {
+        strings.push_back(std::move(s));
+        return strings.back().c_str();
+    }
+};
+
+namespace {
+
+class Converter {
+  public:
+    Converter(const tinygltf::Model &model, icr_scene &scene) : m_(model), s_(scene) {}
+
+    void run() {
+        convert_textures_and_materials();
+        walk_scene();
+        finish();
+    }
+
+    std::vector<std::string> warnings;
+
+  private:
+    const tinygltf::Model &m_;
+    icr_scene &s_;
+    std::vector<std::vector<int64_t>> mesh_prims_;  // glTF mesh -> icr_mesh per primitive (-1: skipped)
+    std::vector<bool> mesh_done_;
+    std::vector<int> image_pixels_;  // glTF image -> index into s_.pixels (-1: not decoded)
+    std::vector<uint32_t> image_w_, image_h_;
+    std::vector<char> on_path_;
+    uint64_t visits_ = 0;
+    bool warned_skin_ = false;
+
+    static std::string quoted_or_index(const std::string &name, const char *kind, size_t index) {
+        if (!name.empty()) return std::string(kind) + " '" + name + "'";
+        return std::string(kind) + " " + std::to_string(index);
+    }
+
+    std::string image_label(size_t index) const {
+        const tinygltf::Image &img = m_.images[index];
+        if (!img.uri.empty()) return "'" + img.uri + "'";
+        if (!img.name.empty()) return "image[" + std::to_string(index) + "] '" + img.name + "'";
+        return "image[" + std::to_string(index) + "]";
+    }
+
+    // Returns the index into s_.pixels for a glTF image, decoding it on first use so that
+    // textures sharing an image share its pixels.
+    int decoded_image(size_t index) {
+        if (image_pixels_[index] >= 0) return image_pixels_[index];
+        const tinygltf::Image &img = m_.images[index];
+        const unsigned char *bytes = nullptr;
+        uint64_t size = 0;
+        if (img.bufferView >= 0) {
+            std::string what = "image " + image_label(index);
+            if (size_t(img.bufferView) >= m_.bufferViews.size()) fail(what + ": bufferView out of range");
+            const tinygltf::BufferView &bv = m_.bufferViews[size_t(img.bufferView)];
+            if (bv.buffer < 0 || size_t(bv.buffer) >= m_.buffers.size()) fail(what + ": buffer out of range");
+            const tinygltf::Buffer &buf = m_.buffers[size_t(bv.buffer)];
+            if (add_checked(bv.byteOffset, bv.byteLength, what) > buf.data.size())
+                fail(what + ": bufferView exceeds its buffer");
+            bytes = buf.data.data() + bv.byteOffset;
+            size = bv.byteLength;
+        } else {
+            bytes = img.image.data();
+            size = img.image.size();
+        }
+        if (size == 0) {
+            if (!img.uri.empty()) fail("missing texture image '" + img.uri + "'");
+            fail("texture image " + image_label(index) + " has no data");
+        }
+        if (size > uint64_t(std::numeric_limits<int>::max()))
+            fail("texture image " + image_label(index) + " is too large");
+        int w = 0, h = 0, comp = 0;
+        // Asking stb for 4 channels expands grey/grey+alpha/RGB to RGBA, and stbi_load (not _16)
+        // reduces 16-bit PNGs to 8 bits, which is exactly the icr_texture format.
+        unsigned char *px = stbi_load_from_memory(bytes, int(size), &w, &h, &comp, 4);
+        if (!px) {
+            const char *why = stbi_failure_reason();
+            fail("cannot decode texture image " + image_label(index) + ": " + (why ? why : "unknown format"));
+        }
+        std::vector<uint8_t> rgba;
+        try {
+            if (w <= 0 || h <= 0) fail("texture image " + image_label(index) + " has no pixels");
+            rgba.assign(px, px + size_t(w) * size_t(h) * 4);
+        } catch (...) {
+            stbi_image_free(px);
+            throw;
+        }
+        stbi_image_free(px);
+        s_.pixels.push_back(std::move(rgba));
+        image_pixels_[index] = int(s_.pixels.size() - 1);
+        image_w_[index] = uint32_t(w);
+        image_h_[index] = uint32_t(h);
+        return image_pixels_[index];
+    }
+
+    void convert_textures_and_materials() {
+        image_pixels_.assign(m_.images.size(), -1);
+        image_w_.assign(m_.images.size(), 0);
+        image_h_.assign(m_.images.size(), 0);
+
+        // icr textures exist only for glTF textures used as base colour, in glTF texture order.
+        std::vector<char> used(m_.textures.size(), 0);
+        for (size_t i = 0; i < m_.materials.size(); ++i) {
+            int t = m_.materials[i].pbrMetallicRoughness.baseColorTexture.index;
+            if (t < 0) continue;
+            if (size_t(t) >= m_.textures.size())
+                fail(quoted_or_index(m_.materials[i].name, "material", i) + ": baseColorTexture " +
+                     std::to_string(t) + " out of range");
+            used[size_t(t)] = 1;
+        }
+        std::vector<int32_t> tex_map(m_.textures.size(), -1);
+        for (size_t t = 0; t < m_.textures.size(); ++t) {
+            if (!used[t]) continue;
+            const tinygltf::Texture &tex = m_.textures[t];
+            std::string label = quoted_or_index(tex.name, "texture", t);
+            if (tex.source < 0) {
+                // Only possible with an image-format extension (e.g. KHR_texture_basisu) that is
+                // not required, so the file allows rendering without it.
+                warnings.push_back(label + " has no core image source; base colour texture ignored");
+                continue;
+            }
+            if (size_t(tex.source) >= m_.images.size())
+                fail(label + ": image " + std::to_string(tex.source) + " out of range");
+            icr_texture out{};
+            size_t src = size_t(tex.source);
+            out.rgba = s_.pixels[size_t(decoded_image(src))].data();
+            out.width = image_w_[src];
+            out.height = image_h_[src];
+            out.wrap_s = out.wrap_t = TINYGLTF_TEXTURE_WRAP_REPEAT;
+            if (tex.sampler >= 0) {
+                if (size_t(tex.sampler) >= m_.samplers.size())
+                    fail(label + ": sampler " + std::to_string(tex.sampler) + " out of range");
+                out.wrap_s = m_.samplers[size_t(tex.sampler)].wrapS;
+                out.wrap_t = m_.samplers[size_t(tex.sampler)].wrapT;
+            }
+            out.srgb = 1;
+            std::string name = tex.name;
+            if (name.empty()) name = m_.images[src].name;
+            if (name.empty()) name = m_.images[src].uri;
+            out.name = s_.keep(name);
+            tex_map[t] = int32_t(s_.textures.size());
+            s_.textures.push_back(out);
+        }
+
+        for (size_t i = 0; i < m_.materials.size(); ++i) {
+            const tinygltf::Material &mat = m_.materials[i];
+            const std::string label = quoted_or_index(mat.name, "material", i);
+            const tinygltf::PbrMetallicRoughness &pbr = mat.pbrMetallicRoughness;
+            icr_material out{};
+            out.name = s_.keep(mat.name);
+            for (int c = 0; c < 4; ++c)
+                out.base_color[c] = pbr.baseColorFactor.size() == 4 ? float(pbr.baseColorFactor[size_t(c)]) : 1.0f;
+            out.base_color_texture = -1;
+            if (pbr.baseColorTexture.index >= 0) {
+                out.base_color_texture = tex_map[size_t(pbr.baseColorTexture.index)];
+                if (pbr.baseColorTexture.texCoord != 0)
+                    warnings.push_back(label + ": baseColorTexture uses TEXCOORD_" +
+                                       std::to_string(pbr.baseColorTexture.texCoord) +
+                                       ", only TEXCOORD_0 is loaded");
+                if (pbr.baseColorTexture.extensions.count("KHR_texture_transform"))
+                    warnings.push_back(label + ": KHR_texture_transform on baseColorTexture is ignored");
+            }
+            out.metallic = float(pbr.metallicFactor);
+            out.roughness = float(pbr.roughnessFactor);
+            for (int c = 0; c < 3; ++c)
+                out.emissive[c] = mat.emissiveFactor.size() == 3 ? float(mat.emissiveFactor[size_t(c)]) : 0.0f;
+
+            out.emissive_strength = 1.0f;
+            auto es = mat.extensions.find("KHR_materials_emissive_strength");
+            if (es != mat.extensions.end()) {
+                double v;
+                if (number_member(es->second, "emissiveStrength", &v)) out.emissive_strength = float(v);
+            }
+            out.specular_factor = 1.0f;
+            out.specular_color[0] = out.specular_color[1] = out.specular_color[2] = 1.0f;
+            auto sp = mat.extensions.find("KHR_materials_specular");
+            if (sp != mat.extensions.end()) {
+                double v;
+                if (number_member(sp->second, "specularFactor", &v)) out.specular_factor = float(v);
+                double col[3];
+                if (number_array_member(sp->second, "specularColorFactor", col, 3))
+                    for (int c = 0; c < 3; ++c) out.specular_color[c] = float(col[c]);
+            }
+
+            if (mat.alphaMode == "OPAQUE") {
+                out.alpha_mode = ICR_ALPHA_OPAQUE;
+            } else if (mat.alphaMode == "MASK") {
+                out.alpha_mode = ICR_ALPHA_MASK;
+            } else if (mat.alphaMode == "BLEND") {
+                out.alpha_mode = ICR_ALPHA_BLEND;
+            } else {
+                warnings.push_back(label + ": unknown alphaMode '" + mat.alphaMode + "', using OPAQUE");
+                out.alpha_mode = ICR_ALPHA_OPAQUE;
+            }
+            out.alpha_cutoff = float(mat.alphaCutoff);
+            out.double_sided = mat.doubleSided ? 1 : 0;
+            s_.materials.push_back(out);
+        }
+    }
+
+    static bool number_member(const tinygltf::Value &obj, const char *key, double *out) {
+        if (!obj.IsObject() || !obj.Has(key)) return false;
+        const tinygltf::Value &v = obj.Get(key);
+        if (!v.IsNumber()) return false;
+        *out = v.GetNumberAsDouble();
+        return true;
+    }
+
+    static bool number_array_member(const tinygltf::Value &obj, const char *key, double *out, size_t n) {
+        if (!obj.IsObject() || !obj.Has(key)) return false;
+        const tinygltf::Value &v = obj.Get(key);
+        if (!v.IsArray() || v.ArrayLen() != n) return false;
+        for (size_t i = 0; i < n; ++i) {
+            const tinygltf::Value &e = v.Get(int(i));
+            if (!e.IsNumber()) return false;
+            out[i] = e.GetNumberAsDouble();
+        }
+        return true;
+    }
+
+    // ----- meshes
+
+    const std::vector<int64_t> &mesh_primitives(size_t mesh_index) {
+        if (mesh_done_[mesh_index]) return mesh_prims_[mesh_index];
+        const tinygltf::Mesh &mesh = m_.meshes[mesh_index];
+        std::vector<int64_t> out;
+        for (size_t p = 0; p < mesh.primitives.size(); ++p) {
+            std::string ctx = "primitive " + std::to_string(p) + " of " + quoted_or_index(mesh.name, "mesh", mesh_index);
+            out.push_back(convert_primitive(mesh.primitives[p], ctx));
+        }
+        mesh_prims_[mesh_index] = std::move(out);
+        mesh_done_[mesh_index] = true;
+        return mesh_prims_[mesh_index];
+    }
+
+    int64_t convert_primitive(const tinygltf::Primitive &prim, const std::string &ctx) {
+        if (prim.mode != TINYGLTF_MODE_TRIANGLES) {
+            warnings.push_back(ctx + ": mode " + std::to_string(prim.mode) + " is not TRIANGLES, skipped");
+            return -1;
+        }
+        if (prim.material < -1 || (prim.material >= 0 && size_t(prim.material) >= m_.materials.size()))
+            fail(ctx + ": material " + std::to_string(prim.material) + " out of range");
+
+        auto pos_it = prim.attributes.find("POSITION");
+        if (pos_it == prim.attributes.end()) fail(ctx + ": no POSITION attribute");
+        AccessorView pos = view_accessor(m_, pos_it->second, ctx + ": POSITION");
+        if (pos.component_type != TINYGLTF_COMPONENT_TYPE_FLOAT || pos.components != 3)
+            fail(ctx + ": POSITION must be float VEC3, got " + component_name(pos.component_type) + " " +
+                 type_name(m_.accessors[size_t(pos_it->second)].type));
+        if (pos.count > std::numeric_limits<uint32_t>::max()) fail(ctx + ": too many vertices");
+        if (pos.count == 0) {
+            warnings.push_back(ctx + ": no vertices, skipped");
+            return -1;
+        }
+        const uint64_t nv = pos.count;
+
+        MeshData md;
+        md.material = prim.material;
+        md.positions.resize(size_t(nv) * 3);
+        for (uint64_t i = 0; i < nv; ++i)
+            for (int c = 0; c < 3; ++c)
+                md.positions[size_t(i * 3 + uint64_t(c))] = load<float>(pos.first + i * pos.stride + uint64_t(c) * 4);
+
+        auto nrm_it = prim.attributes.find("NORMAL");
+        if (nrm_it != prim.attributes.end()) {
+            AccessorView nrm = view_accessor(m_, nrm_it->second, ctx + ": NORMAL");
+            if (nrm.component_type != TINYGLTF_COMPONENT_TYPE_FLOAT || nrm.components != 3)
+                fail(ctx + ": NORMAL must be float VEC3, got " + component_name(nrm.component_type) + " " +
+                     type_name(m_.accessors[size_t(nrm_it->second)].type));
+            if (nrm.count != nv)
+                fail(ctx + ": NORMAL count " + std::to_string(nrm.count) + " differs from POSITION count " +
+                     std::to_string(nv));
+            md.normals.resize(size_t(nv) * 3);
+            for (uint64_t i = 0; i < nv; ++i)
+                for (int c = 0; c < 3; ++c)
+                    md.normals[size_t(i * 3 + uint64_t(c))] = load<float>(nrm.first + i * nrm.stride + uint64_t(c) * 4);
+            md.has_normals = true;
+        }
+
+        auto uv_it = prim.attributes.find("TEXCOORD_0");
+        if (uv_it != prim.attributes.end()) {
+            AccessorView uv = view_accessor(m_, uv_it->second, ctx + ": TEXCOORD_0");
+            bool ok = uv.components == 2 &&
+                      (uv.component_type == TINYGLTF_COMPONENT_TYPE_FLOAT ||
+                       (uv.normalized && (uv.component_type == TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE ||
+                                          uv.component_type == TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT)));
+            if (!ok)
+                fail(ctx + ": TEXCOORD_0 must be VEC2 of float or normalized unsigned byte/short, got " +
+                     (uv.normalized ? "normalized " : "") + component_name(uv.component_type) + " " +
+                     type_name(m_.accessors[size_t(uv_it->second)].type));
+            if (uv.count != nv)
+                fail(ctx + ": TEXCOORD_0 count " + std::to_string(uv.count) + " differs from POSITION count " +
+                     std::to_string(nv));
+            md.texcoords.resize(size_t(nv) * 2);
+            for (uint64_t i = 0; i < nv; ++i) {
+                const unsigned char *e = uv.first + i * uv.stride;
+                for (int c = 0; c < 2; ++c) {
+                    float v;
+                    switch (uv.component_type) {
+                        case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE: v = float(e[c]) / 255.0f; break;
+                        case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT:
+                            v = float(load<uint16_t>(e + c * 2)) / 65535.0f;
+                            break;
+                        default: v = load<float>(e + c * 4); break;
+                    }
+                    md.texcoords[size_t(i * 2 + uint64_t(c))] = v;
+                }
+            }
+            md.has_texcoords = true;
+        }
+
+        if (prim.indices < -1) fail(ctx + ": indices accessor " + std::to_string(prim.indices) + " out of range");
+        if (prim.indices >= 0) {
+            AccessorView ix = view_accessor(m_, prim.indices, ctx + ": indices");
+            int ct = ix.component_type;
+            if (ix.components != 1 ||
+                (ct != TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE && ct != TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT &&
+                 ct != TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT))
+                fail(ctx + ": indices must be SCALAR unsigned byte/short/int, got " + component_name(ct) + " " +
+                     type_name(m_.accessors[size_t(prim.indices)].type));
+            if (ix.count % 3 != 0)
+                fail(ctx + ": index count " + std::to_string(ix.count) + " is not a multiple of 3");
+            if (ix.count / 3 > std::numeric_limits<uint32_t>::max()) fail(ctx + ": too many triangles");
+            md.indices.resize(size_t(ix.count));
+            for (uint64_t i = 0; i < ix.count; ++i) {
+                const unsigned char *e = ix.first + i * ix.stride;
+                uint32_t v = ct == TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE    ? uint32_t(e[0])
+                             : ct == TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT ? uint32_t(load<uint16_t>(e))
+                                                                            : load<uint32_t>(e);
+                if (uint64_t(v) >= nv)
+                    fail(ctx + ": index " + std::to_string(v) + " out of range (vertex count " + std::to_string(nv) + ")");
+                md.indices[size_t(i)] = v;
+            }
+        } else {
+            if (nv % 3 != 0)
+                fail(ctx + ": non-indexed vertex count " + std::to_string(nv) + " is not a multiple of 3");
+            md.indices.resize(size_t(nv));
+            for (uint64_t i = 0; i < nv; ++i) md.indices[size_t(i)] = uint32_t(i);
+        }
+        if (md.indices.empty()) {
+            warnings.push_back(ctx + ": no triangles, skipped");
+            return -1;
+        }
+        s_.mesh_data.push_back(std::move(md));
+        return int64_t(s_.mesh_data.size() - 1);
+    }
+
+    // ----- nodes
+
+    Mat4 local_transform(const tinygltf::Node &node, const std::string &label) {
+        if (!node.matrix.empty()) {
+            if (node.matrix.size() != 16) fail(label + ": matrix must have 16 elements");
+            Mat4 m;
+            for (size_t i = 0; i < 16; ++i) m[i] = node.matrix[i];
+            return m;
+        }
+        if (!node.translation.empty() && node.translation.size() != 3)
+            fail(label + ": translation must have 3 elements");
+        if (!node.rotation.empty() && node.rotation.size() != 4) fail(label + ": rotation must have 4 elements");
+        if (!node.scale.empty() && node.scale.size() != 3) fail(label + ": scale must have 3 elements");
+        double t[3] = {0, 0, 0}, s[3] = {1, 1, 1}, q[4] = {0, 0, 0, 1};
+        for (size_t i = 0; i < node.translation.size(); ++i) t[i] = node.translation[i];
+        for (size_t i = 0; i < node.scale.size(); ++i) s[i] = node.scale[i];
+        for (size_t i = 0; i < node.rotation.size(); ++i) q[i] = node.rotation[i];
+        // Exporters write quaternions rounded to a few digits; renormalise so the rotation
+        // does not also scale.
+        double ql = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+        if (ql > 0.0 && std::isfinite(ql)) {
+            for (double &c : q) c /= ql;
+        } else {
+            warnings.push_back(label + ": rotation quaternion has no length, ignored");
+            q[0] = q[1] = q[2] = 0.0;
+            q[3] = 1.0;
+        }
+        const double x = q[0], y = q[1], z = q[2], w = q[3];
+        const double r[3][3] = {
+            {1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)},
+            {2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)},
+            {2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)},
+        };
+        Mat4 m{};
+        for (int c = 0; c < 3; ++c)
+            for (int row = 0; row < 3; ++row) m[size_t(c * 4 + row)] = r[row][c] * s[c];
+        m[12] = t[0];
+        m[13] = t[1];
+        m[14] = t[2];
+        m[15] = 1.0;
+        return m;
+    }
+
+    void visit(int node_index, const Mat4 &parent, size_t depth) {
+        if (node_index < 0 || size_t(node_index) >= m_.nodes.size())
+            fail("node index " + std::to_string(node_index) + " out of range");
+        const size_t ni = size_t(node_index);
+        if (on_path_[ni]) fail("node graph has a cycle at node " + std::to_string(node_index));
+        if (depth > kMaxNodeDepth) fail("node graph deeper than " + std::to_string(kMaxNodeDepth) + " levels");
+        if (++visits_ > kMaxNodeVisits)
+            fail("node graph expands to more than " + std::to_string(kMaxNodeVisits) + " node visits");
+        const tinygltf::Node &node = m_.nodes[ni];
+        const std::string label = quoted_or_index(node.name, "node", ni);
+        const Mat4 world = mul(parent, local_transform(node, label));
+
+        if (node.mesh >= 0) {
+            if (size_t(node.mesh) >= m_.meshes.size())
+                fail(label + ": mesh " + std::to_string(node.mesh) + " out of range");
+            if (node.skin >= 0 && !warned_skin_) {
+                warnings.push_back("skins are ignored; skinned meshes use their bind pose");
+                warned_skin_ = true;
+            }
+            for (int64_t mi : mesh_primitives(size_t(node.mesh))) {
+                if (mi < 0) continue;
+                icr_instance inst{};
+                inst.mesh = uint32_t(mi);
+                for (size_t i = 0; i < 16; ++i) inst.world[i] = float(world[i]);
+                s_.instances.push_back(inst);
+            }
+        } else if (node.mesh < -1) {
+            fail(label + ": mesh " + std::to_string(node.mesh) + " out of range");
+        }
+
+        if (node.camera >= 0 || node.camera < -1) add_camera(node, label, world);
+
+        auto lp = node.extensions.find("KHR_lights_punctual");
+        if (lp != node.extensions.end()) add_light(node, label, lp->second, world);
+
+        on_path_[ni] = 1;
+        for (int child : node.children) {
+            if (child < 0 || size_t(child) >= m_.nodes.size())
+                fail(label + ": child " + std::to_string(child) + " out of range");
+            visit(child, world, depth + 1);
+        }
+        on_path_[ni] = 0;
+    }
+
+    void add_camera(const tinygltf::Node &node, const std::string &label, const Mat4 &world) {
+        if (node.camera < 0 || size_t(node.camera) >= m_.cameras.size())
+            fail(label + ": camera " + std::to_string(node.camera) + " out of range");
+        const tinygltf::Camera &cam = m_.cameras[size_t(node.camera)];
+        icr_camera out{};
+        out.name = s_.keep(!node.name.empty() ? node.name : cam.name);
+        if (cam.type == "perspective") {
+            out.perspective = 1;
+            out.yfov = float(cam.perspective.yfov);
+            out.aspect = float(cam.perspective.aspectRatio);
+        } else if (cam.type == "orthographic") {
+            out.perspective = 0;
+            out.xmag = float(cam.orthographic.xmag);
+            out.ymag = float(cam.orthographic.ymag);
+        } else {
+            fail(label + ": camera type '" + cam.type + "' is neither perspective nor orthographic");
+        }
+        for (int i = 0; i < 3; ++i) out.position[i] = float(world[size_t(12 + i)]);
+        transform_dir(world, 0, 0, -1, out.forward);
+        transform_dir(world, 0, 1, 0, out.up);
+        s_.cameras.push_back(out);
+    }
+
+    void add_light(const tinygltf::Node &node, const std::string &label, const tinygltf::Value &ext,
+                   const Mat4 &world) {
+        double li;
+        if (!number_member(ext, "light", &li))
+            fail(label + ": KHR_lights_punctual has no light index");
+        if (!(li >= 0.0) || li >= double(m_.lights.size()) || li != std::floor(li)) {
+            char buf[64];
+            std::snprintf(buf, sizeof buf, "%g", li);
+            fail(label + ": light " + buf + " out of range");
+        }
+        const tinygltf::Light &light = m_.lights[size_t(li)];
+        icr_light out{};
+        out.name = s_.keep(!node.name.empty() ? node.name : light.name);
+        if (light.type == "point") {
+            out.type = ICR_LIGHT_POINT;
+        } else if (light.type == "spot") {
+            out.type = ICR_LIGHT_SPOT;
+        } else if (light.type == "directional") {
+            out.type = ICR_LIGHT_DIRECTIONAL;
+        } else {
+            fail(label + ": light type '" + light.type + "' is not point, spot or directional");
+        }
+        if (!light.color.empty() && light.color.size() != 3) fail(label + ": light color must have 3 elements");
+        for (int c = 0; c < 3; ++c) out.color[c] = light.color.empty() ? 1.0f : float(light.color[size_t(c)]);
+        out.intensity = float(light.intensity);
+        out.range = float(light.range);
+        if (out.type == ICR_LIGHT_SPOT) {
+            out.inner_cone = float(light.spot.innerConeAngle);
+            out.outer_cone = float(light.spot.outerConeAngle);
+        }
+        for (int i = 0; i < 3; ++i) out.position[i] = float(world[size_t(12 + i)]);
+        transform_dir(world, 0, 0, -1, out.direction);
+        s_.lights.push_back(out);
+    }
+
+    void walk_scene() {
+        mesh_prims_.assign(m_.meshes.size(), {});
+        mesh_done_.assign(m_.meshes.size(), false);
+        on_path_.assign(m_.nodes.size(), 0);
+
+        std::vector<int> roots;
+        if (!m_.scenes.empty()) {
+            int si = m_.defaultScene >= 0 ? m_.defaultScene : 0;
+            if (size_t(si) >= m_.scenes.size()) fail("default scene " + std::to_string(si) + " out of range");
+            roots = m_.scenes[size_t(si)].nodes;
+        } else {
+            std::vector<char> is_child(m_.nodes.size(), 0);
+            for (const tinygltf::Node &n : m_.nodes)
+                for (int c : n.children)
+                    if (c >= 0 && size_t(c) < m_.nodes.size()) is_child[size_t(c)] = 1;
+            for (size_t i = 0; i < m_.nodes.size(); ++i)
+                if (!is_child[i]) roots.push_back(int(i));
+            if (roots.empty() && !m_.nodes.empty()) fail("node graph has a cycle (no root nodes)");
+        }
+        for (int r : roots) visit(r, identity(), 0);
+    }
+
+    void finish() {
+        s_.meshes.reserve(s_.mesh_data.size());
+        for (const MeshData &md : s_.mesh_data) {
+            icr_mesh out{};
+            out.positions = md.positions.data();
+            out.normals = md.has_normals ? md.normals.data() : nullptr;
+            out.texcoords = md.has_texcoords ? md.texcoords.data() : nullptr;
+            out.indices = md.indices.data();
+            out.vertex_count = uint32_t(md.positions.size() / 3);
+            out.triangle_count = uint32_t(md.indices.size() / 3);
+            out.material = md.material;
+            s_.meshes.push_back(out);
+        }
+    }
+};
+
+const char *const kSupportedRequired[] = {
+    "KHR_lights_punctual",
+    "KHR_materials_emissive_strength",
+    "KHR_materials_specular",
+};
+
+// Empty when every required extension is supported.
+std::string unsupported_required(const tinygltf::Model &model) {
+    std::vector<std::string> bad;
+    for (const std::string &ext : model.extensionsRequired) {
+        bool ok = false;
+        for (const char *s : kSupportedRequired) ok = ok || ext == s;
+        if (!ok && std::find(bad.begin(), bad.end(), ext) == bad.end()) bad.push_back(ext);
+    }
+    if (bad.empty()) return {};
+    return std::string(bad.size() == 1 ? "unsupported required extension " : "unsupported required extensions ") +
+           join(bad, ", ");
+}
+
+icr_scene *load_scene(const std::string &path) {
+    std::vector<unsigned char> data = read_file(path);
+    if (data.empty()) fail("file is empty");
+    if (data.size() > std::numeric_limits<uint32_t>::max()) fail("file is larger than 4 GiB");
+    const size_t size = data.size();
+    // tinygltf 2.7 bounds the GLB BIN chunk against the header's length without the 8-byte chunk
+    // header, so it can read up to 8 bytes past the file; zero padding keeps that read in memory.
+    data.resize(size + 16, 0);
+
+    const bool binary = size >= 4 && std::memcmp(data.data(), "glTF", 4) == 0;
+    if (!binary && ends_with_ci(path, ".glb")) fail("not a binary glTF file (no glTF magic)");
+
+    const unsigned char *json_text = data.data();
+    size_t json_len = size;
+    if (binary) {
+        // Malformed headers are left for tinygltf to report.
+        json_len = 0;
+        if (size >= 20) {
+            uint32_t chunk_len = load<uint32_t>(data.data() + 12);
+            if (uint64_t(chunk_len) <= size - 20) {
+                json_text = data.data() + 20;
+                json_len = chunk_len;
+            }
+        }
+    }
+    check_json_depth(json_text, json_len);
+    check_image_buffer_views(json_text, json_len);
+
+    std::string base_dir = base_dir_of(path);
+    std::string prefix = base_dir.back() == '/' ? base_dir : base_dir + "/";
+
+    tinygltf::TinyGLTF loader;
+    tinygltf::FsCallbacks fs{};
+    fs.FileExists = &file_exists_in_asset_dir;
+    fs.ExpandFilePath = &tinygltf::ExpandFilePath;
+    fs.ReadWholeFile = &tinygltf::ReadWholeFile;
+    fs.WriteWholeFile = &tinygltf::WriteWholeFile;
+    fs.user_data = &prefix;
+    loader.SetFsCallbacks(fs);
+    loader.SetImageLoader(&defer_image_decode, nullptr);
+
+    tinygltf::Model model;
+    std::string terr, twarn;
+    bool ok = binary ? loader.LoadBinaryFromMemory(&model, &terr, &twarn, data.data(), unsigned(size), base_dir)
+                     : loader.LoadASCIIFromString(&model, &terr, &twarn, reinterpret_cast<const char *>(data.data()),
+                                                  unsigned(size), base_dir);
+    // extensionsRequired is parsed before meshes and accessors, so even when tinygltf gives up
+    // (e.g. on Draco accessors without bufferViews) the real reason can be reported.
+    std::string unsupported = unsupported_required(model);
+    if (!unsupported.empty()) fail(unsupported);
+    if (!ok) {
+        std::string msg = one_line(terr);
+        if (msg.empty()) msg = one_line(twarn);
+        fail(msg.empty() ? "invalid glTF" : msg);
+    }
+
+    std::unique_ptr<icr_scene> scene(new icr_scene());
+    Converter conv(model, *scene);
+    conv.run();
+
+    std::vector<std::string> warnings = split_lines(twarn);
+    // tinygltf reports some recoverable problems (e.g. a dropped primitive) in err while still
+    // succeeding; they are warnings from the caller's point of view.
+    for (std::string &l : split_lines(terr)) warnings.push_back(std::move(l));
+    for (const std::string &w : conv.warnings)
+        for (std::string &l : split_lines(w)) warnings.push_back(std::move(l));
+    scene->warnings = join(warnings, "\n");
+    return scene.release();
+}
+
+}  // namespace
+
+extern "C" icr_scene *icr_scene_load(const char *path, char *err, size_t err_len) {
+    if (err && err_len) err[0] = '\0';
+    try {
+        if (!path || !*path) {
+            write_error(err, err_len, "empty path");
+            return nullptr;
+        }
+        return load_scene(path);
+    } catch (const LoadError &e) {
+        write_error(err, err_len, e.what());
+    } catch (const std::bad_alloc &) {
+        write_error(err, err_len, "out of memory");
+    } catch (const std::exception &e) {
+        write_error(err, err_len, std::string("glTF loading failed: ") + e.what());
+    } catch (...) {
+        write_error(err, err_len, "glTF loading failed: unknown exception");
+    }
+    return nullptr;
+}
+
+namespace {
+
+// Empty arrays are reported with a non-NULL, suitably aligned pointer: Rust's
+// slice::from_raw_parts requires one even for length 0.
+template <typename T>
+const T *array_ptr(const std::vector<T> &v) {
+    static const T empty{};
+    return v.empty() ? &empty : v.data();
+}
+
+}  // namespace
+
+extern "C" icr_scene_view icr_scene_get_view(const icr_scene *scene) {
+    icr_scene_view v{};
+    if (!scene) {
+        static const icr_scene none;
+        scene = &none;
+    }
+    v.meshes = array_ptr(scene->meshes);
+    v.mesh_count = scene->meshes.size();
+    v.instances = array_ptr(scene->instances);
+    v.instance_count = scene->instances.size();
+    v.materials = array_ptr(scene->materials);
+    v.material_count = scene->materials.size();
+    v.textures = array_ptr(scene->textures);
+    v.texture_count = scene->textures.size();
+    v.lights = array_ptr(scene->lights);
+    v.light_count = scene->lights.size();
+    v.cameras = array_ptr(scene->cameras);
+    v.camera_count = scene->cameras.size();
+    v.warnings = scene->warnings.c_str();
+    return v;
+}
+
+extern "C" void icr_scene_free(icr_scene *scene) { delete scene; }

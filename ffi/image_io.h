@@ -1,0 +1,60 @@
+/*
+ * C ABI over OpenImageIO (cpp/image_io.cpp): writing a multi-layer OpenEXR and a PNG preview,
+ * and reading an EXR back channel by channel. Rust decides names, layers and temporary paths;
+ * C++ only moves pixels. Every function returns 0 on success, or non-zero with a one-line,
+ * NUL-terminated message in err[0..err_len).
+ */
+#ifndef ICR_IMAGE_IO_H
+#define ICR_IMAGE_IO_H
+#include <stddef.h>
+#include <stdint.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/* One named float channel plane: width * height values, rows top to bottom. */
+typedef struct icr_channel {
+    const char *name;         /* e.g. "R", "direct.G" */
+    const float *data;
+} icr_channel;
+
+/* A string attribute for the file header, e.g. {"icrender:options", "-ab 1 ..."}. */
+typedef struct icr_attribute {
+    const char *name;
+    const char *value;
+} icr_attribute;
+
+/*
+ * Writes an OpenEXR (half or float, chosen by `half_float`) with the channels in the order given,
+ * to exactly `path` (which need not end in .exr: the caller writes to a temporary name and
+ * renames). Compression ZIP.
+ */
+int icr_exr_write(const char *path, uint32_t width, uint32_t height,
+                  const icr_channel *channels, size_t channel_count,
+                  const icr_attribute *attributes, size_t attribute_count,
+                  int half_float, char *err, size_t err_len);
+
+/* Writes an 8-bit RGB PNG (rgb: 3 * width * height bytes) to exactly `path`. */
+int icr_png_write(const char *path, uint32_t width, uint32_t height, const uint8_t *rgb,
+                  char *err, size_t err_len);
+
+typedef struct icr_image icr_image;
+
+/* Reads every channel of the first subimage of an image file as float. NULL on failure. */
+icr_image *icr_image_read(const char *path, char *err, size_t err_len);
+uint32_t icr_image_width(const icr_image *image);
+uint32_t icr_image_height(const icr_image *image);
+size_t icr_image_channel_count(const icr_image *image);
+/* Name of channel i (valid until icr_image_free). */
+const char *icr_image_channel_name(const icr_image *image, size_t i);
+/* Plane of channel i: width * height floats, rows top to bottom. */
+const float *icr_image_channel_data(const icr_image *image, size_t i);
+/* Header attribute as text, or NULL when absent (valid until icr_image_free). */
+const char *icr_image_attribute(const icr_image *image, const char *name);
+void icr_image_free(icr_image *image);
+
+#ifdef __cplusplus
+}
+#endif
+#endif

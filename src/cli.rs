@@ -1,0 +1,230 @@
+//! Command-line arguments. Radiance's option names (-ab, -vp, ...) are accepted as they are
+//! written for rpict: they are rewritten to long options before clap sees them.
+
+use clap::{Args, Parser, Subcommand};
+use std::path::PathBuf;
+
+/// Radiance-style multi-letter options taking a single dash.
+const RADIANCE_OPTIONS: &[&str] = &[
+    "ab", "ad", "av", "st", "lr", "lw", "vp", "vd", "vu", "vh", "vv", "vtv", "vtl",
+];
+
+/// Turns `-ab 2` into `--ab 2` for every Radiance option name; everything else is untouched.
+pub fn rewrite_radiance_options(args: impl IntoIterator<Item = String>) -> Vec<String> {
+    args.into_iter()
+        .map(|a| match a.strip_prefix('-') {
+            Some(name) if !name.starts_with('-') && RADIANCE_OPTIONS.contains(&name) => {
+                format!("--{name}")
+            }
+            _ => a,
+        })
+        .collect()
+}
+
+#[derive(Parser, Debug)]
+#[command(
+    name = "icrender",
+    version,
+    about = "Global illumination with Ward's irradiance cache, by components"
+)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+pub enum Command {
+    /// Render a glTF scene to a layered OpenEXR and a PNG preview.
+    Render(RenderArgs),
+    /// Describe a scene: triangles, materials, lights, bounds, and the components it needs.
+    Info(InfoArgs),
+    /// Error of one EXR against another (RMSE and relative MSE per layer).
+    Compare(CompareArgs),
+    /// Benchmarks (print figures; not tests).
+    Bench(BenchArgs),
+}
+
+#[derive(Args, Debug, Clone)]
+pub struct RenderArgs {
+    /// The glTF 2.0 scene (.gltf or .glb).
+    pub scene: PathBuf,
+    /// Output EXR; the PNG preview is written beside it with the extension .png.
+    #[arg(short = 'o', long = "output")]
+    pub output: Option<PathBuf>,
+    /// Image width in pixels.
+    #[arg(short = 'x', default_value_t = 512)]
+    pub width: u32,
+    /// Image height in pixels.
+    #[arg(short = 'y', default_value_t = 512)]
+    pub height: u32,
+    /// -ab: ambient (indirect diffuse) bounces.
+    #[arg(long = "ab", default_value_t = 1)]
+    pub ambient_bounces: u32,
+    /// -ad: hemisphere samples at the first indirect diffuse bounce.
+    #[arg(long = "ad", default_value_t = 512)]
+    pub ambient_divisions: u32,
+    /// -av r g b: radiance assumed past the last ambient bounce.
+    #[arg(long = "av", num_args = 3, value_names = ["R", "G", "B"], allow_negative_numbers = true)]
+    pub ambient_value: Option<Vec<f32>>,
+    /// -st: specular threshold; no specular ray below this reflectance.
+    #[arg(long = "st", default_value_t = crate::scene::material::DEFAULT_SPECULAR_THRESHOLD)]
+    pub specular_threshold: f32,
+    /// -lr: maximum specular path length.
+    #[arg(long = "lr", default_value_t = 8)]
+    pub max_specular_depth: u32,
+    /// -lw: minimum path weight before a specular path is cut.
+    #[arg(long = "lw", default_value_t = 1e-3)]
+    pub min_weight: f32,
+    /// Shadow rays to area emitters per shading point on the eye path.
+    #[arg(long = "light-samples", default_value_t = 1)]
+    pub light_samples: u32,
+    /// Samples per pixel (stratified over the pixel's area).
+    #[arg(long = "spp", default_value_t = 1)]
+    pub spp: u32,
+    /// Random seed; the same seed gives the same image.
+    #[arg(long = "seed", default_value_t = 1)]
+    pub seed: u64,
+    /// Tile size, WxH.
+    #[arg(long = "tile", default_value = "32x32")]
+    pub tile: String,
+    /// Rendering threads (default: every core).
+    #[arg(long = "threads")]
+    pub threads: Option<usize>,
+    /// Every material becomes a two-sided Lambertian of its base colour (emitters unchanged).
+    #[arg(long = "lambertian")]
+    pub lambertian: bool,
+    /// Write statistics as JSON to this file.
+    #[arg(long = "stats")]
+    pub stats: Option<PathBuf>,
+    /// Report the error against this reference EXR after rendering.
+    #[arg(long = "reference")]
+    pub reference: Option<PathBuf>,
+    /// Do not write the PNG preview.
+    #[arg(long = "no-preview")]
+    pub no_preview: bool,
+    /// Store half floats in the EXR (default: full floats).
+    #[arg(long = "half")]
+    pub half: bool,
+    /// No progress bar and no summary.
+    #[arg(short = 'q', long = "quiet")]
+    pub quiet: bool,
+    #[command(flatten)]
+    pub view: ViewArgs,
+}
+
+#[derive(Args, Debug, Clone, Default)]
+pub struct ViewArgs {
+    /// -vp x y z: view point.
+    #[arg(long = "vp", num_args = 3, allow_negative_numbers = true)]
+    pub vp: Option<Vec<f32>>,
+    /// -vd x y z: view direction.
+    #[arg(long = "vd", num_args = 3, allow_negative_numbers = true)]
+    pub vd: Option<Vec<f32>>,
+    /// -vu x y z: view up.
+    #[arg(long = "vu", num_args = 3, allow_negative_numbers = true)]
+    pub vu: Option<Vec<f32>>,
+    /// -vh: horizontal view angle in degrees (-vtl: width).
+    #[arg(long = "vh", allow_negative_numbers = true)]
+    pub vh: Option<f32>,
+    /// -vv: vertical view angle in degrees (-vtl: height).
+    #[arg(long = "vv", allow_negative_numbers = true)]
+    pub vv: Option<f32>,
+    /// -vtv: perspective view (default).
+    #[arg(long = "vtv")]
+    pub vtv: bool,
+    /// -vtl: parallel (orthographic) view.
+    #[arg(long = "vtl", conflicts_with = "vtv")]
+    pub vtl: bool,
+}
+
+#[derive(Args, Debug)]
+pub struct InfoArgs {
+    pub scene: PathBuf,
+    /// Print the description as JSON.
+    #[arg(long = "json")]
+    pub json: bool,
+}
+
+#[derive(Args, Debug)]
+pub struct CompareArgs {
+    /// The image to judge.
+    pub image: PathBuf,
+    /// The reference it is judged against.
+    pub reference: PathBuf,
+    /// Print the errors as JSON.
+    #[arg(long = "json")]
+    pub json: bool,
+}
+
+#[derive(Args, Debug)]
+pub struct BenchArgs {
+    #[command(subcommand)]
+    pub which: BenchCommand,
+}
+
+#[derive(Subcommand, Debug)]
+pub enum BenchCommand {
+    /// Embree ray throughput on a scene: load and BVH build time, primary and incoherent rays.
+    Rays {
+        scene: PathBuf,
+        /// Seconds spent on each kind of ray.
+        #[arg(long = "seconds", default_value_t = 2.0)]
+        seconds: f64,
+        /// Threads for the second, parallel measurement (default: every core).
+        #[arg(long = "threads")]
+        threads: Option<usize>,
+    },
+}
+
+/// Parses "WxH" (or a single number for square tiles).
+pub fn parse_tile(text: &str) -> Result<(u32, u32), String> {
+    let bad = || format!("--tile {text}: expected WxH with positive whole numbers, e.g. 32x32");
+    let (w, h) = match text.split_once(['x', 'X']) {
+        Some((w, h)) => (
+            w.trim().parse::<u32>().map_err(|_| bad())?,
+            h.trim().parse::<u32>().map_err(|_| bad())?,
+        ),
+        None => {
+            let n = text.trim().parse::<u32>().map_err(|_| bad())?;
+            (n, n)
+        }
+    };
+    if w == 0 || h == 0 {
+        return Err(bad());
+    }
+    Ok((w, h))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn radiance_names_become_long_options() {
+        let args = rewrite_radiance_options(
+            [
+                "icrender", "render", "s.gltf", "-ab", "2", "-vd", "0", "0", "-1", "-x", "8",
+            ]
+            .map(String::from),
+        );
+        assert_eq!(args[3], "--ab");
+        assert_eq!(args[5], "--vd");
+        assert_eq!(args[8], "-1");
+        assert_eq!(args[9], "-x");
+        let cli = Cli::try_parse_from(args).unwrap();
+        let Command::Render(r) = cli.command else {
+            panic!("not render")
+        };
+        assert_eq!(r.ambient_bounces, 2);
+        assert_eq!(r.view.vd, Some(vec![0.0, 0.0, -1.0]));
+        assert_eq!(r.width, 8);
+    }
+
+    #[test]
+    fn tiles_parse() {
+        assert_eq!(parse_tile("16x8"), Ok((16, 8)));
+        assert_eq!(parse_tile("24"), Ok((24, 24)));
+        assert!(parse_tile("0x8").is_err());
+        assert!(parse_tile("axb").is_err());
+    }
+}

@@ -1,0 +1,108 @@
+//! `icrender bench rays`: how fast Embree traces this scene's rays, outside the renderer, so the
+//! renderer's own throughput has a ceiling to be compared with.
+
+use super::CommandResult;
+use crate::cli::{BenchArgs, BenchCommand};
+use crate::sampling::Rng;
+use crate::scene::{MaterialOptions, Scene};
+use crate::sys::embree::Coherence;
+use crate::tracer::Tracer;
+use glam::Vec3;
+use std::time::Instant;
+
+/// Traces `make_ray(i)` for i = 0, 1, ... on `threads` threads for about `seconds`; Mrays/s.
+fn throughput(
+    tracer: &Tracer,
+    threads: usize,
+    seconds: f64,
+    coherence: Coherence,
+    make_ray: &(dyn Fn(u64) -> (Vec3, Vec3) + Sync),
+) -> (f64, f64) {
+    let start = Instant::now();
+    let results: Vec<(u64, u64)> = std::thread::scope(|scope| {
+        let workers: Vec<_> = (0..threads)
+            .map(|t| {
+                scope.spawn(move || {
+                    let (mut rays, mut hits) = (0u64, 0u64);
+                    let mut i = t as u64 * (1 << 40);
+                    while start.elapsed().as_secs_f64() < seconds {
+                        for _ in 0..4096 {
+                            let (o, d) = make_ray(i);
+                            i += 1;
+                            hits += tracer.raw_intersect(o, d, coherence).is_some() as u64;
+                        }
+                        rays += 4096;
+                    }
+                    (rays, hits)
+                })
+            })
+            .collect();
+        workers
+            .into_iter()
+            .map(|w| w.join().unwrap_or((0, 0)))
+            .collect()
+    });
+    let elapsed = start.elapsed().as_secs_f64();
+    let rays: u64 = results.iter().map(|r| r.0).sum();
+    let hits: u64 = results.iter().map(|r| r.1).sum();
+    (
+        rays as f64 / elapsed / 1e6,
+        hits as f64 / rays.max(1) as f64,
+    )
+}
+
+pub fn run(args: &BenchArgs) -> CommandResult {
+    let BenchCommand::Rays {
+        scene: path,
+        seconds,
+        threads,
+    } = &args.which;
+    let load_start = Instant::now();
+    let scene = Scene::load(path, &MaterialOptions::default())?;
+    let load_s = load_start.elapsed().as_secs_f64();
+    let build_start = Instant::now();
+    let tracer = Tracer::new(&scene)?;
+    let build_s = build_start.elapsed().as_secs_f64();
+    let (width, height) = (1024u32, 1024u32);
+    let view = super::view::choose_view(&scene, &tracer, &Default::default(), width, height)?;
+    let camera = view.camera(width, height);
+    let primary = |i: u64| {
+        let p = i % (width as u64 * height as u64);
+        camera.ray(
+            (p % width as u64) as f32 + 0.5,
+            (p / width as u64) as f32 + 0.5,
+        )
+    };
+    let (lo, hi) = (scene.bounds_min, scene.bounds_max);
+    let incoherent = |i: u64| {
+        let mut rng = Rng::new(i, 99);
+        let o = lo + (hi - lo) * Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32());
+        let z = 2.0 * rng.next_f32() - 1.0;
+        let phi = 2.0 * std::f32::consts::PI * rng.next_f32();
+        let r = (1.0 - z * z).max(0.0).sqrt();
+        (o, Vec3::new(r * phi.cos(), r * phi.sin(), z))
+    };
+    let all =
+        threads.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+    println!(
+        "scene        {} ({} triangles)",
+        path.display(),
+        scene.triangle_count()
+    );
+    println!("embree       {} ", tracer.embree_version);
+    println!("load         {load_s:.3} s");
+    println!("bvh build    {build_s:.3} s");
+    for t in [1, all] {
+        let (p, ph) = throughput(&tracer, t, *seconds, Coherence::Coherent, &primary);
+        let (r, rh) = throughput(&tracer, t, *seconds, Coherence::Incoherent, &incoherent);
+        println!(
+            "{t} thread(s)  primary {p:.2} Mrays/s ({:.0}% hit)   incoherent {r:.2} Mrays/s ({:.0}% hit)",
+            ph * 100.0,
+            rh * 100.0
+        );
+        if all == 1 {
+            break;
+        }
+    }
+    Ok(())
+}

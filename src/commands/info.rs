@@ -1,0 +1,97 @@
+//! `icrender info`: what a scene holds and which components it needs.
+
+use super::{CommandResult, warn};
+use crate::cli::InfoArgs;
+use crate::scene::{MaterialOptions, Scene};
+use crate::sys::scene_io::LightType;
+use serde_json::json;
+
+pub fn run(args: &InfoArgs) -> CommandResult {
+    let scene = Scene::load(&args.scene, &MaterialOptions::default())?;
+    for w in &scene.warnings {
+        warn(&format!("{}: {w}", args.scene.display()));
+    }
+    let needs = scene.needs();
+    let count = |kind: LightType| {
+        scene
+            .punctual_lights
+            .iter()
+            .filter(|l| l.kind == kind)
+            .count()
+    };
+    let emissive_materials: Vec<&str> = scene
+        .materials
+        .iter()
+        .filter(|m| m.is_emissive())
+        .map(|m| m.name.as_str())
+        .collect();
+    let specular_materials: Vec<&str> = scene
+        .materials
+        .iter()
+        .filter(|m| m.traces_specular)
+        .map(|m| m.name.as_str())
+        .collect();
+    let description = json!({
+        "scene": args.scene.display().to_string(),
+        "triangles": scene.triangle_count(),
+        "dropped_triangles": scene.dropped_triangles,
+        "placed_meshes": scene.meshes.len(),
+        "materials": scene.materials.len() - 1,
+        "textures": scene.textures.len(),
+        "lights": {
+            "emissive_triangles": scene.emitters.triangles.len(),
+            "emissive_materials": emissive_materials,
+            "point": count(LightType::Point),
+            "spot": count(LightType::Spot),
+            "directional": count(LightType::Directional),
+        },
+        "cameras": scene.cameras.len(),
+        "bounds": { "min": scene.bounds_min.to_array(), "max": scene.bounds_max.to_array(), "size": scene.size() },
+        "specular_materials": specular_materials,
+        "components": {
+            "emission": needs.emission,
+            "direct": needs.direct,
+            "specular": needs.specular,
+            "indirect_diffuse": needs.diffuse,
+            "transparency": needs.transparency,
+        },
+    });
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&description)?);
+        return Ok(());
+    }
+    let d = &description;
+    println!("scene        {}", d["scene"].as_str().unwrap_or_default());
+    println!(
+        "triangles    {} ({} dropped), {} placed meshes",
+        d["triangles"], d["dropped_triangles"], d["placed_meshes"]
+    );
+    println!(
+        "materials    {}, textures {}",
+        d["materials"], d["textures"]
+    );
+    println!(
+        "lights       {} emissive triangles, {} point, {} spot, {} directional",
+        d["lights"]["emissive_triangles"],
+        d["lights"]["point"],
+        d["lights"]["spot"],
+        d["lights"]["directional"]
+    );
+    println!("cameras      {}", d["cameras"]);
+    println!(
+        "bounds       min {:?} max {:?} (size {:.4})",
+        scene.bounds_min.to_array(),
+        scene.bounds_max.to_array(),
+        scene.size()
+    );
+    let yes = |b: bool| if b { "yes" } else { "no" };
+    println!(
+        "components   emission {}, direct {}, specular {}, indirect diffuse {}, transparency {}",
+        yes(needs.emission),
+        yes(needs.direct),
+        yes(needs.specular),
+        yes(needs.diffuse),
+        yes(needs.transparency)
+    );
+    Ok(())
+}

@@ -1,0 +1,103 @@
+//! Which view a render uses: the glTF camera if the scene has one, else an automatic view of
+//! the bounds; then every Radiance view option given on the command line overrides its part.
+
+use crate::cli::ViewArgs;
+use crate::scene::Scene;
+use crate::scene::auto_view::{Probe, auto_view};
+use crate::scene::view::{Projection, View};
+use crate::tracer::Tracer;
+use glam::Vec3;
+
+fn vec3(v: &[f32]) -> Vec3 {
+    Vec3::new(v[0], v[1], v[2])
+}
+
+pub fn choose_view(
+    scene: &Scene,
+    tracer: &Tracer,
+    args: &ViewArgs,
+    width: u32,
+    height: u32,
+) -> Result<View, String> {
+    let aspect = width as f32 / height as f32;
+    let mut view = match scene.cameras.first() {
+        Some(c) if c.perspective => {
+            let vertical = c.yfov.to_degrees();
+            View {
+                projection: Projection::Perspective,
+                position: Vec3::from(c.position),
+                direction: Vec3::from(c.forward),
+                up: Vec3::from(c.up),
+                horizontal: View::horizontal_for_aspect(Projection::Perspective, vertical, aspect),
+                vertical,
+            }
+        }
+        Some(c) => View {
+            projection: Projection::Parallel,
+            position: Vec3::from(c.position),
+            direction: Vec3::from(c.forward),
+            up: Vec3::from(c.up),
+            horizontal: 2.0 * c.ymag * aspect,
+            vertical: 2.0 * c.ymag,
+        },
+        None => auto_view(scene.bounds_min, scene.bounds_max, aspect, |o, d| {
+            probe(scene, tracer, o, d)
+        }),
+    };
+    if args.vtl {
+        view.projection = Projection::Parallel;
+    } else if args.vtv {
+        view.projection = Projection::Perspective;
+    }
+    if let Some(p) = &args.vp {
+        view.position = vec3(p);
+    }
+    if let Some(d) = &args.vd {
+        view.direction = vec3(d);
+    }
+    if let Some(u) = &args.vu {
+        view.up = vec3(u);
+    }
+    // One angle given: the other follows from the image's aspect, so pixels stay square.
+    match (args.vh, args.vv) {
+        (Some(h), Some(v)) => (view.horizontal, view.vertical) = (h, v),
+        (Some(h), None) => {
+            view.horizontal = h;
+            view.vertical = View::horizontal_for_aspect(view.projection, h, 1.0 / aspect);
+        }
+        (None, Some(v)) => {
+            view.vertical = v;
+            view.horizontal = View::horizontal_for_aspect(view.projection, v, aspect);
+        }
+        (None, None) => {}
+    }
+    view.validate()?;
+    Ok(view)
+}
+
+/// Light positions the automatic view tests visibility against: every punctual light and an
+/// even selection of emissive triangles' centres.
+fn light_positions(scene: &Scene) -> Vec<Vec3> {
+    const MAX_EMITTERS: usize = 32;
+    let emitters = &scene.emitters.triangles;
+    let step = emitters.len().div_ceil(MAX_EMITTERS).max(1);
+    let centres = emitters
+        .iter()
+        .step_by(step)
+        .map(|t| t.p0 + (t.e1 + t.e2) / 3.0 + t.normal * 1e-3 * scene.size());
+    scene
+        .punctual_lights
+        .iter()
+        .map(|l| l.position)
+        .chain(centres)
+        .collect()
+}
+
+fn probe(scene: &Scene, tracer: &Tracer, origin: Vec3, dir: Vec3) -> Option<Probe> {
+    let distance = tracer.hit_distance(origin, dir)?;
+    let point = origin + dir * distance * 0.999;
+    let lit = light_positions(scene)
+        .into_iter()
+        .any(|light| !tracer.segment_blocked(point, light));
+    Some(Probe { distance, lit })
+}

@@ -1,0 +1,72 @@
+//! One float RGB plane per component layer; the composite is their sum.
+
+use crate::shading::components::Components;
+use glam::Vec3;
+
+/// The component layers, in the order they are stored and written.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Layer {
+    Emission,
+    Direct,
+    Specular,
+    Indirect,
+}
+
+impl Layer {
+    pub const ALL: [Layer; 4] = [
+        Layer::Emission,
+        Layer::Direct,
+        Layer::Specular,
+        Layer::Indirect,
+    ];
+
+    /// The EXR layer name (channels are `name.R`, `name.G`, `name.B`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Layer::Emission => "emission",
+            Layer::Direct => "direct",
+            Layer::Specular => "specular",
+            Layer::Indirect => "indirect",
+        }
+    }
+
+    pub fn index(self) -> usize {
+        self as usize
+    }
+}
+
+#[derive(Clone, Debug)]
+pub struct FrameBuffer {
+    pub width: u32,
+    pub height: u32,
+    layers: [Vec<Vec3>; 4],
+}
+
+impl FrameBuffer {
+    pub fn new(width: u32, height: u32) -> FrameBuffer {
+        let n = width as usize * height as usize;
+        FrameBuffer {
+            width,
+            height,
+            layers: std::array::from_fn(|_| vec![Vec3::ZERO; n]),
+        }
+    }
+
+    pub fn layer(&self, layer: Layer) -> &[Vec3] {
+        &self.layers[layer.index()]
+    }
+
+    pub fn set(&mut self, x: u32, y: u32, value: &Components) {
+        let i = y as usize * self.width as usize + x as usize;
+        for (plane, v) in self.layers.iter_mut().zip(value.as_array()) {
+            plane[i] = v;
+        }
+    }
+
+    /// Sum of all layers, pixel by pixel.
+    pub fn composite(&self) -> Vec<Vec3> {
+        (0..self.layers[0].len())
+            .map(|i| self.layers.iter().map(|l| l[i]).sum())
+            .collect()
+    }
+}

@@ -1,0 +1,7 @@
+//! Images: per-layer framebuffers, the layered EXR and PNG preview written atomically, and the
+//! error metrics `compare` and `--reference` report.
+
+pub mod framebuffer;
+pub mod metrics;
+pub mod output;
+pub mod preview;

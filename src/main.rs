@@ -1,0 +1,46 @@
+//! icrender: a renderer for global illumination with Ward's irradiance cache, split into
+//! Radiance's components (emission, direct, specular, indirect diffuse).
+
+mod cli;
+mod commands;
+mod image;
+mod progress;
+mod render;
+mod sampling;
+mod scene;
+mod shading;
+mod stats;
+mod sys;
+mod tracer;
+
+use clap::Parser;
+use std::process::ExitCode;
+
+fn main() -> ExitCode {
+    let args = cli::rewrite_radiance_options(std::env::args());
+    let cli = match cli::Cli::try_parse_from(args) {
+        Ok(cli) => cli,
+        Err(e) => {
+            // clap prints help and version to stdout with success, usage errors to stderr.
+            let _ = e.print();
+            return if e.use_stderr() {
+                ExitCode::from(2)
+            } else {
+                ExitCode::SUCCESS
+            };
+        }
+    };
+    let result = match &cli.command {
+        cli::Command::Render(args) => commands::render::run(args),
+        cli::Command::Info(args) => commands::info::run(args),
+        cli::Command::Compare(args) => commands::compare::run(args),
+        cli::Command::Bench(args) => commands::bench::run(args),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(commands::CommandError(message)) => {
+            eprintln!("icrender: error: {message}");
+            ExitCode::FAILURE
+        }
+    }
+}

@@ -1,0 +1,170 @@
+//! The single-process renderer: the image is cut into tiles, threads take tiles from a shared
+//! counter until none are left, and each pixel averages `spp` stratified (jittered) samples over
+//! its area, which is the box filter a converged reference integrates.
+
+use crate::image::framebuffer::FrameBuffer;
+use crate::progress::Progress;
+use crate::sampling::{Rng, grid_side};
+use crate::scene::view::Camera;
+use crate::shading::components::Components;
+use crate::shading::{Integrator, RayCounts};
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::time::Instant;
+
+#[derive(Clone, Debug)]
+pub struct RenderSettings {
+    pub spp: u32,
+    pub seed: u64,
+    pub tile_width: u32,
+    pub tile_height: u32,
+    pub threads: usize,
+}
+
+#[derive(Clone, Copy, Debug)]
+pub struct Tile {
+    pub x0: u32,
+    pub y0: u32,
+    pub x1: u32,
+    pub y1: u32,
+}
+
+/// Tiles in scanline order covering the image exactly once.
+pub fn tiles(width: u32, height: u32, tile_width: u32, tile_height: u32) -> Vec<Tile> {
+    let (tw, th) = (tile_width.max(1), tile_height.max(1));
+    let mut out = Vec::new();
+    for y0 in (0..height).step_by(th as usize) {
+        for x0 in (0..width).step_by(tw as usize) {
+            out.push(Tile {
+                x0,
+                y0,
+                x1: (x0 + tw).min(width),
+                y1: (y0 + th).min(height),
+            });
+        }
+    }
+    out
+}
+
+/// What one thread did.
+#[derive(Clone, Debug, Default)]
+pub struct ThreadStats {
+    pub rays: RayCounts,
+    pub busy_s: f64,
+    pub tiles: usize,
+}
+
+/// The components of one pixel: the mean of its samples.
+pub fn render_pixel(
+    integrator: &Integrator<'_>,
+    camera: &Camera,
+    settings: &RenderSettings,
+    x: u32,
+    y: u32,
+    counts: &mut RayCounts,
+) -> Components {
+    let side = grid_side(settings.spp.max(1));
+    let samples = settings.spp.max(1);
+    let pixel_index = y as u64 * camera.width as u64 + x as u64;
+    let mut sum = Components::default();
+    for s in 0..samples {
+        let mut rng = Rng::for_sample(settings.seed, pixel_index, s as u64);
+        // One sample: the pixel centre. Several: one jittered point per stratum of a grid.
+        let (jx, jy) = if samples == 1 {
+            (0.5, 0.5)
+        } else {
+            let (i, j) = (s % side, (s / side) % side);
+            (
+                (i as f32 + rng.next_f32()) / side as f32,
+                (j as f32 + rng.next_f32()) / side as f32,
+            )
+        };
+        let (origin, dir) = camera.ray(x as f32 + jx, y as f32 + jy);
+        sum += integrator.primary(origin, dir, &mut rng, counts);
+    }
+    sum * (1.0 / samples as f32)
+}
+
+pub fn render(
+    integrator: &Integrator<'_>,
+    camera: &Camera,
+    settings: &RenderSettings,
+    progress: &Progress,
+) -> (FrameBuffer, Vec<ThreadStats>) {
+    let all = tiles(
+        camera.width,
+        camera.height,
+        settings.tile_width,
+        settings.tile_height,
+    );
+    let next = AtomicUsize::new(0);
+    let frame = Mutex::new(FrameBuffer::new(camera.width, camera.height));
+    let threads = settings.threads.max(1).min(all.len().max(1));
+    let stats: Vec<ThreadStats> = std::thread::scope(|scope| {
+        let workers: Vec<_> = (0..threads)
+            .map(|_| {
+                scope.spawn(|| {
+                    let mut stats = ThreadStats::default();
+                    let start = Instant::now();
+                    let mut values = Vec::new();
+                    loop {
+                        let index = next.fetch_add(1, Ordering::Relaxed);
+                        let Some(tile) = all.get(index) else { break };
+                        values.clear();
+                        for y in tile.y0..tile.y1 {
+                            for x in tile.x0..tile.x1 {
+                                values.push(render_pixel(
+                                    integrator,
+                                    camera,
+                                    settings,
+                                    x,
+                                    y,
+                                    &mut stats.rays,
+                                ));
+                            }
+                        }
+                        let mut frame = frame.lock().unwrap_or_else(|e| e.into_inner());
+                        let mut it = values.iter();
+                        for y in tile.y0..tile.y1 {
+                            for x in tile.x0..tile.x1 {
+                                if let Some(v) = it.next() {
+                                    frame.set(x, y, v);
+                                }
+                            }
+                        }
+                        drop(frame);
+                        stats.tiles += 1;
+                        progress.advance(1);
+                    }
+                    stats.busy_s = start.elapsed().as_secs_f64();
+                    stats
+                })
+            })
+            .collect();
+        workers
+            .into_iter()
+            .map(|w| w.join().unwrap_or_default())
+            .collect()
+    });
+    progress.finish();
+    (frame.into_inner().unwrap_or_else(|e| e.into_inner()), stats)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn tiles_cover_every_pixel_once() {
+        let (w, h) = (67, 45);
+        let mut seen = vec![0u8; (w * h) as usize];
+        for t in tiles(w, h, 16, 8) {
+            for y in t.y0..t.y1 {
+                for x in t.x0..t.x1 {
+                    seen[(y * w + x) as usize] += 1;
+                }
+            }
+        }
+        assert!(seen.iter().all(|&c| c == 1));
+    }
+}

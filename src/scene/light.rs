@@ -1,0 +1,242 @@
+//! Light sources: punctual lights (KHR_lights_punctual) and emissive triangles, with the
+//! sampling the direct component needs.
+
+use crate::sys::scene_io::{GltfLight, LightType};
+use glam::Vec3;
+
+/// A punctual light in world space. Intensity is used as radiometric (W/sr for point and spot,
+/// W/m^2 for directional), as renderers of glTF conventionally do.
+#[derive(Clone, Debug)]
+pub struct PunctualLight {
+    pub name: String,
+    pub kind: LightType,
+    pub intensity: Vec3,
+    pub position: Vec3,
+    /// Where the light points (unit).
+    pub direction: Vec3,
+    pub range: f32,
+    pub cos_inner: f32,
+    pub cos_outer: f32,
+}
+
+/// What a light delivers at a point: direction towards the light (unit), distance (infinite
+/// for directional) and the irradiance it gives a surface facing it.
+#[derive(Clone, Copy, Debug)]
+pub struct LightSample {
+    pub to_light: Vec3,
+    pub distance: f32,
+    pub irradiance: Vec3,
+}
+
+fn finite3(v: [f32; 3]) -> Option<Vec3> {
+    let v = Vec3::from(v);
+    v.is_finite().then_some(v)
+}
+
+impl PunctualLight {
+    /// None when the file's numbers cannot describe a light (non-finite position, zero
+    /// direction); the caller warns.
+    pub fn from_gltf(l: &GltfLight) -> Option<PunctualLight> {
+        let color = finite3(l.color)?.max(Vec3::ZERO);
+        let intensity = if l.intensity.is_finite() {
+            l.intensity.max(0.0)
+        } else {
+            return None;
+        };
+        let direction = finite3(l.direction)?.try_normalize()?;
+        let position = finite3(l.position)?;
+        let outer = l.outer_cone.clamp(0.0, std::f32::consts::FRAC_PI_2);
+        let inner = l.inner_cone.clamp(0.0, outer);
+        Some(PunctualLight {
+            name: l.name.clone(),
+            kind: l.kind,
+            intensity: color * intensity,
+            position,
+            direction,
+            range: if l.range.is_finite() && l.range > 0.0 {
+                l.range
+            } else {
+                0.0
+            },
+            cos_inner: inner.cos(),
+            cos_outer: outer.cos(),
+        })
+    }
+
+    /// Irradiance at `point` on a surface facing the light (the caller applies the cosine and
+    /// the shadow test). None when the light gives nothing there.
+    pub fn illuminate(&self, point: Vec3) -> Option<LightSample> {
+        if self.kind == LightType::Directional {
+            return Some(LightSample {
+                to_light: -self.direction,
+                distance: f32::INFINITY,
+                irradiance: self.intensity,
+            });
+        }
+        let offset = self.position - point;
+        let d2 = offset.length_squared();
+        if !(d2 > 0.0 && d2.is_finite()) {
+            return None;
+        }
+        let distance = d2.sqrt();
+        let to_light = offset / distance;
+        let mut scale = 1.0 / d2;
+        if self.range > 0.0 {
+            // glTF's recommended window: smooth fall-off to zero at the range.
+            let r = (distance / self.range).powi(4);
+            scale *= (1.0 - r).clamp(0.0, 1.0).powi(2);
+        }
+        if self.kind == LightType::Spot {
+            let cos = self.direction.dot(-to_light);
+            let t = if self.cos_inner > self.cos_outer {
+                ((cos - self.cos_outer) / (self.cos_inner - self.cos_outer)).clamp(0.0, 1.0)
+            } else if cos >= self.cos_outer {
+                1.0
+            } else {
+                0.0
+            };
+            scale *= t * t;
+        }
+        (scale > 0.0).then(|| LightSample {
+            to_light,
+            distance,
+            irradiance: self.intensity * scale,
+        })
+    }
+}
+
+/// One emissive triangle in world space.
+#[derive(Clone, Debug)]
+pub struct EmitterTriangle {
+    pub p0: Vec3,
+    pub e1: Vec3,
+    pub e2: Vec3,
+    /// Unit normal of the emitting (front) side.
+    pub normal: Vec3,
+    pub area: f32,
+    pub radiance: Vec3,
+    /// Embree geometry and primitive that this triangle is.
+    pub geom_id: u32,
+    pub prim_id: u32,
+}
+
+/// All emissive triangles, chosen in proportion to their power (area x luminance), so bright
+/// and large emitters get most of the shadow rays.
+#[derive(Clone, Debug, Default)]
+pub struct EmitterSet {
+    pub triangles: Vec<EmitterTriangle>,
+    cdf: Vec<f64>,
+    total_power: f64,
+}
+
+/// A point chosen on an emitter, with the area-measure density of having chosen it.
+#[derive(Clone, Copy, Debug)]
+pub struct EmitterPoint {
+    pub position: Vec3,
+    pub normal: Vec3,
+    pub radiance: Vec3,
+    pub pdf_area: f32,
+}
+
+pub fn luminance(c: Vec3) -> f32 {
+    0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z
+}
+
+impl EmitterSet {
+    pub fn new(triangles: Vec<EmitterTriangle>) -> EmitterSet {
+        let mut cdf = Vec::with_capacity(triangles.len());
+        let mut total = 0.0f64;
+        for t in &triangles {
+            total += t.area as f64 * luminance(t.radiance).max(1e-12) as f64;
+            cdf.push(total);
+        }
+        EmitterSet {
+            triangles,
+            cdf,
+            total_power: total,
+        }
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.triangles.is_empty()
+    }
+
+    /// Probability of choosing triangle `index`.
+    pub fn pick_probability(&self, index: usize) -> f64 {
+        let lo = if index == 0 { 0.0 } else { self.cdf[index - 1] };
+        (self.cdf[index] - lo) / self.total_power
+    }
+
+    /// Chooses a triangle by power with `u1`, a uniform point on it with `u2`, `u3`.
+    pub fn sample(&self, u1: f32, u2: f32, u3: f32) -> Option<EmitterPoint> {
+        if self.triangles.is_empty() || !(self.total_power > 0.0) {
+            return None;
+        }
+        let target = u1 as f64 * self.total_power;
+        let index = self
+            .cdf
+            .partition_point(|&c| c <= target)
+            .min(self.triangles.len() - 1);
+        let t = &self.triangles[index];
+        // Uniform point on a triangle by the square-root warp.
+        let su = u2.sqrt();
+        let (b1, b2) = (1.0 - su, u3 * su);
+        let position = t.p0 + b1 * t.e1 + b2 * t.e2;
+        let pdf_area = (self.pick_probability(index) / t.area as f64) as f32;
+        (pdf_area.is_finite() && pdf_area > 0.0).then_some(EmitterPoint {
+            position,
+            normal: t.normal,
+            radiance: t.radiance,
+            pdf_area,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn tri(scale: f32, radiance: f32) -> EmitterTriangle {
+        EmitterTriangle {
+            p0: Vec3::ZERO,
+            e1: Vec3::X * scale,
+            e2: Vec3::Y * scale,
+            normal: Vec3::Z,
+            area: 0.5 * scale * scale,
+            radiance: Vec3::splat(radiance),
+            geom_id: 0,
+            prim_id: 0,
+        }
+    }
+
+    #[test]
+    fn picks_by_power_and_density_integrates_to_one() {
+        let set = EmitterSet::new(vec![tri(1.0, 1.0), tri(2.0, 1.0), tri(1.0, 4.0)]);
+        // Powers 0.5, 2, 2 -> probabilities 1/9, 4/9, 4/9.
+        assert!((set.pick_probability(0) - 1.0 / 9.0).abs() < 1e-9);
+        assert!((set.pick_probability(2) - 4.0 / 9.0).abs() < 1e-9);
+        // Sum over triangles of pdf_area * area equals one.
+        let total: f64 = (0..3).map(|i| set.pick_probability(i)).sum();
+        assert!((total - 1.0).abs() < 1e-9);
+        let p = set.sample(0.05, 0.3, 0.7).unwrap();
+        assert!((p.pdf_area - (1.0 / 9.0) / 0.5).abs() < 1e-5);
+    }
+
+    #[test]
+    fn spot_cone_and_inverse_square() {
+        let l = PunctualLight {
+            name: "s".into(),
+            kind: LightType::Spot,
+            intensity: Vec3::splat(4.0),
+            position: Vec3::new(0.0, 2.0, 0.0),
+            direction: -Vec3::Y,
+            range: 0.0,
+            cos_inner: 0.9,
+            cos_outer: 0.8,
+        };
+        let below = l.illuminate(Vec3::ZERO).unwrap();
+        assert!((below.irradiance.x - 1.0).abs() < 1e-6);
+        assert!(l.illuminate(Vec3::new(10.0, 0.0, 0.0)).is_none());
+        assert!(l.illuminate(l.position).is_none());
+    }
+}

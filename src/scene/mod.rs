@@ -1,0 +1,353 @@
+//! The scene as the renderer sees it: world-space triangle meshes with their materials,
+//! textures, light sources, cameras and bounds, built from a loaded glTF file.
+
+pub mod auto_view;
+pub mod light;
+pub mod material;
+pub mod texture;
+pub mod view;
+
+use crate::sys::scene_io::{self, GltfCamera, GltfScene};
+use glam::{Mat3, Mat4, Vec3};
+use light::{EmitterSet, EmitterTriangle, PunctualLight};
+use material::Material;
+use std::path::{Path, PathBuf};
+use texture::Texture;
+
+/// Coordinates beyond this magnitude are treated like NaN: f32 arithmetic on them (squared
+/// distances, cross products) overflows, so no ray query could be trusted near them.
+pub const MAX_COORDINATE: f32 = 1e15;
+
+#[derive(Debug, thiserror::Error)]
+#[error("{path}: {message}")]
+pub struct SceneError {
+    pub path: PathBuf,
+    pub message: String,
+}
+
+/// How materials are read.
+#[derive(Clone, Debug)]
+pub struct MaterialOptions {
+    /// Radiance's -st: specular reflectance below which no specular ray is traced.
+    pub specular_threshold: f32,
+    /// Every material becomes a two-sided Lambertian of its base colour.
+    pub lambertian: bool,
+}
+
+impl Default for MaterialOptions {
+    fn default() -> Self {
+        MaterialOptions {
+            specular_threshold: material::DEFAULT_SPECULAR_THRESHOLD,
+            lambertian: false,
+        }
+    }
+}
+
+/// One placed mesh in world space; index = Embree geometry id.
+#[derive(Clone, Debug)]
+pub struct WorldMesh {
+    pub positions: Vec<[f32; 3]>,
+    pub normals: Option<Vec<Vec3>>,
+    pub texcoords: Option<Vec<[f32; 2]>>,
+    pub indices: Vec<[u32; 3]>,
+    pub material: u32,
+}
+
+pub struct Scene {
+    pub path: PathBuf,
+    pub meshes: Vec<WorldMesh>,
+    pub materials: Vec<Material>,
+    pub textures: Vec<Texture>,
+    pub punctual_lights: Vec<PunctualLight>,
+    pub emitters: EmitterSet,
+    pub cameras: Vec<GltfCamera>,
+    pub bounds_min: Vec3,
+    pub bounds_max: Vec3,
+    pub dropped_triangles: usize,
+    pub warnings: Vec<String>,
+}
+
+/// What the scene can produce, so no layer, pass or ray is spent on what it cannot.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct SceneNeeds {
+    pub emission: bool,
+    pub direct: bool,
+    pub specular: bool,
+    pub diffuse: bool,
+    pub transparency: bool,
+}
+
+impl Scene {
+    pub fn load(path: &Path, options: &MaterialOptions) -> Result<Scene, SceneError> {
+        let fail = |message: String| SceneError {
+            path: path.to_path_buf(),
+            message,
+        };
+        if !path.exists() {
+            return Err(fail("no such file".into()));
+        }
+        if path.is_dir() {
+            return Err(fail("is a directory, not a glTF file".into()));
+        }
+        let gltf = scene_io::load_gltf(path).map_err(fail)?;
+        Scene::from_gltf(path, gltf, options).map_err(fail)
+    }
+
+    fn from_gltf(path: &Path, gltf: GltfScene, options: &MaterialOptions) -> Result<Scene, String> {
+        let mut materials: Vec<Material> = gltf
+            .materials
+            .iter()
+            .map(|m| Material::from_gltf(m, options.specular_threshold))
+            .collect();
+        let default_material = materials.len() as u32;
+        materials.push(Material::gltf_default());
+        if options.lambertian {
+            materials.iter_mut().for_each(Material::make_lambertian);
+        }
+        let textures: Vec<Texture> = gltf.textures.iter().map(Texture::from_gltf).collect();
+        let mut warnings = gltf.warnings.clone();
+
+        let mut meshes = Vec::new();
+        let mut dropped = 0usize;
+        let mut emitter_triangles = Vec::new();
+        let mut bounds_min = Vec3::splat(f32::INFINITY);
+        let mut bounds_max = Vec3::splat(f32::NEG_INFINITY);
+        for instance in &gltf.instances {
+            let source = &gltf.meshes[instance.mesh];
+            let material = source.material.map_or(default_material, |m| m as u32);
+            let world = Mat4::from_cols_array(&instance.world);
+            let (mesh, dropped_here) = place_mesh(source, world, material);
+            dropped += dropped_here;
+            if mesh.indices.is_empty() {
+                continue;
+            }
+            let geom_id = meshes.len() as u32;
+            for tri in &mesh.indices {
+                for &i in tri {
+                    let p = Vec3::from(mesh.positions[i as usize]);
+                    bounds_min = bounds_min.min(p);
+                    bounds_max = bounds_max.max(p);
+                }
+            }
+            let m = &materials[material as usize];
+            if m.is_emissive() {
+                collect_emitters(&mesh, m.emission, geom_id, &mut emitter_triangles);
+            }
+            meshes.push(mesh);
+        }
+        if dropped > 0 {
+            warnings.push(format!(
+                "dropped {dropped} triangle(s) with zero area or non-finite or out-of-range coordinates"
+            ));
+        }
+        if meshes.is_empty() {
+            return Err(if dropped > 0 {
+                format!(
+                    "no valid triangles: all {dropped} were degenerate or had non-finite or out-of-range coordinates"
+                )
+            } else {
+                "the scene has no triangles".into()
+            });
+        }
+        let mut punctual_lights = Vec::new();
+        for l in &gltf.lights {
+            match PunctualLight::from_gltf(l) {
+                Some(light) => punctual_lights.push(light),
+                None => warnings.push(format!(
+                    "light '{}' ignored: non-finite position or direction",
+                    l.name
+                )),
+            }
+        }
+        Ok(Scene {
+            path: path.to_path_buf(),
+            meshes,
+            materials,
+            textures,
+            punctual_lights,
+            emitters: EmitterSet::new(emitter_triangles),
+            cameras: gltf.cameras,
+            bounds_min,
+            bounds_max,
+            dropped_triangles: dropped,
+            warnings,
+        })
+    }
+
+    pub fn triangle_count(&self) -> usize {
+        self.meshes.iter().map(|m| m.indices.len()).sum()
+    }
+
+    /// Length of the bounding box's diagonal: the scale every tolerance is relative to.
+    pub fn size(&self) -> f32 {
+        (self.bounds_max - self.bounds_min)
+            .length()
+            .max(f32::MIN_POSITIVE)
+    }
+
+    pub fn has_lights(&self) -> bool {
+        !self.emitters.is_empty() || !self.punctual_lights.is_empty()
+    }
+
+    pub fn needs(&self) -> SceneNeeds {
+        let used: Vec<&Material> = {
+            let mut seen = vec![false; self.materials.len()];
+            self.meshes
+                .iter()
+                .for_each(|m| seen[m.material as usize] = true);
+            self.materials
+                .iter()
+                .zip(seen)
+                .filter(|(_, s)| *s)
+                .map(|(m, _)| m)
+                .collect()
+        };
+        SceneNeeds {
+            emission: !self.emitters.is_empty(),
+            direct: self.has_lights(),
+            specular: used
+                .iter()
+                .any(|m| m.traces_specular || m.alpha_mode == scene_io::AlphaMode::Blend),
+            diffuse: used.iter().any(|m| m.max_diffuse() > 0.0),
+            transparency: used.iter().any(|m| m.may_be_transparent()),
+        }
+    }
+
+    pub fn name(&self) -> String {
+        self.path
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_default()
+    }
+}
+
+fn valid_point(p: Vec3) -> bool {
+    p.is_finite() && p.abs().max_element() <= MAX_COORDINATE
+}
+
+/// Transforms a mesh into world space and drops triangles that cannot be traced: non-finite or
+/// out-of-range vertices, or zero area. A mirroring transform reverses the winding, so the
+/// front side (which emitters use) stays where glTF says it is.
+fn place_mesh(source: &scene_io::GltfMesh, world: Mat4, material: u32) -> (WorldMesh, usize) {
+    let mirrored = world.determinant() < 0.0;
+    let positions: Vec<Vec3> = source
+        .positions
+        .iter()
+        .map(|&p| world.transform_point3(Vec3::from(p)))
+        .collect();
+    let normal_matrix = Mat3::from_mat4(world).inverse().transpose();
+    let normals = source
+        .normals
+        .as_ref()
+        .filter(|_| normal_matrix.is_finite())
+        .map(|ns| {
+            ns.iter()
+                .map(|&n| (normal_matrix * Vec3::from(n)).normalize_or_zero())
+                .collect::<Vec<_>>()
+        });
+    let mut indices = Vec::with_capacity(source.indices.len());
+    let mut dropped = 0;
+    for &[a, b, c] in &source.indices {
+        let (pa, pb, pc) = (
+            positions[a as usize],
+            positions[b as usize],
+            positions[c as usize],
+        );
+        let area2 = (pb - pa).cross(pc - pa).length_squared();
+        if valid_point(pa) && valid_point(pb) && valid_point(pc) && area2 > 0.0 && area2.is_finite()
+        {
+            indices.push(if mirrored { [a, c, b] } else { [a, b, c] });
+        } else {
+            dropped += 1;
+        }
+    }
+    // Unreferenced vertices may hold NaN; Embree never reads them, but keep the buffer clean.
+    let positions = positions
+        .into_iter()
+        .map(|p| {
+            if valid_point(p) {
+                p.to_array()
+            } else {
+                [0.0; 3]
+            }
+        })
+        .collect();
+    let mesh = WorldMesh {
+        positions,
+        normals,
+        texcoords: source.texcoords.clone(),
+        indices,
+        material,
+    };
+    (mesh, dropped)
+}
+
+fn collect_emitters(
+    mesh: &WorldMesh,
+    radiance: Vec3,
+    geom_id: u32,
+    out: &mut Vec<EmitterTriangle>,
+) {
+    for (prim_id, &[a, b, c]) in mesh.indices.iter().enumerate() {
+        let p0 = Vec3::from(mesh.positions[a as usize]);
+        let e1 = Vec3::from(mesh.positions[b as usize]) - p0;
+        let e2 = Vec3::from(mesh.positions[c as usize]) - p0;
+        let cross = e1.cross(e2);
+        let area = 0.5 * cross.length();
+        if let Some(normal) = cross
+            .try_normalize()
+            .filter(|_| area > 0.0 && area.is_finite())
+        {
+            out.push(EmitterTriangle {
+                p0,
+                e1,
+                e2,
+                normal,
+                area,
+                radiance,
+                geom_id,
+                prim_id: prim_id as u32,
+            });
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sys::scene_io::GltfMesh;
+
+    fn quad_mesh() -> GltfMesh {
+        GltfMesh {
+            positions: vec![
+                [0.0, 0.0, 0.0],
+                [1.0, 0.0, 0.0],
+                [1.0, 1.0, 0.0],
+                [0.0, 1.0, 0.0],
+                [f32::NAN, 0.0, 0.0],
+            ],
+            normals: None,
+            texcoords: None,
+            indices: vec![[0, 1, 2], [0, 2, 3], [0, 0, 1], [0, 1, 4], [1, 2, 2]],
+            material: None,
+        }
+    }
+
+    #[test]
+    fn drops_degenerate_and_nan_triangles() {
+        let (mesh, dropped) = place_mesh(&quad_mesh(), Mat4::IDENTITY, 0);
+        assert_eq!(mesh.indices.len(), 2);
+        assert_eq!(dropped, 3);
+        assert!(mesh.positions.iter().flatten().all(|v| v.is_finite()));
+    }
+
+    #[test]
+    fn mirroring_keeps_the_front_side() {
+        let mirror = Mat4::from_scale(Vec3::new(-1.0, 1.0, 1.0));
+        let (mesh, _) = place_mesh(&quad_mesh(), mirror, 0);
+        let mut emitters = Vec::new();
+        collect_emitters(&mesh, Vec3::ONE, 0, &mut emitters);
+        // The unmirrored quad faces +Z by winding; mirroring in X must not turn it to -Z.
+        assert!(emitters.iter().all(|e| e.normal.z > 0.99));
+    }
+}

@@ -1,0 +1,182 @@
+//! The view: Radiance's -vp -vd -vu -vh -vv -vt options, the glTF camera, or an automatic view
+//! of the scene's bounds; and primary rays through image positions.
+
+use glam::Vec3;
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Projection {
+    /// Radiance -vtv.
+    Perspective,
+    /// Radiance -vtl: vh and vv are the view's width and height in world units.
+    Parallel,
+}
+
+#[derive(Clone, Debug)]
+pub struct View {
+    pub projection: Projection,
+    pub position: Vec3,
+    pub direction: Vec3,
+    pub up: Vec3,
+    /// Horizontal and vertical full angles in degrees (perspective) or extents (parallel).
+    pub horizontal: f32,
+    pub vertical: f32,
+}
+
+/// A view fully resolved for an image size: an orthonormal frame and half-extents.
+#[derive(Clone, Debug)]
+pub struct Camera {
+    view: View,
+    right: Vec3,
+    up: Vec3,
+    forward: Vec3,
+    half_width: f32,
+    half_height: f32,
+    pub width: u32,
+    pub height: u32,
+}
+
+impl View {
+    /// The horizontal extent that keeps square pixels at the given image aspect.
+    pub fn horizontal_for_aspect(projection: Projection, vertical: f32, aspect: f32) -> f32 {
+        match projection {
+            Projection::Perspective => {
+                2.0 * ((vertical.to_radians() * 0.5).tan() * aspect)
+                    .atan()
+                    .to_degrees()
+            }
+            Projection::Parallel => vertical * aspect,
+        }
+    }
+
+    /// Radiance's -vf-style one-line description, usable as rpict options.
+    pub fn radiance_options(&self) -> String {
+        let t = match self.projection {
+            Projection::Perspective => "v",
+            Projection::Parallel => "l",
+        };
+        let (p, d, u) = (self.position, self.direction, self.up);
+        format!(
+            "-vt{t} -vp {} {} {} -vd {} {} {} -vu {} {} {} -vh {} -vv {}",
+            p.x, p.y, p.z, d.x, d.y, d.z, u.x, u.y, u.z, self.horizontal, self.vertical
+        )
+    }
+
+    pub fn validate(&self) -> Result<(), String> {
+        let finite = self.position.is_finite() && self.direction.is_finite() && self.up.is_finite();
+        if !finite {
+            return Err("view point, direction and up must be finite".into());
+        }
+        if self.direction.length_squared() == 0.0 {
+            return Err("view direction (-vd) is zero".into());
+        }
+        if self
+            .direction
+            .normalize()
+            .cross(self.up.normalize_or_zero())
+            .length_squared()
+            < 1e-10
+        {
+            return Err("view up (-vu) is parallel to the view direction (-vd)".into());
+        }
+        let angle_ok = |a: f32| match self.projection {
+            Projection::Perspective => a > 0.0 && a < 179.0,
+            Projection::Parallel => a > 0.0 && a.is_finite(),
+        };
+        if !angle_ok(self.horizontal) || !angle_ok(self.vertical) {
+            return Err(format!(
+                "view size -vh {} -vv {} is out of range (perspective angles must be in (0, 179) degrees)",
+                self.horizontal, self.vertical
+            ));
+        }
+        Ok(())
+    }
+
+    pub fn camera(&self, width: u32, height: u32) -> Camera {
+        let forward = self.direction.normalize();
+        let right = forward.cross(self.up).normalize();
+        let up = right.cross(forward);
+        let (half_width, half_height) = match self.projection {
+            Projection::Perspective => (
+                (self.horizontal.to_radians() * 0.5).tan(),
+                (self.vertical.to_radians() * 0.5).tan(),
+            ),
+            Projection::Parallel => (self.horizontal * 0.5, self.vertical * 0.5),
+        };
+        Camera {
+            view: self.clone(),
+            right,
+            up,
+            forward,
+            half_width,
+            half_height,
+            width,
+            height,
+        }
+    }
+}
+
+impl Camera {
+    /// Primary ray through image position (x, y) in pixels, with (0, 0) at the top-left corner
+    /// of the image: origin and unit direction.
+    #[inline]
+    pub fn ray(&self, x: f32, y: f32) -> (Vec3, Vec3) {
+        let sx = 2.0 * x / self.width as f32 - 1.0;
+        let sy = 1.0 - 2.0 * y / self.height as f32;
+        match self.view.projection {
+            Projection::Perspective => {
+                let d = self.forward
+                    + sx * self.half_width * self.right
+                    + sy * self.half_height * self.up;
+                (self.view.position, d.normalize())
+            }
+            Projection::Parallel => {
+                let o = self.view.position
+                    + sx * self.half_width * self.right
+                    + sy * self.half_height * self.up;
+                (o, self.forward)
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn view() -> View {
+        View {
+            projection: Projection::Perspective,
+            position: Vec3::ZERO,
+            direction: -Vec3::Z,
+            up: Vec3::Y,
+            horizontal: 90.0,
+            vertical: 90.0,
+        }
+    }
+
+    #[test]
+    fn centre_and_corner_rays() {
+        let cam = view().camera(100, 100);
+        let (_, d) = cam.ray(50.0, 50.0);
+        assert!((d - -Vec3::Z).length() < 1e-6);
+        let (_, corner) = cam.ray(100.0, 0.0);
+        assert!((corner - Vec3::new(1.0, 1.0, -1.0).normalize()).length() < 1e-6);
+    }
+
+    #[test]
+    fn rejects_degenerate_views() {
+        let mut v = view();
+        v.up = -Vec3::Z;
+        assert!(v.validate().is_err());
+        let mut v = view();
+        v.vertical = 180.0;
+        assert!(v.validate().is_err());
+        assert!(view().validate().is_ok());
+    }
+
+    #[test]
+    fn square_pixels_angle() {
+        let h = View::horizontal_for_aspect(Projection::Perspective, 90.0, 2.0);
+        assert!((h - 2.0 * 2f32.atan().to_degrees()).abs() < 1e-4);
+    }
+}

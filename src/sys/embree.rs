@@ -1,0 +1,321 @@
+//! Safe wrapper over Embree: a device, a scene of triangle meshes, closest-hit and occlusion
+//! queries. Works with Embree 3 and Embree 4 (the build script sets `cfg(embree4)`).
+//!
+//! Errors reported through Embree's error callback are collected per device and returned as
+//! Rust errors from the call that caused them.
+
+use super::embree_bindings as rtc;
+use std::ffi::c_void;
+use std::sync::{Arc, Mutex};
+
+/// Embree's RTC_INVALID_GEOMETRY_ID is a macro with a cast, which bindgen does not evaluate.
+const INVALID_GEOMETRY_ID: u32 = u32::MAX;
+
+#[derive(Debug, thiserror::Error)]
+#[error("Embree: {0}")]
+pub struct EmbreeError(pub String);
+
+/// Where the error callback leaves messages until the wrapper picks them up.
+struct ErrorSink {
+    messages: Mutex<Vec<String>>,
+}
+
+extern "C" fn error_callback(
+    user: *mut c_void,
+    code: rtc::RTCError,
+    text: *const std::os::raw::c_char,
+) {
+    if user.is_null() {
+        return;
+    }
+    // SAFETY: `user` is the ErrorSink boxed by Device::new, which outlives the device.
+    let sink = unsafe { &*(user as *const ErrorSink) };
+    // SAFETY: Embree passes a NUL-terminated message or NULL.
+    let message = unsafe { super::owned_string(text) };
+    if let Ok(mut messages) = sink.messages.lock() {
+        messages.push(format!("error {code}: {message}"));
+    }
+}
+
+pub struct Device {
+    raw: rtc::RTCDevice,
+    sink: Box<ErrorSink>,
+}
+
+// SAFETY: Embree devices are thread-safe; the error sink is behind a mutex.
+unsafe impl Send for Device {}
+unsafe impl Sync for Device {}
+
+impl Device {
+    pub fn new() -> Result<Device, EmbreeError> {
+        // SAFETY: a NULL config string asks for Embree's defaults.
+        let raw = unsafe { rtc::rtcNewDevice(std::ptr::null()) };
+        if raw.is_null() {
+            // SAFETY: rtcGetDeviceError accepts NULL and reports the creation error.
+            let code = unsafe { rtc::rtcGetDeviceError(std::ptr::null_mut()) };
+            return Err(EmbreeError(format!(
+                "could not create a device (error {code})"
+            )));
+        }
+        let sink = Box::new(ErrorSink {
+            messages: Mutex::new(Vec::new()),
+        });
+        let user = &*sink as *const ErrorSink as *mut c_void;
+        // SAFETY: the sink lives as long as the device (both dropped together, device first).
+        unsafe { rtc::rtcSetDeviceErrorFunction(raw, Some(error_callback), user) };
+        Ok(Device { raw, sink })
+    }
+
+    /// Turns errors Embree reported since the last check into a Rust error.
+    fn check(&self, what: &str) -> Result<(), EmbreeError> {
+        let mut messages = self
+            .sink
+            .messages
+            .lock()
+            .map_err(|_| EmbreeError("error sink poisoned".into()))?;
+        if messages.is_empty() {
+            Ok(())
+        } else {
+            let all = messages.join("; ");
+            messages.clear();
+            Err(EmbreeError(format!("{what}: {all}")))
+        }
+    }
+
+    /// Version of the library actually loaded, e.g. "3.13.5".
+    pub fn version(&self) -> String {
+        // SAFETY: querying a property of a live device.
+        let v = unsafe { rtc::rtcGetDeviceProperty(self.raw, rtc::RTC_DEVICE_PROPERTY_VERSION) };
+        format!("{}.{}.{}", v / 10000, (v / 100) % 100, v % 100)
+    }
+}
+
+impl Drop for Device {
+    fn drop(&mut self) {
+        // SAFETY: the device was created by rtcNewDevice and is released once.
+        unsafe { rtc::rtcReleaseDevice(self.raw) };
+    }
+}
+
+/// A triangle mesh ready to hand to Embree: world-space vertices and indices.
+pub struct TriangleMeshData<'a> {
+    pub positions: &'a [[f32; 3]],
+    pub indices: &'a [[u32; 3]],
+}
+
+/// A committed (immutable) scene. Geometry ids equal the order of the meshes given to `build`.
+pub struct Scene {
+    device: Arc<Device>,
+    raw: rtc::RTCScene,
+}
+
+// SAFETY: a committed Embree scene may be queried from many threads at once.
+unsafe impl Send for Scene {}
+unsafe impl Sync for Scene {}
+
+/// A ray hit: distance, geometry (mesh) id, primitive (triangle) id, barycentrics, and the
+/// unnormalised geometric normal Embree computed (orientation follows the triangle's winding).
+#[derive(Clone, Copy, Debug)]
+pub struct RayHit {
+    pub t: f32,
+    pub geom_id: u32,
+    pub prim_id: u32,
+    pub u: f32,
+    pub v: f32,
+    pub ng: [f32; 3],
+}
+
+/// Whether a batch of rays is coherent (camera rays) or not; Embree picks traversal by it.
+#[derive(Clone, Copy, PartialEq, Eq)]
+pub enum Coherence {
+    Coherent,
+    Incoherent,
+}
+
+fn make_ray(org: [f32; 3], dir: [f32; 3], tnear: f32, tfar: f32) -> rtc::RTCRay {
+    rtc::RTCRay {
+        org_x: org[0],
+        org_y: org[1],
+        org_z: org[2],
+        tnear,
+        dir_x: dir[0],
+        dir_y: dir[1],
+        dir_z: dir[2],
+        time: 0.0,
+        tfar,
+        mask: u32::MAX,
+        id: 0,
+        flags: 0,
+    }
+}
+
+impl Scene {
+    /// Builds and commits a scene from triangle meshes. Robust traversal is asked for, since
+    /// rays start on surfaces and must not slip through shared edges.
+    pub fn build(
+        device: &Arc<Device>,
+        meshes: &[TriangleMeshData<'_>],
+    ) -> Result<Scene, EmbreeError> {
+        // SAFETY: creating a scene on a live device.
+        let raw = unsafe { rtc::rtcNewScene(device.raw) };
+        if raw.is_null() {
+            device.check("creating a scene")?;
+            return Err(EmbreeError("could not create a scene".into()));
+        }
+        let scene = Scene {
+            device: Arc::clone(device),
+            raw,
+        };
+        // SAFETY: flags and quality on a scene not yet committed.
+        unsafe {
+            rtc::rtcSetSceneFlags(raw, rtc::RTC_SCENE_FLAG_ROBUST);
+            rtc::rtcSetSceneBuildQuality(raw, rtc::RTC_BUILD_QUALITY_HIGH);
+        }
+        for (index, mesh) in meshes.iter().enumerate() {
+            scene.attach_mesh(index, mesh)?;
+        }
+        // SAFETY: all geometries are committed and attached.
+        unsafe { rtc::rtcCommitScene(raw) };
+        device.check("committing the scene")?;
+        Ok(scene)
+    }
+
+    fn attach_mesh(&self, index: usize, mesh: &TriangleMeshData<'_>) -> Result<(), EmbreeError> {
+        let device = self.device.raw;
+        // SAFETY: new geometry on a live device; buffers are sized by Embree and filled within
+        // their bounds below; the geometry is released after attaching (the scene keeps it).
+        unsafe {
+            let geom = rtc::rtcNewGeometry(device, rtc::RTC_GEOMETRY_TYPE_TRIANGLE);
+            if geom.is_null() {
+                self.device.check("creating a triangle geometry")?;
+                return Err(EmbreeError("could not create a triangle geometry".into()));
+            }
+            let vcount = mesh.positions.len();
+            let tcount = mesh.indices.len();
+            let vbuf = rtc::rtcSetNewGeometryBuffer(
+                geom,
+                rtc::RTC_BUFFER_TYPE_VERTEX,
+                0,
+                rtc::RTC_FORMAT_FLOAT3,
+                12,
+                vcount,
+            ) as *mut [f32; 3];
+            let ibuf = rtc::rtcSetNewGeometryBuffer(
+                geom,
+                rtc::RTC_BUFFER_TYPE_INDEX,
+                0,
+                rtc::RTC_FORMAT_UINT3,
+                12,
+                tcount,
+            ) as *mut [u32; 3];
+            if (vbuf.is_null() && vcount > 0) || (ibuf.is_null() && tcount > 0) {
+                rtc::rtcReleaseGeometry(geom);
+                self.device.check("allocating geometry buffers")?;
+                return Err(EmbreeError("could not allocate geometry buffers".into()));
+            }
+            std::ptr::copy_nonoverlapping(mesh.positions.as_ptr(), vbuf, vcount);
+            std::ptr::copy_nonoverlapping(mesh.indices.as_ptr(), ibuf, tcount);
+            rtc::rtcCommitGeometry(geom);
+            let id = rtc::rtcAttachGeometry(self.raw, geom);
+            rtc::rtcReleaseGeometry(geom);
+            if id as usize != index {
+                return Err(EmbreeError(format!("geometry {index} got id {id}")));
+            }
+        }
+        self.device.check("adding a triangle mesh")
+    }
+
+    /// Closest hit along the ray within (tnear, tfar), or None.
+    #[inline]
+    pub fn intersect(
+        &self,
+        org: [f32; 3],
+        dir: [f32; 3],
+        tnear: f32,
+        tfar: f32,
+        coherence: Coherence,
+    ) -> Option<RayHit> {
+        let mut rayhit = rtc::RTCRayHit {
+            ray: make_ray(org, dir, tnear, tfar),
+            hit: rtc::RTCHit {
+                geomID: INVALID_GEOMETRY_ID,
+                ..Default::default()
+            },
+        };
+        self.raw_intersect(&mut rayhit, coherence);
+        let hit = &rayhit.hit;
+        (hit.geomID != INVALID_GEOMETRY_ID).then(|| RayHit {
+            t: rayhit.ray.tfar,
+            geom_id: hit.geomID,
+            prim_id: hit.primID,
+            u: hit.u,
+            v: hit.v,
+            ng: [hit.Ng_x, hit.Ng_y, hit.Ng_z],
+        })
+    }
+
+    /// True when anything blocks the ray within (tnear, tfar).
+    #[inline]
+    pub fn occluded(&self, org: [f32; 3], dir: [f32; 3], tnear: f32, tfar: f32) -> bool {
+        let mut ray = make_ray(org, dir, tnear, tfar);
+        self.raw_occluded(&mut ray);
+        // Embree marks a blocked ray by setting tfar to -inf.
+        ray.tfar < 0.0
+    }
+
+    #[cfg(not(embree4))]
+    #[inline]
+    fn raw_intersect(&self, rayhit: &mut rtc::RTCRayHit, coherence: Coherence) {
+        let mut context = intersect_context(coherence);
+        // SAFETY: committed scene, valid context and ray structures on the stack.
+        unsafe { rtc::rtcIntersect1(self.raw, &mut context, rayhit) };
+    }
+
+    #[cfg(not(embree4))]
+    #[inline]
+    fn raw_occluded(&self, ray: &mut rtc::RTCRay) {
+        let mut context = intersect_context(Coherence::Incoherent);
+        // SAFETY: committed scene, valid context and ray structures on the stack.
+        unsafe { rtc::rtcOccluded1(self.raw, &mut context, ray) };
+    }
+
+    #[cfg(embree4)]
+    #[inline]
+    fn raw_intersect(&self, rayhit: &mut rtc::RTCRayHit, _coherence: Coherence) {
+        // SAFETY: committed scene; NULL arguments select Embree's defaults.
+        unsafe { rtc::rtcIntersect1(self.raw, rayhit, std::ptr::null_mut()) };
+    }
+
+    #[cfg(embree4)]
+    #[inline]
+    fn raw_occluded(&self, ray: &mut rtc::RTCRay) {
+        // SAFETY: committed scene; NULL arguments select Embree's defaults.
+        unsafe { rtc::rtcOccluded1(self.raw, ray, std::ptr::null_mut()) };
+    }
+}
+
+/// Embree 3's rtcInitIntersectContext is an inline C function that bindgen cannot bind, so
+/// the same initialisation is done here.
+#[cfg(not(embree4))]
+#[inline]
+fn intersect_context(coherence: Coherence) -> rtc::RTCIntersectContext {
+    let mut context = rtc::RTCIntersectContext {
+        flags: match coherence {
+            Coherence::Coherent => rtc::RTC_INTERSECT_CONTEXT_FLAG_COHERENT,
+            Coherence::Incoherent => rtc::RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT,
+        },
+        ..Default::default()
+    };
+    context
+        .instID
+        .iter_mut()
+        .for_each(|id| *id = INVALID_GEOMETRY_ID);
+    context
+}
+
+impl Drop for Scene {
+    fn drop(&mut self) {
+        // SAFETY: the scene was created by rtcNewScene and is released once.
+        unsafe { rtc::rtcReleaseScene(self.raw) };
+    }
+}

@@ -1,0 +1,184 @@
+//! Safe wrapper over the OpenImageIO shim: multi-layer EXR and PNG writing, and reading an
+//! image back as named float planes.
+
+use super::abi_bindings as abi;
+use super::{ERR_LEN, buffer_message, owned_string, slice_or_empty};
+use std::ffi::CString;
+use std::os::raw::c_char;
+use std::path::Path;
+
+fn c_path(path: &Path) -> Result<CString, String> {
+    CString::new(path.as_os_str().as_encoded_bytes())
+        .map_err(|_| "path contains a NUL byte".to_string())
+}
+
+fn c_text(text: &str) -> CString {
+    // Interior NULs cannot travel through C strings; they never occur in our names, and in
+    // free text (a command line) dropping them is harmless.
+    CString::new(text.replace('\0', "")).expect("NULs removed")
+}
+
+/// A named plane of width * height floats, rows top to bottom.
+pub struct ChannelPlane<'a> {
+    pub name: &'a str,
+    pub data: &'a [f32],
+}
+
+/// Writes an OpenEXR with the given channels (in order) and string attributes to exactly `path`.
+pub fn write_exr(
+    path: &Path,
+    width: u32,
+    height: u32,
+    channels: &[ChannelPlane<'_>],
+    attributes: &[(String, String)],
+    half_float: bool,
+) -> Result<(), String> {
+    let pixels = width as usize * height as usize;
+    if let Some(bad) = channels.iter().find(|c| c.data.len() != pixels) {
+        return Err(format!(
+            "channel {} has {} values for {} pixels",
+            bad.name,
+            bad.data.len(),
+            pixels
+        ));
+    }
+    let names: Vec<CString> = channels.iter().map(|c| c_text(c.name)).collect();
+    let planes: Vec<abi::icr_channel> = channels
+        .iter()
+        .zip(&names)
+        .map(|(c, n)| abi::icr_channel {
+            name: n.as_ptr(),
+            data: c.data.as_ptr(),
+        })
+        .collect();
+    let attr_text: Vec<(CString, CString)> = attributes
+        .iter()
+        .map(|(k, v)| (c_text(k), c_text(v)))
+        .collect();
+    let attrs: Vec<abi::icr_attribute> = attr_text
+        .iter()
+        .map(|(k, v)| abi::icr_attribute {
+            name: k.as_ptr(),
+            value: v.as_ptr(),
+        })
+        .collect();
+    let path = c_path(path)?;
+    let mut err = vec![0 as c_char; ERR_LEN];
+    // SAFETY: every pointer refers to data alive for the call; planes hold width*height values.
+    let rc = unsafe {
+        abi::icr_exr_write(
+            path.as_ptr(),
+            width,
+            height,
+            planes.as_ptr(),
+            planes.len(),
+            attrs.as_ptr(),
+            attrs.len(),
+            half_float as i32,
+            err.as_mut_ptr(),
+            err.len(),
+        )
+    };
+    if rc == 0 {
+        Ok(())
+    } else {
+        Err(buffer_message(&err))
+    }
+}
+
+/// Writes an 8-bit RGB PNG to exactly `path`.
+pub fn write_png(path: &Path, width: u32, height: u32, rgb: &[u8]) -> Result<(), String> {
+    if rgb.len() != 3 * width as usize * height as usize {
+        return Err("PNG buffer size does not match the image size".into());
+    }
+    let path = c_path(path)?;
+    let mut err = vec![0 as c_char; ERR_LEN];
+    // SAFETY: the buffer holds 3*width*height bytes, checked above.
+    let rc = unsafe {
+        abi::icr_png_write(
+            path.as_ptr(),
+            width,
+            height,
+            rgb.as_ptr(),
+            err.as_mut_ptr(),
+            err.len(),
+        )
+    };
+    if rc == 0 {
+        Ok(())
+    } else {
+        Err(buffer_message(&err))
+    }
+}
+
+/// An image read back: named float planes and the header's string attributes we asked for.
+pub struct ImageData {
+    pub width: u32,
+    pub height: u32,
+    pub channels: Vec<(String, Vec<f32>)>,
+    pub attributes: Vec<(String, String)>,
+}
+
+impl ImageData {
+    pub fn channel(&self, name: &str) -> Option<&[f32]> {
+        self.channels
+            .iter()
+            .find(|(n, _)| n == name)
+            .map(|(_, d)| d.as_slice())
+    }
+    pub fn attribute(&self, name: &str) -> Option<&str> {
+        self.attributes
+            .iter()
+            .find(|(n, _)| n == name)
+            .map(|(_, v)| v.as_str())
+    }
+}
+
+struct ImageHandle(*mut abi::icr_image);
+
+impl Drop for ImageHandle {
+    fn drop(&mut self) {
+        // SAFETY: the pointer came from icr_image_read and is freed once.
+        unsafe { abi::icr_image_free(self.0) };
+    }
+}
+
+/// Reads every channel of an image file, plus the named header attributes where present.
+pub fn read_image(path: &Path, attribute_names: &[&str]) -> Result<ImageData, String> {
+    let cpath = c_path(path)?;
+    let mut err = vec![0 as c_char; ERR_LEN];
+    // SAFETY: valid path and error buffer.
+    let raw = unsafe { abi::icr_image_read(cpath.as_ptr(), err.as_mut_ptr(), err.len()) };
+    if raw.is_null() {
+        return Err(buffer_message(&err));
+    }
+    let handle = ImageHandle(raw);
+    // SAFETY: the handle is live; planes hold width*height floats (the shim's contract) and are
+    // copied before the handle is dropped.
+    unsafe {
+        let width = abi::icr_image_width(handle.0);
+        let height = abi::icr_image_height(handle.0);
+        let pixels = width as usize * height as usize;
+        let count = abi::icr_image_channel_count(handle.0);
+        let mut channels = Vec::with_capacity(count);
+        for i in 0..count {
+            let name = owned_string(abi::icr_image_channel_name(handle.0, i));
+            let data = slice_or_empty(abi::icr_image_channel_data(handle.0, i), pixels).to_vec();
+            channels.push((name, data));
+        }
+        let mut attributes = Vec::new();
+        for name in attribute_names {
+            let cname = c_text(name);
+            let value = abi::icr_image_attribute(handle.0, cname.as_ptr());
+            if !value.is_null() {
+                attributes.push((name.to_string(), owned_string(value)));
+            }
+        }
+        Ok(ImageData {
+            width,
+            height,
+            channels,
+            attributes,
+        })
+    }
+}
