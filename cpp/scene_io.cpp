@@ -965,9 +965,6 @@ icr_scene *load_scene(const std::string &path) {
     if (data.empty()) fail("file is empty");
     if (data.size() > std::numeric_limits<uint32_t>::max()) fail("file is larger than 4 GiB");
     const size_t size = data.size();
-    // tinygltf 2.7 bounds the GLB BIN chunk against the header's length without the 8-byte chunk
-    // header, so it can read up to 8 bytes past the file; zero padding keeps that read in memory.
-    data.resize(size + 16, 0);
 
     const bool binary = size >= 4 && std::memcmp(data.data(), "glTF", 4) == 0;
     if (!binary && ends_with_ci(path, ".glb")) fail("not a binary glTF file (no glTF magic)");
@@ -975,14 +972,21 @@ icr_scene *load_scene(const std::string &path) {
     const unsigned char *json_text = data.data();
     size_t json_len = size;
     if (binary) {
-        // Malformed headers are left for tinygltf to report.
+        // Other malformed headers are left for tinygltf to report.
         json_len = 0;
         if (size >= 20) {
-            uint32_t chunk_len = load<uint32_t>(data.data() + 12);
-            if (uint64_t(chunk_len) <= size - 20) {
+            const uint64_t length = load<uint32_t>(data.data() + 8);
+            const uint64_t chunk_len = load<uint32_t>(data.data() + 12);
+            if (chunk_len <= size - 20) {
                 json_text = data.data() + 20;
-                json_len = chunk_len;
+                json_len = size_t(chunk_len);
             }
+            // tinygltf 2.7 bounds the BIN chunk by the GLB length without counting the chunk's
+            // own 8-byte header, and then reads up to 8 bytes past the end of the data.
+            const uint64_t bin_header = 20 + chunk_len;
+            if (length <= size && bin_header + 8 <= length &&
+                bin_header + 8 + load<uint32_t>(data.data() + bin_header) > length)
+                fail("GLB BIN chunk extends past the end of the file");
         }
     }
     check_json_depth(json_text, json_len);

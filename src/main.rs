@@ -1,17 +1,6 @@
-//! icrender: a renderer for global illumination with Ward's irradiance cache, split into
-//! Radiance's components (emission, direct, specular, indirect diffuse).
+//! The `icrender` command: parses arguments and runs one subcommand.
 
-mod cli;
-mod commands;
-mod image;
-mod progress;
-mod render;
-mod sampling;
-mod scene;
-mod shading;
-mod stats;
-mod sys;
-mod tracer;
+use icrender::{cli, commands};
 
 use clap::Parser;
 use std::process::ExitCode;

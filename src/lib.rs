@@ -1,0 +1,14 @@
+//! icrender: a renderer for global illumination with Ward's irradiance cache, split into
+//! Radiance's components (emission, direct, specular, indirect diffuse).
+
+pub mod cli;
+pub mod commands;
+pub mod image;
+pub mod progress;
+pub mod render;
+pub mod sampling;
+pub mod scene;
+pub mod shading;
+pub mod stats;
+pub mod sys;
+pub mod tracer;

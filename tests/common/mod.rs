@@ -1,0 +1,267 @@
+//! Test support: building small glTF scenes on disk, running the real `icrender` binary, and
+//! reading its EXR output back.
+
+#![allow(dead_code)]
+
+use serde_json::{json, Value};
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+pub use icrender::sys::image_io::{read_image, ImageData};
+
+pub fn binary() -> PathBuf {
+    PathBuf::from(env!("CARGO_BIN_EXE_icrender"))
+}
+
+/// The project's root (for `scenes/`) and the shared scenes beside it.
+pub fn project_dir() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+pub fn shared_scene(relative: &str) -> PathBuf {
+    project_dir().join("../shared/scenes").join(relative)
+}
+
+/// Runs icrender with arguments; returns the process output.
+pub fn run(args: &[&str]) -> Output {
+    Command::new(binary()).args(args).output().expect("icrender runs")
+}
+
+pub fn stderr(out: &Output) -> String {
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
+pub fn stdout(out: &Output) -> String {
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+/// Runs icrender and fails the test with its stderr if it did not succeed.
+pub fn run_ok(args: &[&str]) -> Output {
+    let out = run(args);
+    assert!(out.status.success(), "icrender {args:?} failed:\n{}", stderr(&out));
+    out
+}
+
+pub fn read_exr(path: &Path) -> ImageData {
+    read_image(path, &["icrender/options", "icrender/statistics", "icrender/command"])
+        .unwrap_or_else(|e| panic!("reading {}: {e}", path.display()))
+}
+
+/// R, G, B planes of a layer ("" for the composite).
+pub fn rgb(image: &ImageData, layer: &str) -> [Vec<f32>; 3] {
+    ["R", "G", "B"].map(|c| {
+        let name = if layer.is_empty() { c.to_string() } else { format!("{layer}.{c}") };
+        image.channel(&name).unwrap_or_else(|| panic!("no channel {name}")).to_vec()
+    })
+}
+
+pub fn mean(values: &[f32]) -> f64 {
+    values.iter().map(|&v| v as f64).sum::<f64>() / values.len().max(1) as f64
+}
+
+/// A glTF file under construction: geometry goes into one external .bin buffer.
+#[derive(Default)]
+pub struct GltfBuilder {
+    bin: Vec<u8>,
+    buffer_views: Vec<Value>,
+    accessors: Vec<Value>,
+    meshes: Vec<Value>,
+    materials: Vec<Value>,
+    nodes: Vec<Value>,
+    lights: Vec<Value>,
+    cameras: Vec<Value>,
+    images: Vec<Value>,
+    textures: Vec<Value>,
+    pub extensions_used: Vec<String>,
+    pub extensions_required: Vec<String>,
+}
+
+/// A Lambertian material (specularFactor 0, metallic 0) of albedo `rgb`.
+pub fn lambertian(name: &str, rgb: [f32; 3]) -> Value {
+    json!({
+        "name": name,
+        "pbrMetallicRoughness": {"baseColorFactor": [rgb[0], rgb[1], rgb[2], 1.0], "metallicFactor": 0.0, "roughnessFactor": 1.0},
+        "extensions": {"KHR_materials_specular": {"specularFactor": 0.0}}
+    })
+}
+
+/// A Lambertian material that also emits `radiance` from its front side.
+pub fn emissive_lambertian(name: &str, rgb: [f32; 3], radiance: f32) -> Value {
+    let mut m = lambertian(name, rgb);
+    m["emissiveFactor"] = json!([1.0, 1.0, 1.0]);
+    m["extensions"]["KHR_materials_emissive_strength"] = json!({"emissiveStrength": radiance});
+    m
+}
+
+impl GltfBuilder {
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    fn push_view(&mut self, bytes: &[u8], target: Option<u32>) -> usize {
+        while self.bin.len() % 4 != 0 {
+            self.bin.push(0);
+        }
+        let offset = self.bin.len();
+        self.bin.extend_from_slice(bytes);
+        let mut view = json!({"buffer": 0, "byteOffset": offset, "byteLength": bytes.len()});
+        if let Some(t) = target {
+            view["target"] = json!(t);
+        }
+        self.buffer_views.push(view);
+        self.buffer_views.len() - 1
+    }
+
+    pub fn material(&mut self, material: Value) -> usize {
+        self.materials.push(material);
+        self.materials.len() - 1
+    }
+
+    /// Adds a mesh of triangles (positions, indices) with a material; returns the mesh index.
+    pub fn mesh(&mut self, positions: &[[f32; 3]], indices: &[[u32; 3]], material: Option<usize>) -> usize {
+        let pos_bytes: Vec<u8> = positions.iter().flatten().flat_map(|v| v.to_le_bytes()).collect();
+        let idx_bytes: Vec<u8> = indices.iter().flatten().flat_map(|v| v.to_le_bytes()).collect();
+        let pv = self.push_view(&pos_bytes, Some(34962));
+        let iv = self.push_view(&idx_bytes, Some(34963));
+        let finite: Vec<&[f32; 3]> = positions.iter().filter(|p| p.iter().all(|v| v.is_finite())).collect();
+        let (mut lo, mut hi) = ([f32::MAX; 3], [f32::MIN; 3]);
+        for p in &finite {
+            for c in 0..3 {
+                lo[c] = lo[c].min(p[c]);
+                hi[c] = hi[c].max(p[c]);
+            }
+        }
+        self.accessors.push(json!({"bufferView": pv, "componentType": 5126, "count": positions.len(), "type": "VEC3", "min": lo, "max": hi}));
+        let pa = self.accessors.len() - 1;
+        self.accessors.push(json!({"bufferView": iv, "componentType": 5125, "count": indices.len() * 3, "type": "SCALAR"}));
+        let ia = self.accessors.len() - 1;
+        let mut primitive = json!({"attributes": {"POSITION": pa}, "indices": ia, "mode": 4});
+        if let Some(m) = material {
+            primitive["material"] = json!(m);
+        }
+        self.meshes.push(json!({"primitives": [primitive]}));
+        self.meshes.len() - 1
+    }
+
+    /// Adds a quad (two triangles, counter-clockwise a-b-c-d seen from its front).
+    pub fn quad(&mut self, corners: [[f32; 3]; 4], material: Option<usize>) -> usize {
+        let mesh = self.mesh(&corners, &[[0, 1, 2], [0, 2, 3]], material);
+        self.node(json!({"mesh": mesh}))
+    }
+
+    pub fn node(&mut self, node: Value) -> usize {
+        self.nodes.push(node);
+        self.nodes.len() - 1
+    }
+
+    pub fn point_light(&mut self, position: [f32; 3], intensity: f32) -> usize {
+        self.use_extension("KHR_lights_punctual");
+        self.lights.push(json!({"type": "point", "color": [1.0, 1.0, 1.0], "intensity": intensity}));
+        let light = self.lights.len() - 1;
+        self.node(json!({"translation": position, "extensions": {"KHR_lights_punctual": {"light": light}}}))
+    }
+
+    pub fn texture(&mut self, uri: &str) -> usize {
+        self.images.push(json!({"uri": uri}));
+        self.textures.push(json!({"source": self.images.len() - 1}));
+        self.textures.len() - 1
+    }
+
+    pub fn use_extension(&mut self, name: &str) {
+        if !self.extensions_used.iter().any(|e| e == name) {
+            self.extensions_used.push(name.to_string());
+        }
+    }
+
+    pub fn to_json(&self, bin_name: &str) -> Value {
+        let mut used = self.extensions_used.clone();
+        for m in &self.materials {
+            if let Some(ext) = m.get("extensions").and_then(|e| e.as_object()) {
+                for k in ext.keys() {
+                    if !used.contains(k) {
+                        used.push(k.clone());
+                    }
+                }
+            }
+        }
+        let mut doc = json!({
+            "asset": {"version": "2.0", "generator": "icrender tests"},
+            "scene": 0,
+            "scenes": [{"nodes": (0..self.nodes.len()).collect::<Vec<_>>()}],
+            "nodes": self.nodes,
+            "meshes": self.meshes,
+            "accessors": self.accessors,
+            "bufferViews": self.buffer_views,
+            "buffers": [{"uri": bin_name, "byteLength": self.bin.len()}],
+        });
+        if !self.materials.is_empty() {
+            doc["materials"] = json!(self.materials);
+        }
+        if !self.cameras.is_empty() {
+            doc["cameras"] = json!(self.cameras);
+        }
+        if !self.images.is_empty() {
+            doc["images"] = json!(self.images);
+            doc["textures"] = json!(self.textures);
+        }
+        if !self.lights.is_empty() {
+            doc["extensions"] = json!({"KHR_lights_punctual": {"lights": self.lights}});
+        }
+        if !used.is_empty() {
+            doc["extensionsUsed"] = json!(used);
+        }
+        if !self.extensions_required.is_empty() {
+            doc["extensionsRequired"] = json!(self.extensions_required);
+        }
+        doc
+    }
+
+    /// Writes `name.gltf` and `name.bin` into `dir`; returns the .gltf path.
+    pub fn write(&self, dir: &Path, name: &str) -> PathBuf {
+        let bin_name = format!("{name}.bin");
+        std::fs::write(dir.join(&bin_name), &self.bin).unwrap();
+        let path = dir.join(format!("{name}.gltf"));
+        std::fs::write(&path, serde_json::to_string_pretty(&self.to_json(&bin_name)).unwrap()).unwrap();
+        path
+    }
+}
+
+fn sub(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+
+fn cross(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
+    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+}
+
+fn dot(a: [f32; 3], b: [f32; 3]) -> f32 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+/// Orders a planar quad's corners so that its front (by winding) faces towards `target`.
+pub fn facing(mut corners: [[f32; 3]; 4], target: [f32; 3]) -> [[f32; 3]; 4] {
+    let n = cross(sub(corners[1], corners[0]), sub(corners[2], corners[0]));
+    let centre = [0, 1, 2].map(|c| corners.iter().map(|p| p[c]).sum::<f32>() / 4.0);
+    if dot(n, sub(target, centre)) < 0.0 {
+        corners.reverse();
+    }
+    corners
+}
+
+/// The six walls of an axis-aligned box from `lo` to `hi`, fronts facing inwards.
+pub fn inward_box(b: &mut GltfBuilder, lo: [f32; 3], hi: [f32; 3], material: usize) {
+    let [x0, y0, z0] = lo;
+    let [x1, y1, z1] = hi;
+    let centre = [(x0 + x1) / 2.0, (y0 + y1) / 2.0, (z0 + z1) / 2.0];
+    let faces = [
+        [[x0, y0, z0], [x1, y0, z0], [x1, y0, z1], [x0, y0, z1]],
+        [[x0, y1, z0], [x1, y1, z0], [x1, y1, z1], [x0, y1, z1]],
+        [[x0, y0, z0], [x1, y0, z0], [x1, y1, z0], [x0, y1, z0]],
+        [[x0, y0, z1], [x1, y0, z1], [x1, y1, z1], [x0, y1, z1]],
+        [[x0, y0, z0], [x0, y1, z0], [x0, y1, z1], [x0, y0, z1]],
+        [[x1, y0, z0], [x1, y1, z0], [x1, y1, z1], [x1, y0, z1]],
+    ];
+    for f in faces {
+        b.quad(facing(f, centre), Some(material));
+    }
+}

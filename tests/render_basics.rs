@@ -1,0 +1,161 @@
+//! The default scene end to end: files written, layers that oiiotool and Nuke see, layers that
+//! add up to the composite, determinism, header and statistics.
+
+mod common;
+use common::*;
+use std::process::Command;
+
+fn default_scene() -> String {
+    project_dir().join("scenes/cornell.gltf").to_string_lossy().into_owned()
+}
+
+fn render_default(dir: &std::path::Path, name: &str, extra: &[&str]) -> std::path::PathBuf {
+    let out = dir.join(format!("{name}.exr"));
+    let scene = default_scene();
+    let mut args = vec!["render", scene.as_str(), "-o", out.to_str().unwrap(), "-x", "48", "-y", "48", "-ad", "16", "-q"];
+    args.extend_from_slice(extra);
+    run_ok(&args);
+    out
+}
+
+#[test]
+fn default_scene_renders_an_exr_and_a_png_preview() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = render_default(dir.path(), "cornell", &[]);
+    assert!(out.exists());
+    let png = out.with_extension("png");
+    let bytes = std::fs::read(&png).unwrap();
+    assert_eq!(&bytes[1..4], b"PNG");
+    let preview = read_image(&png, &[]).unwrap();
+    assert_eq!((preview.width, preview.height), (48, 48));
+    // The preview is a picture, not a black frame.
+    assert!(mean(preview.channel("R").unwrap()) > 0.05);
+}
+
+#[test]
+fn oiiotool_lists_the_four_layers() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = render_default(dir.path(), "layers", &[]);
+    let info = Command::new("oiiotool").args(["--info", "-v"]).arg(&out).output().expect("oiiotool (openimageio-tools) is installed");
+    let text = String::from_utf8_lossy(&info.stdout);
+    let channels = text.lines().find(|l| l.trim_start().starts_with("channel list")).unwrap_or_else(|| panic!("no channel list in:\n{text}"));
+    for name in ["R", "G", "B", "A"] {
+        assert!(channels.split([',', ':']).any(|c| c.trim() == name), "{name} missing: {channels}");
+    }
+    for layer in ["emission", "direct", "specular", "indirect"] {
+        for c in ["R", "G", "B"] {
+            let full = format!("{layer}.{c}");
+            assert!(channels.contains(&full), "{full} missing: {channels}");
+        }
+    }
+    assert!(text.contains("icrender/options"), "options missing from the header:\n{text}");
+    assert!(text.contains("icrender/render_time_s"), "timing missing from the header:\n{text}");
+}
+
+#[test]
+fn composite_is_the_sum_of_the_layers() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = render_default(dir.path(), "sum", &[]);
+    let image = read_exr(&out);
+    let composite = rgb(&image, "");
+    let layers: Vec<[Vec<f32>; 3]> = ["emission", "direct", "specular", "indirect"].iter().map(|l| rgb(&image, l)).collect();
+    for c in 0..3 {
+        for i in 0..composite[c].len() {
+            let sum: f32 = layers.iter().map(|l| l[c][i]).sum();
+            let v = composite[c][i];
+            assert!((v - sum).abs() <= 1e-5 * v.abs().max(1.0), "pixel {i} channel {c}: {v} vs {sum}");
+        }
+    }
+    // Every layer carries light in this scene (mirror box, visible light, diffuse walls).
+    for (name, l) in ["emission", "direct", "specular", "indirect"].iter().zip(&layers) {
+        assert!(mean(&l[0]) > 0.0, "{name} is black");
+    }
+    assert!(composite.iter().flatten().all(|v| v.is_finite() && *v >= 0.0));
+}
+
+#[test]
+fn same_seed_same_image_whatever_the_threads() {
+    let dir = tempfile::tempdir().unwrap();
+    let a = read_exr(&render_default(dir.path(), "a", &["--threads", "1", "--tile", "7x5"]));
+    let b = read_exr(&render_default(dir.path(), "b", &["--threads", "2"]));
+    let c = read_exr(&render_default(dir.path(), "c", &["--seed", "2"]));
+    assert_eq!(rgb(&a, ""), rgb(&b, ""));
+    assert_ne!(rgb(&a, ""), rgb(&c, ""));
+}
+
+#[test]
+fn statistics_json_and_header() {
+    let dir = tempfile::tempdir().unwrap();
+    let stats = dir.path().join("stats.json");
+    let out = render_default(dir.path(), "stats", &["--stats", stats.to_str().unwrap()]);
+    let json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&stats).unwrap()).unwrap();
+    for key in ["wall_s", "render_s", "load_s", "build_s", "rays", "threads", "per_thread", "layers"] {
+        assert!(json.get(key).is_some(), "{key} missing from {json}");
+    }
+    assert!(json["rays"]["primary"].as_u64().unwrap() >= 48 * 48);
+    assert_eq!(json["nonfinite_dropped"], 0);
+    let image = read_exr(&out);
+    let options = image.attribute("icrender/options").unwrap();
+    assert!(options.contains("-ab 1") && options.contains("-ad 16"), "{options}");
+}
+
+#[test]
+fn radiance_view_options_override_the_gltf_camera() {
+    let dir = tempfile::tempdir().unwrap();
+    // Looking straight up at the light from the floor: the image is dominated by emission.
+    let out = render_default(dir.path(), "up", &["-vp", "0", "0.1", "0", "-vd", "0", "1", "0", "-vu", "0", "0", "1", "-vh", "20", "-vv", "20"]);
+    let image = read_exr(&out);
+    let emission = mean(&rgb(&image, "emission")[0]);
+    assert!(emission > 1.0, "the light should fill the view, emission mean {emission}");
+}
+
+#[test]
+fn spp_averages_jittered_samples_over_the_pixel() {
+    let dir = tempfile::tempdir().unwrap();
+    let one = read_exr(&render_default(dir.path(), "one", &["--spp", "1"]));
+    let many = read_exr(&render_default(dir.path(), "many", &["--spp", "16"]));
+    // Same mean light, but edges are antialiased: some pixels lie between the one-sample values.
+    let (m1, m16) = (mean(&rgb(&one, "")[1]), mean(&rgb(&many, "")[1]));
+    assert!((m1 - m16).abs() / m1 < 0.05, "means {m1} {m16}");
+}
+
+#[test]
+fn corridor_renders() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("corridor.exr");
+    let scene = project_dir().join("scenes/corridor.gltf");
+    run_ok(&["render", scene.to_str().unwrap(), "-o", out.to_str().unwrap(), "-x", "32", "-y", "24", "-ad", "8", "-q"]);
+    let image = read_exr(&out);
+    assert!(mean(&rgb(&image, "")[0]) > 0.0);
+    // Lambertian corridor: no specular layer.
+    assert!(image.channel("specular.R").is_none());
+}
+
+#[test]
+fn info_and_compare_commands() {
+    let scene = default_scene();
+    let info = stdout(&run_ok(&["info", scene.as_str(), "--json"]));
+    let json: serde_json::Value = serde_json::from_str(&info).unwrap();
+    assert_eq!(json["triangles"], 36);
+    assert_eq!(json["lights"]["emissive_triangles"], 2);
+    assert_eq!(json["components"]["specular"], true);
+    assert_eq!(json["cameras"], 1);
+
+    let dir = tempfile::tempdir().unwrap();
+    let a = render_default(dir.path(), "a", &[]);
+    let b = render_default(dir.path(), "b", &["--seed", "9"]);
+    let same = stdout(&run_ok(&["compare", a.to_str().unwrap(), a.to_str().unwrap(), "--json"]));
+    let same: serde_json::Value = serde_json::from_str(&same).unwrap();
+    assert_eq!(same[0]["layer"], "composite");
+    assert_eq!(same[0]["rmse"], 0.0);
+    assert_eq!(same.as_array().unwrap().len(), 5);
+    let differ: serde_json::Value = serde_json::from_str(&stdout(&run_ok(&["compare", a.to_str().unwrap(), b.to_str().unwrap(), "--json"]))).unwrap();
+    assert!(differ[0]["rmse"].as_f64().unwrap() > 0.0);
+    // The emission layer does not depend on the seed at one centred sample per pixel.
+    let emission = differ.as_array().unwrap().iter().find(|e| e["layer"] == "emission").unwrap();
+    assert_eq!(emission["rmse"], 0.0);
+    // --reference prints the error after rendering.
+    let out = dir.path().join("r.exr");
+    let printed = stdout(&run_ok(&["render", scene.as_str(), "-o", out.to_str().unwrap(), "-x", "48", "-y", "48", "-ad", "16", "-q", "--reference", a.to_str().unwrap()]));
+    assert!(printed.contains("composite") && printed.contains("relmse"), "{printed}");
+}
