@@ -35,7 +35,7 @@ pub struct Cli {
 #[derive(Subcommand, Debug)]
 pub enum Command {
     /// Render a glTF scene to a layered OpenEXR and a PNG preview.
-    Render(RenderArgs),
+    Render(Box<RenderArgs>),
     /// Describe a scene: triangles, materials, lights, bounds, and the components it needs.
     Info(InfoArgs),
     /// Error of one EXR against another (RMSE and relative MSE per layer).

@@ -15,24 +15,57 @@ fn white_furnace_converges_to_e_over_one_minus_rho() {
     let scene = b.write(dir.path(), "furnace");
     let out = dir.path().join("furnace.exr");
     run_ok(&[
-        "render", scene.to_str().unwrap(), "-o", out.to_str().unwrap(), "-q",
-        "-x", "32", "-y", "32", "-ab", "10", "-ad", "64", "--light-samples", "64",
-        "-vp", "0.5", "0.5", "0.5", "-vd", "0", "0", "-1", "-vh", "60", "-vv", "60",
+        "render",
+        scene.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "-q",
+        "-x",
+        "32",
+        "-y",
+        "32",
+        "-ab",
+        "10",
+        "-ad",
+        "64",
+        "--light-samples",
+        "64",
+        "-vp",
+        "0.5",
+        "0.5",
+        "0.5",
+        "-vd",
+        "0",
+        "0",
+        "-1",
+        "-vh",
+        "60",
+        "-vv",
+        "60",
     ]);
     let image = read_exr(&out);
     let expected = e / (1.0 - rho);
     let composite: Vec<f32> = rgb(&image, "").concat();
     assert!(composite.iter().all(|v| v.is_finite()));
     let mean_total = mean(&composite);
-    assert!((mean_total - expected).abs() / expected < 0.01, "furnace mean {mean_total}, expected {expected}");
+    assert!(
+        (mean_total - expected).abs() / expected < 0.01,
+        "furnace mean {mean_total}, expected {expected}"
+    );
     // Each bounce's share: emission E, direct rho E, indirect the rest of the series.
     let emission = mean(&rgb(&image, "emission").concat());
     let direct = mean(&rgb(&image, "direct").concat());
     let indirect = mean(&rgb(&image, "indirect").concat());
     assert!((emission - e).abs() < 1e-6, "emission {emission}");
-    assert!((direct - rho * e).abs() / (rho * e) < 0.02, "direct {direct}");
+    assert!(
+        (direct - rho * e).abs() / (rho * e) < 0.02,
+        "direct {direct}"
+    );
     let indirect_expected = expected - e - rho * e;
-    assert!((indirect - indirect_expected).abs() / indirect_expected < 0.02, "indirect {indirect}");
+    assert!(
+        (indirect - indirect_expected).abs() / indirect_expected < 0.02,
+        "indirect {indirect}"
+    );
 }
 
 /// A Lambertian plane under one point light: L = rho / pi * I cos(theta) / d^2 at every point,
@@ -43,20 +76,59 @@ fn diffuse_plane_under_a_point_light_matches_the_analytic_radiance() {
     let (rho, intensity, height) = (0.5f64, 10.0f64, 1.0f64);
     let mut b = GltfBuilder::new();
     let m = b.material(lambertian("plane", [rho as f32; 3]));
-    b.quad(facing([[-2.0, 0.0, -2.0], [2.0, 0.0, -2.0], [2.0, 0.0, 2.0], [-2.0, 0.0, 2.0]], [0.0, 1.0, 0.0]), Some(m));
+    b.quad(
+        facing(
+            [
+                [-2.0, 0.0, -2.0],
+                [2.0, 0.0, -2.0],
+                [2.0, 0.0, 2.0],
+                [-2.0, 0.0, 2.0],
+            ],
+            [0.0, 1.0, 0.0],
+        ),
+        Some(m),
+    );
     b.point_light([0.0, height as f32, 0.0], intensity as f32);
     let scene = b.write(dir.path(), "plane");
     let out = dir.path().join("plane.exr");
     let n = 32u32;
     run_ok(&[
-        "render", scene.to_str().unwrap(), "-o", out.to_str().unwrap(), "-q",
-        "-x", "32", "-y", "32", "-ab", "0",
-        "-vtl", "-vp", "0", "5", "0", "-vd", "0", "-1", "0", "-vu", "0", "0", "-1", "-vh", "2", "-vv", "2",
+        "render",
+        scene.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "-q",
+        "-x",
+        "32",
+        "-y",
+        "32",
+        "-ab",
+        "0",
+        "-vtl",
+        "-vp",
+        "0",
+        "5",
+        "0",
+        "-vd",
+        "0",
+        "-1",
+        "0",
+        "-vu",
+        "0",
+        "0",
+        "-1",
+        "-vh",
+        "2",
+        "-vv",
+        "2",
     ]);
     let image = read_exr(&out);
     // -ab 0 and no ambient value: the scene cannot produce indirect light, emission or specular.
     for absent in ["indirect.R", "emission.R", "specular.R"] {
-        assert!(image.channel(absent).is_none(), "{absent} should not be written");
+        assert!(
+            image.channel(absent).is_none(),
+            "{absent} should not be written"
+        );
     }
     let [r, _, _] = rgb(&image, "");
     let mut worst = 0.0f64;
@@ -85,16 +157,62 @@ fn area_light_irradiance_matches_the_closed_form() {
     let mut b = GltfBuilder::new();
     let plane = b.material(lambertian("plane", [rho as f32; 3]));
     let light = b.material(emissive_lambertian("light", [0.0; 3], radiance as f32));
-    b.quad(facing([[-4.0, 0.0, -4.0], [4.0, 0.0, -4.0], [4.0, 0.0, 4.0], [-4.0, 0.0, 4.0]], [0.0, 1.0, 0.0]), Some(plane));
+    b.quad(
+        facing(
+            [
+                [-4.0, 0.0, -4.0],
+                [4.0, 0.0, -4.0],
+                [4.0, 0.0, 4.0],
+                [-4.0, 0.0, 4.0],
+            ],
+            [0.0, 1.0, 0.0],
+        ),
+        Some(plane),
+    );
     let (af, hf) = (a as f32, h as f32);
-    b.quad(facing([[-af, hf, -af], [af, hf, -af], [af, hf, af], [-af, hf, af]], [0.0, 0.0, 0.0]), Some(light));
+    b.quad(
+        facing(
+            [[-af, hf, -af], [af, hf, -af], [af, hf, af], [-af, hf, af]],
+            [0.0, 0.0, 0.0],
+        ),
+        Some(light),
+    );
     let scene = b.write(dir.path(), "area");
     let out = dir.path().join("area.exr");
     // A tiny parallel view of the point under the light's centre, seen from below the light.
     run_ok(&[
-        "render", scene.to_str().unwrap(), "-o", out.to_str().unwrap(), "-q",
-        "-x", "8", "-y", "8", "-ab", "0", "--light-samples", "256", "--spp", "16",
-        "-vtl", "-vp", "0", "0.5", "0", "-vd", "0", "-1", "0", "-vu", "0", "0", "-1", "-vh", "0.001", "-vv", "0.001",
+        "render",
+        scene.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "-q",
+        "-x",
+        "8",
+        "-y",
+        "8",
+        "-ab",
+        "0",
+        "--light-samples",
+        "256",
+        "--spp",
+        "16",
+        "-vtl",
+        "-vp",
+        "0",
+        "0.5",
+        "0",
+        "-vd",
+        "0",
+        "-1",
+        "0",
+        "-vu",
+        "0",
+        "0",
+        "-1",
+        "-vh",
+        "0.001",
+        "-vv",
+        "0.001",
     ]);
     let image = read_exr(&out);
     // Irradiance below the centre of a square: E = 4 L * (a / sqrt(a^2 + h^2)) * atan(a / sqrt(a^2 + h^2)).
@@ -102,6 +220,8 @@ fn area_light_irradiance_matches_the_closed_form() {
     let irradiance = 4.0 * radiance * (a / s) * (a / s).atan();
     let expected = rho / std::f64::consts::PI * irradiance;
     let got = mean(&rgb(&image, "direct")[0]);
-    assert!((got - expected).abs() / expected < 0.01, "got {got}, expected {expected}");
+    assert!(
+        (got - expected).abs() / expected < 0.01,
+        "got {got}, expected {expected}"
+    );
 }
-

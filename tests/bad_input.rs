@@ -9,30 +9,76 @@ use std::path::{Path, PathBuf};
 /// A small valid scene: a lit Lambertian quad with a point light above it.
 fn valid_scene(b: &mut GltfBuilder) {
     let m = b.material(lambertian("floor", [0.5; 3]));
-    b.quad(facing([[-1.0, 0.0, -1.0], [1.0, 0.0, -1.0], [1.0, 0.0, 1.0], [-1.0, 0.0, 1.0]], [0.0, 1.0, 0.0]), Some(m));
+    b.quad(
+        facing(
+            [
+                [-1.0, 0.0, -1.0],
+                [1.0, 0.0, -1.0],
+                [1.0, 0.0, 1.0],
+                [-1.0, 0.0, 1.0],
+            ],
+            [0.0, 1.0, 0.0],
+        ),
+        Some(m),
+    );
     b.point_light([0.0, 1.0, 0.0], 5.0);
 }
 
-const VIEW: [&str; 12] = ["-vp", "0", "2", "0", "-vd", "0", "-1", "0", "-vu", "0", "0", "-1"];
+const VIEW: [&str; 12] = [
+    "-vp", "0", "2", "0", "-vd", "0", "-1", "0", "-vu", "0", "0", "-1",
+];
 
 /// Renders `scene` expecting failure; checks the message and that `out` was left alone.
 fn expect_failure(scene: &Path, extra: &[&str], out: &Path, must_mention: &[&str]) -> String {
-    let mut args = vec!["render", scene.to_str().unwrap(), "-o", out.to_str().unwrap(), "-x", "8", "-y", "8", "-ad", "4"];
+    let mut args = vec![
+        "render",
+        scene.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "-x",
+        "8",
+        "-y",
+        "8",
+        "-ad",
+        "4",
+    ];
     args.extend_from_slice(extra);
     let result = run(&args);
     let err = stderr(&result);
-    assert!(!result.status.success(), "expected failure for {}, got success:\n{err}", scene.display());
+    assert!(
+        !result.status.success(),
+        "expected failure for {}, got success:\n{err}",
+        scene.display()
+    );
     assert!(!err.contains("panicked"), "panic:\n{err}");
-    let error_lines: Vec<&str> = err.lines().filter(|l| l.starts_with("icrender: error:")).collect();
+    let error_lines: Vec<&str> = err
+        .lines()
+        .filter(|l| l.starts_with("icrender: error:"))
+        .collect();
     assert_eq!(error_lines.len(), 1, "expected one error line, got:\n{err}");
-    assert!(err.lines().last().unwrap().starts_with("icrender: error:"), "error must be the last line:\n{err}");
+    assert!(
+        err.lines().last().unwrap().starts_with("icrender: error:"),
+        "error must be the last line:\n{err}"
+    );
     for word in must_mention {
-        assert!(error_lines[0].contains(word), "error line should mention {word:?}: {}", error_lines[0]);
+        assert!(
+            error_lines[0].contains(word),
+            "error line should mention {word:?}: {}",
+            error_lines[0]
+        );
     }
-    assert!(!out.exists() || std::fs::read(out).unwrap() == b"old", "output was written or changed");
+    assert!(
+        !out.exists() || std::fs::read(out).unwrap() == b"old",
+        "output was written or changed"
+    );
     assert!(!out.with_extension("png").exists(), "preview was written");
     let dir = out.parent().unwrap();
-    let leftovers: Vec<_> = std::fs::read_dir(dir).into_iter().flatten().flatten().filter(|e| e.file_name().to_string_lossy().contains(".partial-")).collect();
+    let leftovers: Vec<_> = std::fs::read_dir(dir)
+        .into_iter()
+        .flatten()
+        .flatten()
+        .filter(|e| e.file_name().to_string_lossy().contains(".partial-"))
+        .collect();
     assert!(leftovers.is_empty(), "temporary files left behind");
     eprintln!("{}", error_lines[0]);
     error_lines[0].to_string()
@@ -44,7 +90,9 @@ struct Case {
 
 impl Case {
     fn new() -> Case {
-        Case { dir: tempfile::tempdir().unwrap() }
+        Case {
+            dir: tempfile::tempdir().unwrap(),
+        }
     }
     fn path(&self, name: &str) -> PathBuf {
         self.dir.path().join(name)
@@ -57,20 +105,34 @@ impl Case {
 #[test]
 fn missing_file() {
     let c = Case::new();
-    expect_failure(&c.path("nope.gltf"), &[], &c.out(), &["nope.gltf", "no such file"]);
+    expect_failure(
+        &c.path("nope.gltf"),
+        &[],
+        &c.out(),
+        &["nope.gltf", "no such file"],
+    );
 }
 
 #[test]
 fn directory_instead_of_a_scene() {
     let c = Case::new();
     std::fs::create_dir(c.path("scene.gltf")).unwrap();
-    expect_failure(&c.path("scene.gltf"), &[], &c.out(), &["scene.gltf", "directory"]);
+    expect_failure(
+        &c.path("scene.gltf"),
+        &[],
+        &c.out(),
+        &["scene.gltf", "directory"],
+    );
 }
 
 #[test]
 fn malformed_json() {
     let c = Case::new();
-    std::fs::write(c.path("broken.gltf"), "{\"asset\": {\"version\": \"2.0\"}, \"meshes\": [").unwrap();
+    std::fs::write(
+        c.path("broken.gltf"),
+        "{\"asset\": {\"version\": \"2.0\"}, \"meshes\": [",
+    )
+    .unwrap();
     expect_failure(&c.path("broken.gltf"), &[], &c.out(), &["broken.gltf"]);
 }
 
@@ -86,10 +148,16 @@ fn unsupported_required_extension() {
     let c = Case::new();
     let mut b = GltfBuilder::new();
     valid_scene(&mut b);
-    b.extensions_required.push("KHR_draco_mesh_compression".into());
+    b.extensions_required
+        .push("KHR_draco_mesh_compression".into());
     b.use_extension("KHR_draco_mesh_compression");
     let scene = b.write(c.dir.path(), "draco");
-    expect_failure(&scene, &VIEW, &c.out(), &["draco.gltf", "KHR_draco_mesh_compression"]);
+    expect_failure(
+        &scene,
+        &VIEW,
+        &c.out(),
+        &["draco.gltf", "KHR_draco_mesh_compression"],
+    );
 }
 
 #[test]
@@ -97,8 +165,21 @@ fn missing_texture() {
     let c = Case::new();
     let mut b = GltfBuilder::new();
     let t = b.texture("missing.png");
-    let m = b.material(json!({"pbrMetallicRoughness": {"baseColorTexture": {"index": t}, "metallicFactor": 0.0}}));
-    b.quad(facing([[-1.0, 0.0, -1.0], [1.0, 0.0, -1.0], [1.0, 0.0, 1.0], [-1.0, 0.0, 1.0]], [0.0, 1.0, 0.0]), Some(m));
+    let m = b.material(
+        json!({"pbrMetallicRoughness": {"baseColorTexture": {"index": t}, "metallicFactor": 0.0}}),
+    );
+    b.quad(
+        facing(
+            [
+                [-1.0, 0.0, -1.0],
+                [1.0, 0.0, -1.0],
+                [1.0, 0.0, 1.0],
+                [-1.0, 0.0, 1.0],
+            ],
+            [0.0, 1.0, 0.0],
+        ),
+        Some(m),
+    );
     b.point_light([0.0, 1.0, 0.0], 5.0);
     let scene = b.write(c.dir.path(), "textured");
     expect_failure(&scene, &VIEW, &c.out(), &["textured.gltf", "missing.png"]);
@@ -120,8 +201,24 @@ fn only_nan_and_huge_vertices_is_an_error() {
     let mut b = GltfBuilder::new();
     let m = b.material(lambertian("bad", [0.5; 3]));
     let nan = f32::NAN;
-    b.quad([[nan, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 0.0, 1.0], [0.0, 0.0, 1.0]], Some(m));
-    b.quad([[1e30, 0.0, 0.0], [2e30, 0.0, 0.0], [2e30, 0.0, 1e30], [1e30, 0.0, 1e30]], Some(m));
+    b.quad(
+        [
+            [nan, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [1.0, 0.0, 1.0],
+            [0.0, 0.0, 1.0],
+        ],
+        Some(m),
+    );
+    b.quad(
+        [
+            [1e30, 0.0, 0.0],
+            [2e30, 0.0, 0.0],
+            [2e30, 0.0, 1e30],
+            [1e30, 0.0, 1e30],
+        ],
+        Some(m),
+    );
     b.point_light([0.0, 1.0, 0.0], 5.0);
     // serde_json writes NaN as null; write the NaN into the binary buffer, which is where
     // real files carry it, by building the quad directly (done above) and checking the error.
@@ -134,13 +231,40 @@ fn no_light_sources() {
     let c = Case::new();
     let mut b = GltfBuilder::new();
     let m = b.material(lambertian("floor", [0.5; 3]));
-    b.quad(facing([[-1.0, 0.0, -1.0], [1.0, 0.0, -1.0], [1.0, 0.0, 1.0], [-1.0, 0.0, 1.0]], [0.0, 1.0, 0.0]), Some(m));
+    b.quad(
+        facing(
+            [
+                [-1.0, 0.0, -1.0],
+                [1.0, 0.0, -1.0],
+                [1.0, 0.0, 1.0],
+                [-1.0, 0.0, 1.0],
+            ],
+            [0.0, 1.0, 0.0],
+        ),
+        Some(m),
+    );
     let scene = b.write(c.dir.path(), "dark");
     std::fs::write(c.out(), b"old").unwrap();
     expect_failure(&scene, &VIEW, &c.out(), &["dark.gltf", "no light sources"]);
     // With an ambient value the same scene is lit and renders.
     let out = c.path("ambient.exr");
-    let mut args = vec!["render", scene.to_str().unwrap(), "-o", out.to_str().unwrap(), "-x", "8", "-y", "8", "-q", "-av", "1", "1", "1", "-ab", "0"];
+    let mut args = vec![
+        "render",
+        scene.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "-x",
+        "8",
+        "-y",
+        "8",
+        "-q",
+        "-av",
+        "1",
+        "1",
+        "1",
+        "-ab",
+        "0",
+    ];
     args.extend_from_slice(&VIEW);
     run_ok(&args);
 }
@@ -165,7 +289,14 @@ fn bad_options_are_refused() {
     expect_failure(&scene, &["--spp", "0"], &c.out(), &["--spp"]);
     expect_failure(&scene, &["--tile", "0x4"], &c.out(), &["--tile"]);
     // Up parallel to the view direction: no image plane.
-    expect_failure(&scene, &["-vp", "0", "2", "0", "-vd", "0", "-1", "0", "-vu", "0", "1", "0"], &c.out(), &["-vu"]);
+    expect_failure(
+        &scene,
+        &[
+            "-vp", "0", "2", "0", "-vd", "0", "-1", "0", "-vu", "0", "1", "0",
+        ],
+        &c.out(),
+        &["-vu"],
+    );
     expect_failure(&scene, &["-vv", "200"], &c.out(), &["-vv"]);
 }
 
@@ -176,11 +307,32 @@ fn degenerate_and_nan_triangles_are_dropped_with_a_warning() {
     valid_scene(&mut b);
     let m = b.material(lambertian("junk", [0.5; 3]));
     // Zero area (collinear) and non-finite triangles beside the valid floor.
-    let mesh = b.mesh(&[[0.0, 0.5, 0.0], [1.0, 0.5, 0.0], [2.0, 0.5, 0.0], [f32::NAN, 0.5, 0.0], [1e30, 0.0, 0.0]], &[[0, 1, 2], [0, 1, 3], [0, 1, 4]], Some(m));
+    let mesh = b.mesh(
+        &[
+            [0.0, 0.5, 0.0],
+            [1.0, 0.5, 0.0],
+            [2.0, 0.5, 0.0],
+            [f32::NAN, 0.5, 0.0],
+            [1e30, 0.0, 0.0],
+        ],
+        &[[0, 1, 2], [0, 1, 3], [0, 1, 4]],
+        Some(m),
+    );
     b.node(json!({"mesh": mesh}));
     let scene = b.write(c.dir.path(), "junk");
     let out = c.out();
-    let mut args = vec!["render", scene.to_str().unwrap(), "-o", out.to_str().unwrap(), "-x", "8", "-y", "8", "-ad", "4"];
+    let mut args = vec![
+        "render",
+        scene.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "-x",
+        "8",
+        "-y",
+        "8",
+        "-ad",
+        "4",
+    ];
     args.extend_from_slice(&VIEW);
     let result = run_ok(&args);
     let err = stderr(&result);

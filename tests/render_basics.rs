@@ -6,13 +6,28 @@ use common::*;
 use std::process::Command;
 
 fn default_scene() -> String {
-    project_dir().join("scenes/cornell.gltf").to_string_lossy().into_owned()
+    project_dir()
+        .join("scenes/cornell.gltf")
+        .to_string_lossy()
+        .into_owned()
 }
 
 fn render_default(dir: &std::path::Path, name: &str, extra: &[&str]) -> std::path::PathBuf {
     let out = dir.join(format!("{name}.exr"));
     let scene = default_scene();
-    let mut args = vec!["render", scene.as_str(), "-o", out.to_str().unwrap(), "-x", "48", "-y", "48", "-ad", "16", "-q"];
+    let mut args = vec![
+        "render",
+        scene.as_str(),
+        "-o",
+        out.to_str().unwrap(),
+        "-x",
+        "48",
+        "-y",
+        "48",
+        "-ad",
+        "16",
+        "-q",
+    ];
     args.extend_from_slice(extra);
     run_ok(&args);
     out
@@ -36,11 +51,21 @@ fn default_scene_renders_an_exr_and_a_png_preview() {
 fn oiiotool_lists_the_four_layers() {
     let dir = tempfile::tempdir().unwrap();
     let out = render_default(dir.path(), "layers", &[]);
-    let info = Command::new("oiiotool").args(["--info", "-v"]).arg(&out).output().expect("oiiotool (openimageio-tools) is installed");
+    let info = Command::new("oiiotool")
+        .args(["--info", "-v"])
+        .arg(&out)
+        .output()
+        .expect("oiiotool (openimageio-tools) is installed");
     let text = String::from_utf8_lossy(&info.stdout);
-    let channels = text.lines().find(|l| l.trim_start().starts_with("channel list")).unwrap_or_else(|| panic!("no channel list in:\n{text}"));
+    let channels = text
+        .lines()
+        .find(|l| l.trim_start().starts_with("channel list"))
+        .unwrap_or_else(|| panic!("no channel list in:\n{text}"));
     for name in ["R", "G", "B", "A"] {
-        assert!(channels.split([',', ':']).any(|c| c.trim() == name), "{name} missing: {channels}");
+        assert!(
+            channels.split([',', ':']).any(|c| c.trim() == name),
+            "{name} missing: {channels}"
+        );
     }
     for layer in ["emission", "direct", "specular", "indirect"] {
         for c in ["R", "G", "B"] {
@@ -48,8 +73,14 @@ fn oiiotool_lists_the_four_layers() {
             assert!(channels.contains(&full), "{full} missing: {channels}");
         }
     }
-    assert!(text.contains("icrender/options"), "options missing from the header:\n{text}");
-    assert!(text.contains("icrender/render_time_s"), "timing missing from the header:\n{text}");
+    assert!(
+        text.contains("icrender/options"),
+        "options missing from the header:\n{text}"
+    );
+    assert!(
+        text.contains("icrender/render_time_s"),
+        "timing missing from the header:\n{text}"
+    );
 }
 
 #[test]
@@ -58,25 +89,43 @@ fn composite_is_the_sum_of_the_layers() {
     let out = render_default(dir.path(), "sum", &[]);
     let image = read_exr(&out);
     let composite = rgb(&image, "");
-    let layers: Vec<[Vec<f32>; 3]> = ["emission", "direct", "specular", "indirect"].iter().map(|l| rgb(&image, l)).collect();
+    let layers: Vec<[Vec<f32>; 3]> = ["emission", "direct", "specular", "indirect"]
+        .iter()
+        .map(|l| rgb(&image, l))
+        .collect();
     for c in 0..3 {
         for i in 0..composite[c].len() {
             let sum: f32 = layers.iter().map(|l| l[c][i]).sum();
             let v = composite[c][i];
-            assert!((v - sum).abs() <= 1e-5 * v.abs().max(1.0), "pixel {i} channel {c}: {v} vs {sum}");
+            assert!(
+                (v - sum).abs() <= 1e-5 * v.abs().max(1.0),
+                "pixel {i} channel {c}: {v} vs {sum}"
+            );
         }
     }
     // Every layer carries light in this scene (mirror box, visible light, diffuse walls).
-    for (name, l) in ["emission", "direct", "specular", "indirect"].iter().zip(&layers) {
+    for (name, l) in ["emission", "direct", "specular", "indirect"]
+        .iter()
+        .zip(&layers)
+    {
         assert!(mean(&l[0]) > 0.0, "{name} is black");
     }
-    assert!(composite.iter().flatten().all(|v| v.is_finite() && *v >= 0.0));
+    assert!(
+        composite
+            .iter()
+            .flatten()
+            .all(|v| v.is_finite() && *v >= 0.0)
+    );
 }
 
 #[test]
 fn same_seed_same_image_whatever_the_threads() {
     let dir = tempfile::tempdir().unwrap();
-    let a = read_exr(&render_default(dir.path(), "a", &["--threads", "1", "--tile", "7x5"]));
+    let a = read_exr(&render_default(
+        dir.path(),
+        "a",
+        &["--threads", "1", "--tile", "7x5"],
+    ));
     let b = read_exr(&render_default(dir.path(), "b", &["--threads", "2"]));
     let c = read_exr(&render_default(dir.path(), "c", &["--seed", "2"]));
     assert_eq!(rgb(&a, ""), rgb(&b, ""));
@@ -88,25 +137,48 @@ fn statistics_json_and_header() {
     let dir = tempfile::tempdir().unwrap();
     let stats = dir.path().join("stats.json");
     let out = render_default(dir.path(), "stats", &["--stats", stats.to_str().unwrap()]);
-    let json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&stats).unwrap()).unwrap();
-    for key in ["wall_s", "render_s", "load_s", "build_s", "rays", "threads", "per_thread", "layers"] {
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&stats).unwrap()).unwrap();
+    for key in [
+        "wall_s",
+        "render_s",
+        "load_s",
+        "build_s",
+        "rays",
+        "threads",
+        "per_thread",
+        "layers",
+    ] {
         assert!(json.get(key).is_some(), "{key} missing from {json}");
     }
     assert!(json["rays"]["primary"].as_u64().unwrap() >= 48 * 48);
     assert_eq!(json["nonfinite_dropped"], 0);
     let image = read_exr(&out);
     let options = image.attribute("icrender/options").unwrap();
-    assert!(options.contains("-ab 1") && options.contains("-ad 16"), "{options}");
+    assert!(
+        options.contains("-ab 1") && options.contains("-ad 16"),
+        "{options}"
+    );
 }
 
 #[test]
 fn radiance_view_options_override_the_gltf_camera() {
     let dir = tempfile::tempdir().unwrap();
     // Looking straight up at the light from the floor: the image is dominated by emission.
-    let out = render_default(dir.path(), "up", &["-vp", "0", "0.1", "0", "-vd", "0", "1", "0", "-vu", "0", "0", "1", "-vh", "20", "-vv", "20"]);
+    let out = render_default(
+        dir.path(),
+        "up",
+        &[
+            "-vp", "0", "0.1", "0", "-vd", "0", "1", "0", "-vu", "0", "0", "1", "-vh", "20", "-vv",
+            "20",
+        ],
+    );
     let image = read_exr(&out);
     let emission = mean(&rgb(&image, "emission")[0]);
-    assert!(emission > 1.0, "the light should fill the view, emission mean {emission}");
+    assert!(
+        emission > 1.0,
+        "the light should fill the view, emission mean {emission}"
+    );
 }
 
 #[test]
@@ -124,7 +196,19 @@ fn corridor_renders() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("corridor.exr");
     let scene = project_dir().join("scenes/corridor.gltf");
-    run_ok(&["render", scene.to_str().unwrap(), "-o", out.to_str().unwrap(), "-x", "32", "-y", "24", "-ad", "8", "-q"]);
+    run_ok(&[
+        "render",
+        scene.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "-x",
+        "32",
+        "-y",
+        "24",
+        "-ad",
+        "8",
+        "-q",
+    ]);
     let image = read_exr(&out);
     assert!(mean(&rgb(&image, "")[0]) > 0.0);
     // Lambertian corridor: no specular layer.
@@ -144,18 +228,51 @@ fn info_and_compare_commands() {
     let dir = tempfile::tempdir().unwrap();
     let a = render_default(dir.path(), "a", &[]);
     let b = render_default(dir.path(), "b", &["--seed", "9"]);
-    let same = stdout(&run_ok(&["compare", a.to_str().unwrap(), a.to_str().unwrap(), "--json"]));
+    let same = stdout(&run_ok(&[
+        "compare",
+        a.to_str().unwrap(),
+        a.to_str().unwrap(),
+        "--json",
+    ]));
     let same: serde_json::Value = serde_json::from_str(&same).unwrap();
     assert_eq!(same[0]["layer"], "composite");
     assert_eq!(same[0]["rmse"], 0.0);
     assert_eq!(same.as_array().unwrap().len(), 5);
-    let differ: serde_json::Value = serde_json::from_str(&stdout(&run_ok(&["compare", a.to_str().unwrap(), b.to_str().unwrap(), "--json"]))).unwrap();
+    let differ: serde_json::Value = serde_json::from_str(&stdout(&run_ok(&[
+        "compare",
+        a.to_str().unwrap(),
+        b.to_str().unwrap(),
+        "--json",
+    ])))
+    .unwrap();
     assert!(differ[0]["rmse"].as_f64().unwrap() > 0.0);
     // The emission layer does not depend on the seed at one centred sample per pixel.
-    let emission = differ.as_array().unwrap().iter().find(|e| e["layer"] == "emission").unwrap();
+    let emission = differ
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|e| e["layer"] == "emission")
+        .unwrap();
     assert_eq!(emission["rmse"], 0.0);
     // --reference prints the error after rendering.
     let out = dir.path().join("r.exr");
-    let printed = stdout(&run_ok(&["render", scene.as_str(), "-o", out.to_str().unwrap(), "-x", "48", "-y", "48", "-ad", "16", "-q", "--reference", a.to_str().unwrap()]));
-    assert!(printed.contains("composite") && printed.contains("relmse"), "{printed}");
+    let printed = stdout(&run_ok(&[
+        "render",
+        scene.as_str(),
+        "-o",
+        out.to_str().unwrap(),
+        "-x",
+        "48",
+        "-y",
+        "48",
+        "-ad",
+        "16",
+        "-q",
+        "--reference",
+        a.to_str().unwrap(),
+    ]));
+    assert!(
+        printed.contains("composite") && printed.contains("relmse"),
+        "{printed}"
+    );
 }

@@ -38,10 +38,10 @@ fn validate(args: &RenderArgs) -> Result<(), String> {
     if args.threads == Some(0) {
         return Err("--threads must be at least 1".into());
     }
-    if let Some(av) = &args.ambient_value {
-        if av.iter().any(|v| !v.is_finite() || *v < 0.0) {
-            return Err("-av values must be finite and not negative".into());
-        }
+    if let Some(av) = &args.ambient_value
+        && av.iter().any(|v| !v.is_finite() || *v < 0.0)
+    {
+        return Err("-av values must be finite and not negative".into());
     }
     if !(args.specular_threshold.is_finite() && args.specular_threshold >= 0.0) {
         return Err("-st must be a finite, non-negative number".into());

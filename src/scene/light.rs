@@ -169,7 +169,7 @@ impl EmitterSet {
 
     /// Chooses a triangle by power with `u1`, a uniform point on it with `u2`, `u3`.
     pub fn sample(&self, u1: f32, u2: f32, u3: f32) -> Option<EmitterPoint> {
-        if self.triangles.is_empty() || !(self.total_power > 0.0) {
+        if self.triangles.is_empty() || self.total_power.is_nan() || self.total_power <= 0.0 {
             return None;
         }
         let target = u1 as f64 * self.total_power;

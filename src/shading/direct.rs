@@ -33,7 +33,7 @@ pub fn direct_light(
             };
             let offset = light.position - hit.position;
             let d2 = offset.length_squared();
-            if !(d2 > 0.0) {
+            if d2.is_nan() || d2 <= 0.0 {
                 continue;
             }
             let d = d2.sqrt();

@@ -244,7 +244,7 @@ impl Scene {
         };
         self.raw_intersect(&mut rayhit, coherence);
         let hit = &rayhit.hit;
-        (hit.geomID != INVALID_GEOMETRY_ID).then(|| RayHit {
+        (hit.geomID != INVALID_GEOMETRY_ID).then_some(RayHit {
             t: rayhit.ray.tfar,
             geom_id: hit.geomID,
             prim_id: hit.primID,
@@ -317,5 +317,64 @@ impl Drop for Scene {
     fn drop(&mut self) {
         // SAFETY: the scene was created by rtcNewScene and is released once.
         unsafe { rtc::rtcReleaseScene(self.raw) };
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn errors_reported_by_embree_become_rust_errors() {
+        let device = Device::new().unwrap();
+        assert!(device.check("nothing yet").is_ok());
+        // An invalid geometry type makes Embree call the error callback.
+        // SAFETY: a live device; Embree validates the type and returns NULL for a bad one.
+        let geom = unsafe { rtc::rtcNewGeometry(device.raw, 12345) };
+        assert!(geom.is_null());
+        let err = device.check("creating a bogus geometry").unwrap_err();
+        assert!(err.0.contains("creating a bogus geometry"), "{err}");
+        // Reported once, then cleared.
+        assert!(device.check("after").is_ok());
+    }
+
+    #[test]
+    fn closest_hit_and_occlusion_on_one_triangle() {
+        let device = Arc::new(Device::new().unwrap());
+        let positions = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
+        let indices = [[0u32, 1, 2]];
+        let scene = Scene::build(
+            &device,
+            &[TriangleMeshData {
+                positions: &positions,
+                indices: &indices,
+            }],
+        )
+        .unwrap();
+        let hit = scene
+            .intersect(
+                [0.25, 0.25, 1.0],
+                [0.0, 0.0, -1.0],
+                0.0,
+                f32::INFINITY,
+                Coherence::Coherent,
+            )
+            .unwrap();
+        assert!((hit.t - 1.0).abs() < 1e-6);
+        assert_eq!((hit.geom_id, hit.prim_id), (0, 0));
+        assert!((hit.u - 0.25).abs() < 1e-6 && (hit.v - 0.25).abs() < 1e-6);
+        assert!(
+            scene
+                .intersect(
+                    [2.0, 2.0, 1.0],
+                    [0.0, 0.0, -1.0],
+                    0.0,
+                    f32::INFINITY,
+                    Coherence::Incoherent
+                )
+                .is_none()
+        );
+        assert!(scene.occluded([0.25, 0.25, 1.0], [0.0, 0.0, -1.0], 0.0, 2.0));
+        assert!(!scene.occluded([0.25, 0.25, 1.0], [0.0, 0.0, -1.0], 0.0, 0.5));
     }
 }

@@ -3,11 +3,11 @@
 
 #![allow(dead_code)]
 
-use serde_json::{json, Value};
+use serde_json::{Value, json};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-pub use icrender::sys::image_io::{read_image, ImageData};
+pub use icrender::sys::image_io::{ImageData, read_image};
 
 pub fn binary() -> PathBuf {
     PathBuf::from(env!("CARGO_BIN_EXE_icrender"))
@@ -24,7 +24,10 @@ pub fn shared_scene(relative: &str) -> PathBuf {
 
 /// Runs icrender with arguments; returns the process output.
 pub fn run(args: &[&str]) -> Output {
-    Command::new(binary()).args(args).output().expect("icrender runs")
+    Command::new(binary())
+        .args(args)
+        .output()
+        .expect("icrender runs")
 }
 
 pub fn stderr(out: &Output) -> String {
@@ -38,20 +41,38 @@ pub fn stdout(out: &Output) -> String {
 /// Runs icrender and fails the test with its stderr if it did not succeed.
 pub fn run_ok(args: &[&str]) -> Output {
     let out = run(args);
-    assert!(out.status.success(), "icrender {args:?} failed:\n{}", stderr(&out));
+    assert!(
+        out.status.success(),
+        "icrender {args:?} failed:\n{}",
+        stderr(&out)
+    );
     out
 }
 
 pub fn read_exr(path: &Path) -> ImageData {
-    read_image(path, &["icrender/options", "icrender/statistics", "icrender/command"])
-        .unwrap_or_else(|e| panic!("reading {}: {e}", path.display()))
+    read_image(
+        path,
+        &[
+            "icrender/options",
+            "icrender/statistics",
+            "icrender/command",
+        ],
+    )
+    .unwrap_or_else(|e| panic!("reading {}: {e}", path.display()))
 }
 
 /// R, G, B planes of a layer ("" for the composite).
 pub fn rgb(image: &ImageData, layer: &str) -> [Vec<f32>; 3] {
     ["R", "G", "B"].map(|c| {
-        let name = if layer.is_empty() { c.to_string() } else { format!("{layer}.{c}") };
-        image.channel(&name).unwrap_or_else(|| panic!("no channel {name}")).to_vec()
+        let name = if layer.is_empty() {
+            c.to_string()
+        } else {
+            format!("{layer}.{c}")
+        };
+        image
+            .channel(&name)
+            .unwrap_or_else(|| panic!("no channel {name}"))
+            .to_vec()
     })
 }
 
@@ -99,7 +120,7 @@ impl GltfBuilder {
     }
 
     fn push_view(&mut self, bytes: &[u8], target: Option<u32>) -> usize {
-        while self.bin.len() % 4 != 0 {
+        while !self.bin.len().is_multiple_of(4) {
             self.bin.push(0);
         }
         let offset = self.bin.len();
@@ -118,12 +139,28 @@ impl GltfBuilder {
     }
 
     /// Adds a mesh of triangles (positions, indices) with a material; returns the mesh index.
-    pub fn mesh(&mut self, positions: &[[f32; 3]], indices: &[[u32; 3]], material: Option<usize>) -> usize {
-        let pos_bytes: Vec<u8> = positions.iter().flatten().flat_map(|v| v.to_le_bytes()).collect();
-        let idx_bytes: Vec<u8> = indices.iter().flatten().flat_map(|v| v.to_le_bytes()).collect();
+    pub fn mesh(
+        &mut self,
+        positions: &[[f32; 3]],
+        indices: &[[u32; 3]],
+        material: Option<usize>,
+    ) -> usize {
+        let pos_bytes: Vec<u8> = positions
+            .iter()
+            .flatten()
+            .flat_map(|v| v.to_le_bytes())
+            .collect();
+        let idx_bytes: Vec<u8> = indices
+            .iter()
+            .flatten()
+            .flat_map(|v| v.to_le_bytes())
+            .collect();
         let pv = self.push_view(&pos_bytes, Some(34962));
         let iv = self.push_view(&idx_bytes, Some(34963));
-        let finite: Vec<&[f32; 3]> = positions.iter().filter(|p| p.iter().all(|v| v.is_finite())).collect();
+        let finite: Vec<&[f32; 3]> = positions
+            .iter()
+            .filter(|p| p.iter().all(|v| v.is_finite()))
+            .collect();
         let (mut lo, mut hi) = ([f32::MAX; 3], [f32::MIN; 3]);
         for p in &finite {
             for c in 0..3 {
@@ -156,7 +193,8 @@ impl GltfBuilder {
 
     pub fn point_light(&mut self, position: [f32; 3], intensity: f32) -> usize {
         self.use_extension("KHR_lights_punctual");
-        self.lights.push(json!({"type": "point", "color": [1.0, 1.0, 1.0], "intensity": intensity}));
+        self.lights
+            .push(json!({"type": "point", "color": [1.0, 1.0, 1.0], "intensity": intensity}));
         let light = self.lights.len() - 1;
         self.node(json!({"translation": position, "extensions": {"KHR_lights_punctual": {"light": light}}}))
     }
@@ -221,7 +259,11 @@ impl GltfBuilder {
         let bin_name = format!("{name}.bin");
         std::fs::write(dir.join(&bin_name), &self.bin).unwrap();
         let path = dir.join(format!("{name}.gltf"));
-        std::fs::write(&path, serde_json::to_string_pretty(&self.to_json(&bin_name)).unwrap()).unwrap();
+        std::fs::write(
+            &path,
+            serde_json::to_string_pretty(&self.to_json(&bin_name)).unwrap(),
+        )
+        .unwrap();
         path
     }
 }
@@ -231,7 +273,11 @@ fn sub(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
 }
 
 fn cross(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
 }
 
 fn dot(a: [f32; 3], b: [f32; 3]) -> f32 {
