@@ -18,6 +18,7 @@
 #include <cstring>
 #include <deque>
 #include <exception>
+#include <initializer_list>
 #include <limits>
 #include <memory>
 #include <new>
@@ -38,19 +39,7 @@
 #define STB_IMAGE_IMPLEMENTATION
 #define TINYGLTF_IMPLEMENTATION
 #define TINYGLTF_NO_STB_IMAGE_WRITE
-#if defined(__GNUC__)
-#pragma GCC diagnostic push
-#pragma GCC diagnostic ignored "-Wunused-function"
-#pragma GCC diagnostic ignored "-Wunused-parameter"
-#pragma GCC diagnostic ignored "-Wmissing-field-initializers"
-#pragma GCC diagnostic ignored "-Wsign-compare"
-#pragma GCC diagnostic ignored "-Wimplicit-fallthrough"
-#pragma GCC diagnostic ignored "-Wtype-limits"
-#endif
 #include <tiny_gltf.h>
-#if defined(__GNUC__)
-#pragma GCC diagnostic pop
-#endif
 
 namespace {
 
@@ -546,6 +535,15 @@ class Converter {
                 out.wrap_s = m_.samplers[size_t(tex.sampler)].wrapS;
                 out.wrap_t = m_.samplers[size_t(tex.sampler)].wrapT;
             }
+            // Rust only has to understand the three modes glTF defines.
+            for (int32_t *wrap : {&out.wrap_s, &out.wrap_t}) {
+                if (*wrap != TINYGLTF_TEXTURE_WRAP_REPEAT && *wrap != TINYGLTF_TEXTURE_WRAP_CLAMP_TO_EDGE &&
+                    *wrap != TINYGLTF_TEXTURE_WRAP_MIRRORED_REPEAT) {
+                    warnings.push_back(label + ": unknown sampler wrap mode " + std::to_string(*wrap) +
+                                       ", using REPEAT");
+                    *wrap = TINYGLTF_TEXTURE_WRAP_REPEAT;
+                }
+            }
             out.srgb = 1;
             std::string name = tex.name;
             if (name.empty()) name = m_.images[src].name;
@@ -801,12 +799,14 @@ class Converter {
         return m;
     }
 
-    void visit(int node_index, const Mat4 &parent, size_t depth) {
-        if (node_index < 0 || size_t(node_index) >= m_.nodes.size())
-            fail("node index " + std::to_string(node_index) + " out of range");
-        const size_t ni = size_t(node_index);
-        if (on_path_[ni]) fail("node graph has a cycle at node " + std::to_string(node_index));
-        if (depth > kMaxNodeDepth) fail("node graph deeper than " + std::to_string(kMaxNodeDepth) + " levels");
+    struct PathEntry {
+        size_t node;
+        Mat4 world;
+        size_t next_child;
+    };
+
+    // Places one node (instances, camera, light) and returns its world matrix.
+    Mat4 place_node(size_t ni, const Mat4 &parent) {
         if (++visits_ > kMaxNodeVisits)
             fail("node graph expands to more than " + std::to_string(kMaxNodeVisits) + " node visits");
         const tinygltf::Node &node = m_.nodes[ni];
@@ -835,14 +835,38 @@ class Converter {
 
         auto lp = node.extensions.find("KHR_lights_punctual");
         if (lp != node.extensions.end()) add_light(node, label, lp->second, world);
+        return world;
+    }
 
-        on_path_[ni] = 1;
-        for (int child : node.children) {
-            if (child < 0 || size_t(child) >= m_.nodes.size())
-                fail(label + ": child " + std::to_string(child) + " out of range");
-            visit(child, world, depth + 1);
+    // Depth-first walk with an explicit stack: 1024 levels of recursion would not fit the 2 MiB
+    // stack of a Rust thread comfortably. `path` is exactly the chain of ancestors, which is
+    // what the cycle check needs.
+    void walk_from(int root) {
+        std::vector<PathEntry> path;
+        auto enter = [&](int index, const Mat4 &parent, const std::string &from) {
+            if (index < 0 || size_t(index) >= m_.nodes.size())
+                fail(from + std::to_string(index) + " out of range");
+            const size_t ni = size_t(index);
+            if (on_path_[ni]) fail("node graph has a cycle at node " + std::to_string(index));
+            if (path.size() > kMaxNodeDepth)
+                fail("node graph deeper than " + std::to_string(kMaxNodeDepth) + " levels");
+            Mat4 world = place_node(ni, parent);
+            on_path_[ni] = 1;
+            path.push_back(PathEntry{ni, world, 0});
+        };
+        enter(root, identity(), "scene root node ");
+        while (!path.empty()) {
+            PathEntry &top = path.back();
+            const tinygltf::Node &node = m_.nodes[top.node];
+            if (top.next_child < node.children.size()) {
+                int child = node.children[top.next_child++];
+                const Mat4 parent = top.world;  // `top` dies if `path` reallocates
+                enter(child, parent, quoted_or_index(node.name, "node", top.node) + ": child ");
+            } else {
+                on_path_[top.node] = 0;
+                path.pop_back();
+            }
         }
-        on_path_[ni] = 0;
     }
 
     void add_camera(const tinygltf::Node &node, const std::string &label, const Mat4 &world) {
@@ -922,7 +946,7 @@ class Converter {
                 if (!is_child[i]) roots.push_back(int(i));
             if (roots.empty() && !m_.nodes.empty()) fail("node graph has a cycle (no root nodes)");
         }
-        for (int r : roots) visit(r, identity(), 0);
+        for (int r : roots) walk_from(r);
     }
 
     void finish() {
