@@ -39,10 +39,7 @@ fn find_embree() -> Embree {
             if root.join(sub).join("rtcore.h").is_file() {
                 let lib_root = root.parent().unwrap_or(root);
                 for lib in ["lib", "lib64", "lib/x86_64-linux-gnu"] {
-                    println!(
-                        "cargo:rustc-link-search=native={}",
-                        lib_root.join(lib).display()
-                    );
+                    println!("cargo:rustc-link-search=native={}", lib_root.join(lib).display());
                 }
                 println!("cargo:rustc-link-lib=dylib={sub}");
                 if version4 {

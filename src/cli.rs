@@ -6,7 +6,7 @@ use std::path::PathBuf;
 
 /// Radiance-style multi-letter options taking a single dash.
 const RADIANCE_OPTIONS: &[&str] = &[
-    "ab", "ad", "av", "st", "lr", "lw", "vp", "vd", "vu", "vh", "vv", "vtv", "vtl",
+    "ab", "aa", "ad", "as", "ar", "af", "av", "st", "lr", "lw", "vp", "vd", "vu", "vh", "vv", "vtv", "vtl",
 ];
 
 /// Turns `-ab 2` into `--ab 2` for every Radiance option name; everything else is untouched.
@@ -60,9 +60,28 @@ pub struct RenderArgs {
     /// -ab: ambient (indirect diffuse) bounces.
     #[arg(long = "ab", default_value_t = 1)]
     pub ambient_bounces: u32,
-    /// -ad: hemisphere samples at the first indirect diffuse bounce.
+    /// -aa: ambient accuracy; larger means larger record radii and fewer records. 0 turns the
+    /// irradiance cache off (brute force at every point).
+    #[arg(long = "aa", default_value_t = 0.2)]
+    pub ambient_accuracy: f32,
+    /// -ad: hemisphere samples of a new record (brute force: at the first bounce).
     #[arg(long = "ad", default_value_t = 512)]
     pub ambient_divisions: u32,
+    /// -as: extra hemisphere samples where the first ones vary most.
+    #[arg(long = "as", default_value_t = 128)]
+    pub ambient_supersamples: u32,
+    /// -ar: ambient resolution; the smallest record radius is scene size / ar (0: no limit).
+    #[arg(long = "ar", default_value_t = 64)]
+    pub ambient_resolution: u32,
+    /// -af FILE: persistent irradiance cache, loaded at start and appended to while rendering.
+    #[arg(long = "af")]
+    pub ambient_file: Option<PathBuf>,
+    /// Record weighting: Radiance's Hessian-based error control, or Ward's 1988 split sphere.
+    #[arg(long = "ic-metric", value_enum, default_value_t = MetricArg::Hessian)]
+    pub ic_metric: MetricArg,
+    /// Add a debug layer `ic_records` counting the records each pixel made.
+    #[arg(long = "ic-records")]
+    pub ic_records: bool,
     /// -av r g b: radiance assumed past the last ambient bounce.
     #[arg(long = "av", num_args = 3, value_names = ["R", "G", "B"], allow_negative_numbers = true)]
     pub ambient_value: Option<Vec<f32>>,
@@ -110,6 +129,12 @@ pub struct RenderArgs {
     pub quiet: bool,
     #[command(flatten)]
     pub view: ViewArgs,
+}
+
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum MetricArg {
+    Hessian,
+    Ward88,
 }
 
 #[derive(Args, Debug, Clone, Default)]

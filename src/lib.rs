@@ -4,6 +4,8 @@
 pub mod cli;
 pub mod commands;
 pub mod image;
+pub mod irradiance;
+pub mod job;
 pub mod progress;
 pub mod render;
 pub mod sampling;

@@ -91,12 +91,7 @@ pub fn render(
     settings: &RenderSettings,
     progress: &Progress,
 ) -> (FrameBuffer, Vec<ThreadStats>) {
-    let all = tiles(
-        camera.width,
-        camera.height,
-        settings.tile_width,
-        settings.tile_height,
-    );
+    let all = tiles(camera.width, camera.height, settings.tile_width, settings.tile_height);
     let next = AtomicUsize::new(0);
     let frame = Mutex::new(FrameBuffer::new(camera.width, camera.height));
     let threads = settings.threads.max(1).min(all.len().max(1));
@@ -113,22 +108,18 @@ pub fn render(
                         values.clear();
                         for y in tile.y0..tile.y1 {
                             for x in tile.x0..tile.x1 {
-                                values.push(render_pixel(
-                                    integrator,
-                                    camera,
-                                    settings,
-                                    x,
-                                    y,
-                                    &mut stats.rays,
-                                ));
+                                let before = stats.rays.records_level0;
+                                let value = render_pixel(integrator, camera, settings, x, y, &mut stats.rays);
+                                values.push((value, (stats.rays.records_level0 - before) as f32));
                             }
                         }
                         let mut frame = frame.lock().unwrap_or_else(|e| e.into_inner());
                         let mut it = values.iter();
                         for y in tile.y0..tile.y1 {
                             for x in tile.x0..tile.x1 {
-                                if let Some(v) = it.next() {
+                                if let Some((v, records)) = it.next() {
                                     frame.set(x, y, v);
+                                    frame.set_records(x, y, *records);
                                 }
                             }
                         }
@@ -141,10 +132,7 @@ pub fn render(
                 })
             })
             .collect();
-        workers
-            .into_iter()
-            .map(|w| w.join().unwrap_or_default())
-            .collect()
+        workers.into_iter().map(|w| w.join().unwrap_or_default()).collect()
     });
     progress.finish();
     (frame.into_inner().unwrap_or_else(|e| e.into_inner()), stats)

@@ -37,9 +37,7 @@ impl Rng {
 
     pub fn next_u32(&mut self) -> u32 {
         let old = self.state;
-        self.state = old
-            .wrapping_mul(6_364_136_223_846_793_005)
-            .wrapping_add(self.inc);
+        self.state = old.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(self.inc);
         let xorshifted = (((old >> 18) ^ old) >> 27) as u32;
         let rot = (old >> 59) as u32;
         xorshifted.rotate_right(rot)
@@ -114,16 +112,9 @@ mod tests {
 
     #[test]
     fn basis_is_orthonormal() {
-        for n in [
-            Vec3::Z,
-            -Vec3::Z,
-            Vec3::X,
-            Vec3::new(1.0, 2.0, -3.0).normalize(),
-        ] {
+        for n in [Vec3::Z, -Vec3::Z, Vec3::X, Vec3::new(1.0, 2.0, -3.0).normalize()] {
             let (t, b) = basis(n);
-            assert!(
-                t.dot(b).abs() < 1e-5 && t.dot(n).abs() < 1e-5 && (t.length() - 1.0).abs() < 1e-5
-            );
+            assert!(t.dot(b).abs() < 1e-5 && t.dot(n).abs() < 1e-5 && (t.length() - 1.0).abs() < 1e-5);
         }
     }
 }

@@ -1,10 +1,12 @@
-//! Render statistics: timers and ray counters, per thread and total, written as JSON and into
-//! the EXR header.
+//! Render statistics: timers, ray counters and irradiance cache traffic, per thread and total,
+//! written as JSON (`--stats`) and into the EXR header. The top-level keys `records_computed`,
+//! `lookups`, `hits`, `t_amb_s`, `t_notamb_s` and `wall_s` are relied on by scripts.
 
 use crate::render::ThreadStats;
+use crate::shading::RayCounts;
 use serde::Serialize;
 
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Default, Serialize)]
 pub struct RayStats {
     pub primary: u64,
     pub shadow: u64,
@@ -13,18 +15,50 @@ pub struct RayStats {
     pub total: u64,
 }
 
-#[derive(Clone, Debug, Serialize)]
+impl From<&RayCounts> for RayStats {
+    fn from(c: &RayCounts) -> Self {
+        RayStats { primary: c.primary, shadow: c.shadow, specular: c.specular, ambient: c.ambient, total: c.total() }
+    }
+}
+
+/// One thread's share.
+#[derive(Clone, Debug, Default, Serialize)]
 pub struct ThreadReport {
     pub tiles: usize,
     pub busy_s: f64,
+    pub records_computed: u64,
+    pub lookups: u64,
+    pub hits: u64,
+    pub duplicates: u64,
+    /// Time computing indirect diffuse light (the paper's T_amb) and the rest (T_notamb).
+    pub t_amb_s: f64,
+    pub t_notamb_s: f64,
     pub rays: RayStats,
 }
 
-#[derive(Clone, Debug, Serialize)]
+impl From<&ThreadStats> for ThreadReport {
+    fn from(t: &ThreadStats) -> Self {
+        let c = &t.rays;
+        ThreadReport {
+            tiles: t.tiles,
+            busy_s: t.busy_s,
+            records_computed: c.records_computed,
+            lookups: c.lookups,
+            hits: c.hits,
+            duplicates: c.duplicates,
+            t_amb_s: c.t_amb,
+            t_notamb_s: (t.busy_s - c.t_amb).max(0.0),
+            rays: RayStats::from(c),
+        }
+    }
+}
+
+#[derive(Clone, Debug, Default, Serialize)]
 pub struct RenderStats {
     pub version: &'static str,
     pub scene: String,
     pub mode: &'static str,
+    pub ranks: usize,
     pub width: u32,
     pub height: u32,
     pub spp: u32,
@@ -35,6 +69,20 @@ pub struct RenderStats {
     pub build_s: f64,
     pub render_s: f64,
     pub wall_s: f64,
+    /// New records made by this run (cache misses).
+    pub records_computed: u64,
+    /// Records read from the -af file at start.
+    pub records_loaded: u64,
+    /// Records in the cache at the end.
+    pub cache_records: u64,
+    pub lookups: u64,
+    pub hits: u64,
+    /// Records computed while another thread's new record already covered the point.
+    pub duplicates: u64,
+    /// Times a thread found a cache shard locked and waited.
+    pub lock_contention: u64,
+    pub t_amb_s: f64,
+    pub t_notamb_s: f64,
     pub rays: RayStats,
     pub mrays_per_s: f64,
     /// Contributions dropped for being NaN or infinite (should be 0).
@@ -43,32 +91,22 @@ pub struct RenderStats {
     pub per_thread: Vec<ThreadReport>,
 }
 
-fn rays(c: &crate::shading::RayCounts) -> RayStats {
-    RayStats {
-        primary: c.primary,
-        shadow: c.shadow,
-        specular: c.specular,
-        ambient: c.ambient,
-        total: c.total(),
-    }
-}
-
-pub fn per_thread(threads: &[ThreadStats]) -> (Vec<ThreadReport>, crate::shading::RayCounts) {
-    let mut total = crate::shading::RayCounts::default();
-    let reports = threads
-        .iter()
-        .map(|t| {
+impl RenderStats {
+    /// Fills the totals from the threads' reports.
+    pub fn add_threads(&mut self, threads: &[ThreadStats]) {
+        let mut total = RayCounts::default();
+        for t in threads {
             total.add(&t.rays);
-            ThreadReport {
-                tiles: t.tiles,
-                busy_s: t.busy_s,
-                rays: rays(&t.rays),
-            }
-        })
-        .collect();
-    (reports, total)
-}
-
-pub fn ray_stats(c: &crate::shading::RayCounts) -> RayStats {
-    rays(c)
+            self.per_thread.push(ThreadReport::from(t));
+        }
+        self.records_computed = total.records_computed;
+        self.lookups = total.lookups;
+        self.hits = total.hits;
+        self.duplicates = total.duplicates;
+        self.t_amb_s = total.t_amb;
+        self.t_notamb_s = self.per_thread.iter().map(|t| t.t_notamb_s).sum();
+        self.rays = RayStats::from(&total);
+        self.nonfinite_dropped = total.nonfinite;
+        self.mrays_per_s = total.total() as f64 / self.render_s.max(1e-9) / 1e6;
+    }
 }

@@ -74,13 +74,7 @@ impl Tracer {
         hit.position + hit.geometric_normal * (side * self.epsilon_at(hit.position))
     }
 
-    pub fn intersect(
-        &self,
-        scene: &Scene,
-        org: Vec3,
-        dir: Vec3,
-        coherence: Coherence,
-    ) -> Option<SurfaceHit> {
+    pub fn intersect(&self, scene: &Scene, org: Vec3, dir: Vec3, coherence: Coherence) -> Option<SurfaceHit> {
         self.intersect_within(scene, org, dir, f32::INFINITY, coherence)
     }
 
@@ -102,15 +96,8 @@ impl Tracer {
         let w = 1.0 - u - v;
         let p = |i: usize| Vec3::from(mesh.positions[i]);
         let position = w * p(a) + u * p(b) + v * p(c);
-        let geometric_normal = (p(b) - p(a))
-            .cross(p(c) - p(a))
-            .try_normalize()
-            .unwrap_or(-dir);
-        let toward_ray = if geometric_normal.dot(dir) > 0.0 {
-            -1.0
-        } else {
-            1.0
-        };
+        let geometric_normal = (p(b) - p(a)).cross(p(c) - p(a)).try_normalize().unwrap_or(-dir);
+        let toward_ray = if geometric_normal.dot(dir) > 0.0 { -1.0 } else { 1.0 };
         let facing_normal = geometric_normal * toward_ray;
         let mut normal = facing_normal;
         if let Some(ns) = &mesh.normals {
@@ -122,10 +109,7 @@ impl Tracer {
         }
         let uv = mesh.texcoords.as_ref().map(|t| {
             let (ta, tb, tc) = (t[a], t[b], t[c]);
-            [
-                w * ta[0] + u * tb[0] + v * tc[0],
-                w * ta[1] + u * tb[1] + v * tc[1],
-            ]
+            [w * ta[0] + u * tb[0] + v * tc[0], w * ta[1] + u * tb[1] + v * tc[1]]
         });
         Some(SurfaceHit {
             position,
@@ -144,10 +128,7 @@ impl Tracer {
     /// 0 blocked). Only scenes with transparent materials pay for walking through hits.
     pub fn transmittance(&self, scene: &Scene, org: Vec3, dir: Vec3, distance: f32) -> f32 {
         if !self.transparency {
-            return if self
-                .embree
-                .occluded(org.to_array(), dir.to_array(), 0.0, distance)
-            {
+            return if self.embree.occluded(org.to_array(), dir.to_array(), 0.0, distance) {
                 0.0
             } else {
                 1.0
@@ -157,8 +138,7 @@ impl Tracer {
         let mut origin = org;
         let mut left = distance;
         for _ in 0..MAX_TRANSPARENT_PASSES {
-            let Some(hit) = self.intersect_within(scene, origin, dir, left, Coherence::Incoherent)
-            else {
+            let Some(hit) = self.intersect_within(scene, origin, dir, left, Coherence::Incoherent) else {
                 return through;
             };
             let material = &scene.materials[hit.material as usize];
@@ -194,25 +174,12 @@ impl Tracer {
     pub fn segment_blocked(&self, from: Vec3, to: Vec3) -> bool {
         let d = to - from;
         let len = d.length();
-        len > 0.0
-            && self
-                .embree
-                .occluded(from.to_array(), (d / len).to_array(), 0.0, len)
+        len > 0.0 && self.embree.occluded(from.to_array(), (d / len).to_array(), 0.0, len)
     }
 
     /// The raw Embree query, for the ray-throughput bench.
-    pub fn raw_intersect(
-        &self,
-        org: Vec3,
-        dir: Vec3,
-        coherence: Coherence,
-    ) -> Option<embree::RayHit> {
-        self.embree.intersect(
-            org.to_array(),
-            dir.to_array(),
-            0.0,
-            f32::INFINITY,
-            coherence,
-        )
+    pub fn raw_intersect(&self, org: Vec3, dir: Vec3, coherence: Coherence) -> Option<embree::RayHit> {
+        self.embree
+            .intersect(org.to_array(), dir.to_array(), 0.0, f32::INFINITY, coherence)
     }
 }

@@ -57,10 +57,7 @@ fn white_furnace_converges_to_e_over_one_minus_rho() {
     let direct = mean(&rgb(&image, "direct").concat());
     let indirect = mean(&rgb(&image, "indirect").concat());
     assert!((emission - e).abs() < 1e-6, "emission {emission}");
-    assert!(
-        (direct - rho * e).abs() / (rho * e) < 0.02,
-        "direct {direct}"
-    );
+    assert!((direct - rho * e).abs() / (rho * e) < 0.02, "direct {direct}");
     let indirect_expected = expected - e - rho * e;
     assert!(
         (indirect - indirect_expected).abs() / indirect_expected < 0.02,
@@ -78,12 +75,7 @@ fn diffuse_plane_under_a_point_light_matches_the_analytic_radiance() {
     let m = b.material(lambertian("plane", [rho as f32; 3]));
     b.quad(
         facing(
-            [
-                [-2.0, 0.0, -2.0],
-                [2.0, 0.0, -2.0],
-                [2.0, 0.0, 2.0],
-                [-2.0, 0.0, 2.0],
-            ],
+            [[-2.0, 0.0, -2.0], [2.0, 0.0, -2.0], [2.0, 0.0, 2.0], [-2.0, 0.0, 2.0]],
             [0.0, 1.0, 0.0],
         ),
         Some(m),
@@ -125,10 +117,7 @@ fn diffuse_plane_under_a_point_light_matches_the_analytic_radiance() {
     let image = read_exr(&out);
     // -ab 0 and no ambient value: the scene cannot produce indirect light, emission or specular.
     for absent in ["indirect.R", "emission.R", "specular.R"] {
-        assert!(
-            image.channel(absent).is_none(),
-            "{absent} should not be written"
-        );
+        assert!(image.channel(absent).is_none(), "{absent} should not be written");
     }
     let [r, _, _] = rgb(&image, "");
     let mut worst = 0.0f64;
@@ -159,12 +148,7 @@ fn area_light_irradiance_matches_the_closed_form() {
     let light = b.material(emissive_lambertian("light", [0.0; 3], radiance as f32));
     b.quad(
         facing(
-            [
-                [-4.0, 0.0, -4.0],
-                [4.0, 0.0, -4.0],
-                [4.0, 0.0, 4.0],
-                [-4.0, 0.0, 4.0],
-            ],
+            [[-4.0, 0.0, -4.0], [4.0, 0.0, -4.0], [4.0, 0.0, 4.0], [-4.0, 0.0, 4.0]],
             [0.0, 1.0, 0.0],
         ),
         Some(plane),

@@ -11,12 +11,7 @@ fn valid_scene(b: &mut GltfBuilder) {
     let m = b.material(lambertian("floor", [0.5; 3]));
     b.quad(
         facing(
-            [
-                [-1.0, 0.0, -1.0],
-                [1.0, 0.0, -1.0],
-                [1.0, 0.0, 1.0],
-                [-1.0, 0.0, 1.0],
-            ],
+            [[-1.0, 0.0, -1.0], [1.0, 0.0, -1.0], [1.0, 0.0, 1.0], [-1.0, 0.0, 1.0]],
             [0.0, 1.0, 0.0],
         ),
         Some(m),
@@ -24,9 +19,7 @@ fn valid_scene(b: &mut GltfBuilder) {
     b.point_light([0.0, 1.0, 0.0], 5.0);
 }
 
-const VIEW: [&str; 12] = [
-    "-vp", "0", "2", "0", "-vd", "0", "-1", "0", "-vu", "0", "0", "-1",
-];
+const VIEW: [&str; 12] = ["-vp", "0", "2", "0", "-vd", "0", "-1", "0", "-vu", "0", "0", "-1"];
 
 /// Renders `scene` expecting failure; checks the message and that `out` was left alone.
 fn expect_failure(scene: &Path, extra: &[&str], out: &Path, must_mention: &[&str]) -> String {
@@ -51,10 +44,7 @@ fn expect_failure(scene: &Path, extra: &[&str], out: &Path, must_mention: &[&str
         scene.display()
     );
     assert!(!err.contains("panicked"), "panic:\n{err}");
-    let error_lines: Vec<&str> = err
-        .lines()
-        .filter(|l| l.starts_with("icrender: error:"))
-        .collect();
+    let error_lines: Vec<&str> = err.lines().filter(|l| l.starts_with("icrender: error:")).collect();
     assert_eq!(error_lines.len(), 1, "expected one error line, got:\n{err}");
     assert!(
         err.lines().last().unwrap().starts_with("icrender: error:"),
@@ -105,24 +95,14 @@ impl Case {
 #[test]
 fn missing_file() {
     let c = Case::new();
-    expect_failure(
-        &c.path("nope.gltf"),
-        &[],
-        &c.out(),
-        &["nope.gltf", "no such file"],
-    );
+    expect_failure(&c.path("nope.gltf"), &[], &c.out(), &["nope.gltf", "no such file"]);
 }
 
 #[test]
 fn directory_instead_of_a_scene() {
     let c = Case::new();
     std::fs::create_dir(c.path("scene.gltf")).unwrap();
-    expect_failure(
-        &c.path("scene.gltf"),
-        &[],
-        &c.out(),
-        &["scene.gltf", "directory"],
-    );
+    expect_failure(&c.path("scene.gltf"), &[], &c.out(), &["scene.gltf", "directory"]);
 }
 
 #[test]
@@ -148,16 +128,10 @@ fn unsupported_required_extension() {
     let c = Case::new();
     let mut b = GltfBuilder::new();
     valid_scene(&mut b);
-    b.extensions_required
-        .push("KHR_draco_mesh_compression".into());
+    b.extensions_required.push("KHR_draco_mesh_compression".into());
     b.use_extension("KHR_draco_mesh_compression");
     let scene = b.write(c.dir.path(), "draco");
-    expect_failure(
-        &scene,
-        &VIEW,
-        &c.out(),
-        &["draco.gltf", "KHR_draco_mesh_compression"],
-    );
+    expect_failure(&scene, &VIEW, &c.out(), &["draco.gltf", "KHR_draco_mesh_compression"]);
 }
 
 #[test]
@@ -165,17 +139,10 @@ fn missing_texture() {
     let c = Case::new();
     let mut b = GltfBuilder::new();
     let t = b.texture("missing.png");
-    let m = b.material(
-        json!({"pbrMetallicRoughness": {"baseColorTexture": {"index": t}, "metallicFactor": 0.0}}),
-    );
+    let m = b.material(json!({"pbrMetallicRoughness": {"baseColorTexture": {"index": t}, "metallicFactor": 0.0}}));
     b.quad(
         facing(
-            [
-                [-1.0, 0.0, -1.0],
-                [1.0, 0.0, -1.0],
-                [1.0, 0.0, 1.0],
-                [-1.0, 0.0, 1.0],
-            ],
+            [[-1.0, 0.0, -1.0], [1.0, 0.0, -1.0], [1.0, 0.0, 1.0], [-1.0, 0.0, 1.0]],
             [0.0, 1.0, 0.0],
         ),
         Some(m),
@@ -202,21 +169,11 @@ fn only_nan_and_huge_vertices_is_an_error() {
     let m = b.material(lambertian("bad", [0.5; 3]));
     let nan = f32::NAN;
     b.quad(
-        [
-            [nan, 0.0, 0.0],
-            [1.0, 0.0, 0.0],
-            [1.0, 0.0, 1.0],
-            [0.0, 0.0, 1.0],
-        ],
+        [[nan, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 0.0, 1.0], [0.0, 0.0, 1.0]],
         Some(m),
     );
     b.quad(
-        [
-            [1e30, 0.0, 0.0],
-            [2e30, 0.0, 0.0],
-            [2e30, 0.0, 1e30],
-            [1e30, 0.0, 1e30],
-        ],
+        [[1e30, 0.0, 0.0], [2e30, 0.0, 0.0], [2e30, 0.0, 1e30], [1e30, 0.0, 1e30]],
         Some(m),
     );
     b.point_light([0.0, 1.0, 0.0], 5.0);
@@ -233,12 +190,7 @@ fn no_light_sources() {
     let m = b.material(lambertian("floor", [0.5; 3]));
     b.quad(
         facing(
-            [
-                [-1.0, 0.0, -1.0],
-                [1.0, 0.0, -1.0],
-                [1.0, 0.0, 1.0],
-                [-1.0, 0.0, 1.0],
-            ],
+            [[-1.0, 0.0, -1.0], [1.0, 0.0, -1.0], [1.0, 0.0, 1.0], [-1.0, 0.0, 1.0]],
             [0.0, 1.0, 0.0],
         ),
         Some(m),
@@ -291,9 +243,7 @@ fn bad_options_are_refused() {
     // Up parallel to the view direction: no image plane.
     expect_failure(
         &scene,
-        &[
-            "-vp", "0", "2", "0", "-vd", "0", "-1", "0", "-vu", "0", "1", "0",
-        ],
+        &["-vp", "0", "2", "0", "-vd", "0", "-1", "0", "-vu", "0", "1", "0"],
         &c.out(),
         &["-vu"],
     );

@@ -6,10 +6,7 @@ use common::*;
 use std::process::Command;
 
 fn default_scene() -> String {
-    project_dir()
-        .join("scenes/cornell.gltf")
-        .to_string_lossy()
-        .into_owned()
+    project_dir().join("scenes/cornell.gltf").to_string_lossy().into_owned()
 }
 
 fn render_default(dir: &std::path::Path, name: &str, extra: &[&str]) -> std::path::PathBuf {
@@ -104,28 +101,16 @@ fn composite_is_the_sum_of_the_layers() {
         }
     }
     // Every layer carries light in this scene (mirror box, visible light, diffuse walls).
-    for (name, l) in ["emission", "direct", "specular", "indirect"]
-        .iter()
-        .zip(&layers)
-    {
+    for (name, l) in ["emission", "direct", "specular", "indirect"].iter().zip(&layers) {
         assert!(mean(&l[0]) > 0.0, "{name} is black");
     }
-    assert!(
-        composite
-            .iter()
-            .flatten()
-            .all(|v| v.is_finite() && *v >= 0.0)
-    );
+    assert!(composite.iter().flatten().all(|v| v.is_finite() && *v >= 0.0));
 }
 
 #[test]
 fn same_seed_same_image_whatever_the_threads() {
     let dir = tempfile::tempdir().unwrap();
-    let a = read_exr(&render_default(
-        dir.path(),
-        "a",
-        &["--threads", "1", "--tile", "7x5"],
-    ));
+    let a = read_exr(&render_default(dir.path(), "a", &["--threads", "1", "--tile", "7x5"]));
     let b = read_exr(&render_default(dir.path(), "b", &["--threads", "2"]));
     let c = read_exr(&render_default(dir.path(), "c", &["--seed", "2"]));
     assert_eq!(rgb(&a, ""), rgb(&b, ""));
@@ -137,8 +122,7 @@ fn statistics_json_and_header() {
     let dir = tempfile::tempdir().unwrap();
     let stats = dir.path().join("stats.json");
     let out = render_default(dir.path(), "stats", &["--stats", stats.to_str().unwrap()]);
-    let json: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&stats).unwrap()).unwrap();
+    let json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&stats).unwrap()).unwrap();
     for key in [
         "wall_s",
         "render_s",
@@ -155,10 +139,7 @@ fn statistics_json_and_header() {
     assert_eq!(json["nonfinite_dropped"], 0);
     let image = read_exr(&out);
     let options = image.attribute("icrender/options").unwrap();
-    assert!(
-        options.contains("-ab 1") && options.contains("-ad 16"),
-        "{options}"
-    );
+    assert!(options.contains("-ab 1") && options.contains("-ad 16"), "{options}");
 }
 
 #[test]
@@ -169,8 +150,7 @@ fn radiance_view_options_override_the_gltf_camera() {
         dir.path(),
         "up",
         &[
-            "-vp", "0", "0.1", "0", "-vd", "0", "1", "0", "-vu", "0", "0", "1", "-vh", "20", "-vv",
-            "20",
+            "-vp", "0", "0.1", "0", "-vd", "0", "1", "0", "-vu", "0", "0", "1", "-vh", "20", "-vv", "20",
         ],
     );
     let image = read_exr(&out);
@@ -271,8 +251,5 @@ fn info_and_compare_commands() {
         "--reference",
         a.to_str().unwrap(),
     ]));
-    assert!(
-        printed.contains("composite") && printed.contains("relmse"),
-        "{printed}"
-    );
+    assert!(printed.contains("composite") && printed.contains("relmse"), "{printed}");
 }

@@ -28,10 +28,7 @@ fn render_shared(relative: &str, extra: &[&str]) -> ImageData {
             data.iter().all(|v| v.is_finite()),
             "{relative}: non-finite value in {name}"
         );
-        assert!(
-            data.iter().all(|v| *v >= 0.0),
-            "{relative}: negative value in {name}"
-        );
+        assert!(data.iter().all(|v| *v >= 0.0), "{relative}: negative value in {name}");
     }
     image
 }
@@ -49,10 +46,7 @@ fn cornell_box_original() {
 
 #[test]
 fn conference_room_331k_triangles() {
-    let image = render_shared(
-        "conference_room/conference.gltf",
-        &["-x", "32", "-y", "24", "-ad", "4"],
-    );
+    let image = render_shared("conference_room/conference.gltf", &["-x", "32", "-y", "24", "-ad", "4"]);
     assert!(
         mean(&rgb(&image, "")[0]) > 0.0,
         "the automatic view should see the lit room"
@@ -61,10 +55,7 @@ fn conference_room_331k_triangles() {
 
 #[test]
 fn sibenik_with_textures_and_point_lights() {
-    let image = render_shared(
-        "sibenik_cathedral/sibenik.gltf",
-        &["-x", "32", "-y", "24", "-ad", "4"],
-    );
+    let image = render_shared("sibenik_cathedral/sibenik.gltf", &["-x", "32", "-y", "24", "-ad", "4"]);
     assert!(mean(&rgb(&image, "direct")[0]) > 0.0);
     // Point lights only: nothing emissive to see.
     assert!(image.channel("emission.R").is_none());

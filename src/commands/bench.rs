@@ -37,18 +37,12 @@ fn throughput(
                 })
             })
             .collect();
-        workers
-            .into_iter()
-            .map(|w| w.join().unwrap_or((0, 0)))
-            .collect()
+        workers.into_iter().map(|w| w.join().unwrap_or((0, 0))).collect()
     });
     let elapsed = start.elapsed().as_secs_f64();
     let rays: u64 = results.iter().map(|r| r.0).sum();
     let hits: u64 = results.iter().map(|r| r.1).sum();
-    (
-        rays as f64 / elapsed / 1e6,
-        hits as f64 / rays.max(1) as f64,
-    )
+    (rays as f64 / elapsed / 1e6, hits as f64 / rays.max(1) as f64)
 }
 
 pub fn run(args: &BenchArgs) -> CommandResult {
@@ -68,10 +62,7 @@ pub fn run(args: &BenchArgs) -> CommandResult {
     let camera = view.camera(width, height);
     let primary = |i: u64| {
         let p = i % (width as u64 * height as u64);
-        camera.ray(
-            (p % width as u64) as f32 + 0.5,
-            (p / width as u64) as f32 + 0.5,
-        )
+        camera.ray((p % width as u64) as f32 + 0.5, (p / width as u64) as f32 + 0.5)
     };
     let (lo, hi) = (scene.bounds_min, scene.bounds_max);
     let incoherent = |i: u64| {
@@ -82,13 +73,8 @@ pub fn run(args: &BenchArgs) -> CommandResult {
         let r = (1.0 - z * z).max(0.0).sqrt();
         (o, Vec3::new(r * phi.cos(), r * phi.sin(), z))
     };
-    let all =
-        threads.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
-    println!(
-        "scene        {} ({} triangles)",
-        path.display(),
-        scene.triangle_count()
-    );
+    let all = threads.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+    println!("scene        {} ({} triangles)", path.display(), scene.triangle_count());
     println!("embree       {} ", tracer.embree_version);
     println!("load         {load_s:.3} s");
     println!("bvh build    {build_s:.3} s");

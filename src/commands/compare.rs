@@ -7,8 +7,7 @@ use crate::sys::image_io;
 
 pub fn run(args: &CompareArgs) -> CommandResult {
     let read = |path: &std::path::Path| {
-        image_io::read_image(path, &[])
-            .map_err(|e| CommandError(format!("{}: {e}", path.display())))
+        image_io::read_image(path, &[]).map_err(|e| CommandError(format!("{}: {e}", path.display())))
     };
     let image = read(&args.image)?;
     let reference = read(&args.reference)?;

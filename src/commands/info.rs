@@ -12,13 +12,7 @@ pub fn run(args: &InfoArgs) -> CommandResult {
         warn(&format!("{}: {w}", args.scene.display()));
     }
     let needs = scene.needs();
-    let count = |kind: LightType| {
-        scene
-            .punctual_lights
-            .iter()
-            .filter(|l| l.kind == kind)
-            .count()
-    };
+    let count = |kind: LightType| scene.punctual_lights.iter().filter(|l| l.kind == kind).count();
     let emissive_materials: Vec<&str> = scene
         .materials
         .iter()
@@ -66,16 +60,10 @@ pub fn run(args: &InfoArgs) -> CommandResult {
         "triangles    {} ({} dropped), {} placed meshes",
         d["triangles"], d["dropped_triangles"], d["placed_meshes"]
     );
-    println!(
-        "materials    {}, textures {}",
-        d["materials"], d["textures"]
-    );
+    println!("materials    {}, textures {}", d["materials"], d["textures"]);
     println!(
         "lights       {} emissive triangles, {} point, {} spot, {} directional",
-        d["lights"]["emissive_triangles"],
-        d["lights"]["point"],
-        d["lights"]["spot"],
-        d["lights"]["directional"]
+        d["lights"]["emissive_triangles"], d["lights"]["point"], d["lights"]["spot"], d["lights"]["directional"]
     );
     println!("cameras      {}", d["cameras"]);
     println!(

@@ -1,57 +1,19 @@
-//! `icrender render`: load, trace, write the layered EXR, the preview and the statistics.
+//! `icrender render`: prepare the job, trace, write the layered EXR, the preview and the
+//! statistics, and report the error against a reference if one is given.
 
-use super::{CommandError, CommandResult, warn};
-use crate::cli::{RenderArgs, parse_tile};
-use crate::image::framebuffer::Layer;
+use super::{warn, CommandError, CommandResult};
+use crate::cli::RenderArgs;
+use crate::image::framebuffer::{FrameBuffer, Layer};
 use crate::image::{metrics, output};
+use crate::job::{validate, Job};
 use crate::progress::Progress;
-use crate::render::{RenderSettings, render, tiles};
-use crate::scene::{MaterialOptions, Scene, SceneNeeds};
+use crate::render::{render, tiles};
+use crate::scene::SceneNeeds;
 use crate::shading::{Integrator, ShadingOptions};
-use crate::stats::{RenderStats, per_thread, ray_stats};
+use crate::stats::RenderStats;
 use crate::sys::image_io;
-use crate::tracer::Tracer;
-use glam::Vec3;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
-
-/// Largest image side we accept: beyond it framebuffers stop fitting in memory sensibly.
-const MAX_IMAGE_SIDE: u32 = 65_536;
-
-fn validate(args: &RenderArgs) -> Result<(), String> {
-    if args.width == 0
-        || args.height == 0
-        || args.width > MAX_IMAGE_SIDE
-        || args.height > MAX_IMAGE_SIDE
-    {
-        return Err(format!(
-            "image size -x {} -y {} must be between 1 and {MAX_IMAGE_SIDE}",
-            args.width, args.height
-        ));
-    }
-    if args.spp == 0 {
-        return Err("--spp must be at least 1".into());
-    }
-    if args.ambient_divisions == 0 {
-        return Err("-ad must be at least 1".into());
-    }
-    if args.threads == Some(0) {
-        return Err("--threads must be at least 1".into());
-    }
-    if let Some(av) = &args.ambient_value
-        && av.iter().any(|v| !v.is_finite() || *v < 0.0)
-    {
-        return Err("-av values must be finite and not negative".into());
-    }
-    if !(args.specular_threshold.is_finite() && args.specular_threshold >= 0.0) {
-        return Err("-st must be a finite, non-negative number".into());
-    }
-    if !(args.min_weight.is_finite() && args.min_weight >= 0.0) {
-        return Err("-lw must be a finite, non-negative number".into());
-    }
-    parse_tile(&args.tile)?;
-    Ok(())
-}
 
 /// The layers this scene can put light in; the others are not written.
 pub fn producible_layers(needs: SceneNeeds, shading: &ShadingOptions) -> Vec<Layer> {
@@ -68,204 +30,157 @@ pub fn producible_layers(needs: SceneNeeds, shading: &ShadingOptions) -> Vec<Lay
 }
 
 fn default_output(scene: &Path) -> PathBuf {
-    let stem = scene
-        .file_stem()
-        .map(|s| s.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "render".into());
+    let stem = scene.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "render".into());
     PathBuf::from(format!("{stem}.exr"))
 }
 
 /// The options as a Radiance-style line for the EXR header (and for giving rpict the same).
-fn options_line(args: &RenderArgs, shading: &ShadingOptions) -> String {
-    let av = shading.ambient_value;
+pub fn options_line(args: &RenderArgs) -> String {
+    let av = args.ambient_value.as_deref().unwrap_or(&[0.0, 0.0, 0.0]);
     format!(
-        "-x {} -y {} -ab {} -ad {} -av {} {} {} -st {} -lr {} -lw {} --light-samples {} --spp {} --seed {}{}",
+        "-x {} -y {} -ab {} -aa {} -ad {} -as {} -ar {} -av {} {} {} -st {} -lr {} -lw {} --ic-metric {:?} \
+         --light-samples {} --spp {} --seed {}{}",
         args.width,
         args.height,
-        shading.ambient_bounces,
-        shading.ambient_divisions,
-        av.x,
-        av.y,
-        av.z,
+        args.ambient_bounces,
+        args.ambient_accuracy,
+        args.ambient_divisions,
+        args.ambient_supersamples,
+        args.ambient_resolution,
+        av[0],
+        av[1],
+        av[2],
         args.specular_threshold,
-        shading.max_specular_depth,
-        shading.min_weight,
-        shading.light_samples,
+        args.max_specular_depth,
+        args.min_weight,
+        args.ic_metric,
+        args.light_samples,
         args.spp,
         args.seed,
         if args.lambertian { " --lambertian" } else { "" }
     )
 }
 
+/// Where the results go, checked writable before any work is done.
+pub struct Outputs {
+    pub exr: PathBuf,
+    pub png: Option<PathBuf>,
+    pub stats: Option<PathBuf>,
+}
+
+impl Outputs {
+    pub fn check(args: &RenderArgs) -> Result<Outputs, CommandError> {
+        let exr = args.output.clone().unwrap_or_else(|| default_output(&args.scene));
+        let png = (!args.no_preview).then(|| exr.with_extension("png"));
+        let outputs = Outputs { exr, png, stats: args.stats.clone() };
+        for path in std::iter::once(&outputs.exr).chain(outputs.png.iter()).chain(outputs.stats.iter()) {
+            output::check_writable(path).map_err(|e| CommandError(format!("{}: {e}", path.display())))?;
+        }
+        Ok(outputs)
+    }
+
+    /// Writes the EXR (with header), the preview and the statistics.
+    pub fn write(&self, args: &RenderArgs, job: &Job, frame: &FrameBuffer, stats: &RenderStats) -> Result<(), CommandError> {
+        let layers = producible_layers(job.scene.needs(), &job.shading);
+        let stats_json = serde_json::to_string(stats)?;
+        let command_line: Vec<String> = std::env::args().collect();
+        let attributes = vec![
+            ("Software".to_string(), format!("icrender {}", env!("CARGO_PKG_VERSION"))),
+            ("icrender/command".to_string(), command_line.join(" ")),
+            ("icrender/scene".to_string(), args.scene.display().to_string()),
+            ("icrender/options".to_string(), options_line(args)),
+            ("icrender/view".to_string(), job.view.radiance_options()),
+            ("icrender/mode".to_string(), stats.mode.to_string()),
+            ("icrender/ranks".to_string(), stats.ranks.to_string()),
+            ("icrender/render_time_s".to_string(), format!("{:.3}", stats.render_s)),
+            ("icrender/statistics".to_string(), stats_json),
+        ];
+        output::write_exr(&self.exr, frame, &layers, &attributes, args.half, args.ic_records)
+            .map_err(|e| CommandError(format!("{}: {e}", self.exr.display())))?;
+        if let Some(png) = &self.png {
+            output::write_preview(png, frame).map_err(|e| CommandError(format!("{}: {e}", png.display())))?;
+        }
+        if let Some(path) = &self.stats {
+            let text = serde_json::to_string_pretty(stats)? + "\n";
+            output::write_atomically(path, |tmp| std::fs::write(tmp, &text).map_err(|e| e.to_string()))
+                .map_err(|e| CommandError(format!("{}: {e}", path.display())))?;
+        }
+        Ok(())
+    }
+}
+
+/// Prints the error of the written image against the reference, next to the run time.
+pub fn report_error(exr: &Path, reference: &image_io::ImageData, reference_path: &Path, seconds: f64) -> Result<(), CommandError> {
+    let written = image_io::read_image(exr, &[]).map_err(|e| CommandError(format!("{}: {e}", exr.display())))?;
+    let errors = metrics::compare(&written, reference).map_err(|e| CommandError(format!("{}: {e}", reference_path.display())))?;
+    for e in &errors {
+        println!("error {:<10} rmse {:.6e}  relmse {:.6e}  time {:.3} s", e.layer, e.rmse, e.rel_mse, seconds);
+    }
+    Ok(())
+}
+
 pub fn run(args: &RenderArgs) -> CommandResult {
     let wall = Instant::now();
     validate(args)?;
-    let output = args
-        .output
-        .clone()
-        .unwrap_or_else(|| default_output(&args.scene));
-    let preview = (!args.no_preview).then(|| output.with_extension("png"));
-    // Fail before rendering, not after, if a result could not be written.
-    for path in std::iter::once(&output)
-        .chain(preview.iter())
-        .chain(args.stats.iter())
-    {
-        output::check_writable(path)
-            .map_err(|e| CommandError(format!("{}: {e}", path.display())))?;
-    }
+    let outputs = Outputs::check(args)?;
     let reference = match &args.reference {
-        Some(path) => Some(
-            image_io::read_image(path, &[])
-                .map_err(|e| CommandError(format!("{}: {e}", path.display())))?,
-        ),
+        Some(path) => Some(image_io::read_image(path, &[]).map_err(|e| CommandError(format!("{}: {e}", path.display())))?),
         None => None,
     };
-
-    let load_start = Instant::now();
-    let material_options = MaterialOptions {
-        specular_threshold: args.specular_threshold,
-        lambertian: args.lambertian,
-    };
-    let scene = Scene::load(&args.scene, &material_options)?;
-    let load_s = load_start.elapsed().as_secs_f64();
-    for w in &scene.warnings {
-        warn(&format!("{}: {w}", args.scene.display()));
-    }
-    let shading = ShadingOptions {
-        ambient_bounces: args.ambient_bounces,
-        ambient_divisions: args.ambient_divisions,
-        ambient_value: args
-            .ambient_value
-            .as_deref()
-            .map_or(Vec3::ZERO, |v| Vec3::new(v[0], v[1], v[2])),
-        max_specular_depth: args.max_specular_depth,
-        min_weight: args.min_weight,
-        light_samples: args.light_samples.max(1),
-    };
-    if !scene.has_lights() && shading.ambient_value.max_element() <= 0.0 {
-        return Err(CommandError(format!(
-            "{}: the scene has no light sources (no emissive material, no KHR_lights_punctual light); \
-             it would render black (give -av for an ambient-only render)",
-            args.scene.display()
-        )));
-    }
-
-    let build_start = Instant::now();
-    let tracer =
-        Tracer::new(&scene).map_err(|e| CommandError(format!("{}: {e}", args.scene.display())))?;
-    let build_s = build_start.elapsed().as_secs_f64();
-    let view = super::view::choose_view(&scene, &tracer, &args.view, args.width, args.height)
-        .map_err(|e| CommandError(format!("view: {e}")))?;
-    let camera = view.camera(args.width, args.height);
-
-    let (tile_width, tile_height) = parse_tile(&args.tile)?;
-    let threads = args
-        .threads
-        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
-    let settings = RenderSettings {
-        spp: args.spp,
-        seed: args.seed,
-        tile_width,
-        tile_height,
-        threads,
-    };
-    let integrator = Integrator::new(&scene, &tracer, &shading);
-    let progress = Progress::new(
-        tiles(args.width, args.height, tile_width, tile_height).len(),
-        args.quiet,
-    );
+    let job = Job::prepare(args)?;
+    let integrator = Integrator::new(&job.scene, &job.tracer, &job.shading, job.cache.as_ref());
+    let s = &job.settings;
+    let progress = Progress::new(tiles(args.width, args.height, s.tile_width, s.tile_height).len(), args.quiet);
     let render_start = Instant::now();
-    let (frame, thread_stats) = render(&integrator, &camera, &settings, &progress);
+    let (frame, thread_stats) = render(&integrator, &job.camera, s, &progress);
     let render_s = render_start.elapsed().as_secs_f64();
+    if let Some(cache) = &job.cache
+        && let Err(e) = cache.finish()
+    {
+        warn(&format!("{}: cache file not fully written: {e}", args.ambient_file.as_deref().unwrap_or(Path::new("")).display()));
+    }
 
-    let layers = producible_layers(scene.needs(), &shading);
-    let (per_thread, total_rays) = per_thread(&thread_stats);
     let mut stats = RenderStats {
         version: env!("CARGO_PKG_VERSION"),
         scene: args.scene.display().to_string(),
         mode: "serial",
+        ranks: 1,
         width: args.width,
         height: args.height,
         spp: args.spp,
-        threads,
-        triangles: scene.triangle_count(),
-        dropped_triangles: scene.dropped_triangles,
-        load_s,
-        build_s,
+        threads: s.threads,
+        triangles: job.scene.triangle_count(),
+        dropped_triangles: job.scene.dropped_triangles,
+        load_s: job.load_s,
+        build_s: job.build_s,
         render_s,
-        wall_s: 0.0,
-        rays: ray_stats(&total_rays),
-        mrays_per_s: total_rays.total() as f64 / render_s.max(1e-9) / 1e6,
-        nonfinite_dropped: total_rays.nonfinite,
-        layers: layers.iter().map(|l| l.name()).collect(),
-        per_thread,
+        layers: producible_layers(job.scene.needs(), &job.shading).iter().map(|l| l.name()).collect(),
+        records_loaded: job.cache.as_ref().map_or(0, |c| c.load_report.loaded as u64),
+        cache_records: job.cache.as_ref().map_or(0, |c| c.len() as u64),
+        lock_contention: job.cache.as_ref().map_or(0, |c| c.contention()),
+        ..Default::default()
     };
-    if total_rays.nonfinite > 0 {
-        warn(&format!(
-            "{} non-finite contribution(s) were dropped",
-            total_rays.nonfinite
-        ));
+    stats.add_threads(&thread_stats);
+    if stats.nonfinite_dropped > 0 {
+        warn(&format!("{} non-finite contribution(s) were dropped", stats.nonfinite_dropped));
     }
     stats.wall_s = wall.elapsed().as_secs_f64();
-    let stats_json = serde_json::to_string(&stats)?;
-    let command_line: Vec<String> = std::env::args().collect();
-    let attributes = vec![
-        (
-            "Software".to_string(),
-            format!("icrender {}", env!("CARGO_PKG_VERSION")),
-        ),
-        ("icrender/command".to_string(), command_line.join(" ")),
-        (
-            "icrender/scene".to_string(),
-            args.scene.display().to_string(),
-        ),
-        ("icrender/options".to_string(), options_line(args, &shading)),
-        ("icrender/view".to_string(), view.radiance_options()),
-        ("icrender/mode".to_string(), "serial".to_string()),
-        (
-            "icrender/render_time_s".to_string(),
-            format!("{render_s:.3}"),
-        ),
-        ("icrender/statistics".to_string(), stats_json.clone()),
-    ];
-    output::write_exr(&output, &frame, &layers, &attributes, args.half)
-        .map_err(|e| CommandError(format!("{}: {e}", output.display())))?;
-    if let Some(png) = &preview {
-        output::write_preview(png, &frame)
-            .map_err(|e| CommandError(format!("{}: {e}", png.display())))?;
-    }
-    if let Some(path) = &args.stats {
-        output::write_atomically(path, |tmp| {
-            std::fs::write(
-                tmp,
-                serde_json::to_string_pretty(&stats).map_err(|e| e.to_string())? + "\n",
-            )
-            .map_err(|e| e.to_string())
-        })
-        .map_err(|e| CommandError(format!("{}: {e}", path.display())))?;
-    }
+    outputs.write(args, &job, &frame, &stats)?;
     if !args.quiet {
         eprintln!(
-            "icrender: {}x{} in {:.2} s ({:.1} Mrays/s, {} threads) -> {}",
+            "icrender: {}x{} in {:.2} s ({:.1} Mrays/s, {} threads, {} records, {:.0}% of lookups hit) -> {}",
             args.width,
             args.height,
             render_s,
             stats.mrays_per_s,
-            threads,
-            output.display()
+            s.threads,
+            stats.records_computed,
+            100.0 * stats.hits as f64 / stats.lookups.max(1) as f64,
+            outputs.exr.display()
         );
     }
     if let (Some(reference), Some(path)) = (&reference, &args.reference) {
-        let written = image_io::read_image(&output, &[])
-            .map_err(|e| CommandError(format!("{}: {e}", output.display())))?;
-        let errors = metrics::compare(&written, reference)
-            .map_err(|e| CommandError(format!("{}: {e}", path.display())))?;
-        for e in &errors {
-            println!(
-                "error {:<10} rmse {:.6e}  relmse {:.6e}  time {:.3} s",
-                e.layer, e.rmse, e.rel_mse, render_s
-            );
-        }
+        report_error(&outputs.exr, reference, path, render_s)?;
     }
     Ok(())
 }

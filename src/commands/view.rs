@@ -12,13 +12,7 @@ fn vec3(v: &[f32]) -> Vec3 {
     Vec3::new(v[0], v[1], v[2])
 }
 
-pub fn choose_view(
-    scene: &Scene,
-    tracer: &Tracer,
-    args: &ViewArgs,
-    width: u32,
-    height: u32,
-) -> Result<View, String> {
+pub fn choose_view(scene: &Scene, tracer: &Tracer, args: &ViewArgs, width: u32, height: u32) -> Result<View, String> {
     let aspect = width as f32 / height as f32;
     let mut view = match scene.cameras.first() {
         Some(c) if c.perspective => {

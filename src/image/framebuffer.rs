@@ -13,12 +13,7 @@ pub enum Layer {
 }
 
 impl Layer {
-    pub const ALL: [Layer; 4] = [
-        Layer::Emission,
-        Layer::Direct,
-        Layer::Specular,
-        Layer::Indirect,
-    ];
+    pub const ALL: [Layer; 4] = [Layer::Emission, Layer::Direct, Layer::Specular, Layer::Indirect];
 
     /// The EXR layer name (channels are `name.R`, `name.G`, `name.B`).
     pub fn name(self) -> &'static str {
@@ -40,6 +35,8 @@ pub struct FrameBuffer {
     pub width: u32,
     pub height: u32,
     layers: [Vec<Vec3>; 4],
+    /// Records of the irradiance cache made while rendering each pixel (debug layer).
+    records: Vec<f32>,
 }
 
 impl FrameBuffer {
@@ -49,6 +46,7 @@ impl FrameBuffer {
             width,
             height,
             layers: std::array::from_fn(|_| vec![Vec3::ZERO; n]),
+            records: vec![0.0; n],
         }
     }
 
@@ -61,6 +59,15 @@ impl FrameBuffer {
         for (plane, v) in self.layers.iter_mut().zip(value.as_array()) {
             plane[i] = v;
         }
+    }
+
+    pub fn set_records(&mut self, x: u32, y: u32, count: f32) {
+        let i = y as usize * self.width as usize + x as usize;
+        self.records[i] = count;
+    }
+
+    pub fn records(&self) -> &[f32] {
+        &self.records
     }
 
     /// Sum of all layers, pixel by pixel.

@@ -91,17 +91,11 @@ pub fn compare(image: &ImageData, reference: &ImageData) -> Result<Vec<LayerErro
         ));
     }
     let theirs = rgb_layers(reference);
-    let shared: Vec<String> = rgb_layers(image)
-        .into_iter()
-        .filter(|l| theirs.contains(l))
-        .collect();
+    let shared: Vec<String> = rgb_layers(image).into_iter().filter(|l| theirs.contains(l)).collect();
     if shared.is_empty() {
         return Err("the images share no R/G/B layer".into());
     }
-    Ok(shared
-        .iter()
-        .map(|l| layer_error(image, reference, l))
-        .collect())
+    Ok(shared.iter().map(|l| layer_error(image, reference, l)).collect())
 }
 
 #[cfg(test)]
@@ -112,10 +106,7 @@ mod tests {
         ImageData {
             width: 2,
             height: 1,
-            channels: values
-                .iter()
-                .map(|(n, v)| (n.to_string(), vec![*v, *v]))
-                .collect(),
+            channels: values.iter().map(|(n, v)| (n.to_string(), vec![*v, *v])).collect(),
             attributes: vec![],
         }
     }

@@ -16,14 +16,10 @@ fn temporary_beside(path: &Path) -> PathBuf {
 
 /// Runs `write` on a temporary path, then renames it to `path`; on failure removes the
 /// temporary file and leaves whatever was at `path` untouched.
-pub fn write_atomically(
-    path: &Path,
-    write: impl FnOnce(&Path) -> Result<(), String>,
-) -> Result<(), String> {
+pub fn write_atomically(path: &Path, write: impl FnOnce(&Path) -> Result<(), String>) -> Result<(), String> {
     let temporary = temporary_beside(path);
     let result = write(&temporary).and_then(|()| {
-        std::fs::rename(&temporary, path)
-            .map_err(|e| format!("cannot move the finished file into place: {e}"))
+        std::fs::rename(&temporary, path).map_err(|e| format!("cannot move the finished file into place: {e}"))
     });
     if result.is_err() {
         let _ = std::fs::remove_file(&temporary);
@@ -49,15 +45,14 @@ pub fn write_exr(
     layers: &[Layer],
     attributes: &[(String, String)],
     half_float: bool,
+    records_layer: bool,
 ) -> Result<(), String> {
     let composite = frame.composite();
-    let split = |pixels: &[glam::Vec3]| -> [Vec<f32>; 3] {
-        std::array::from_fn(|c| pixels.iter().map(|p| p[c]).collect())
-    };
+    let split =
+        |pixels: &[glam::Vec3]| -> [Vec<f32>; 3] { std::array::from_fn(|c| pixels.iter().map(|p| p[c]).collect()) };
     let alpha = vec![1.0f32; composite.len()];
     let composite_planes = split(&composite);
-    let layer_planes: Vec<(Layer, [Vec<f32>; 3])> =
-        layers.iter().map(|&l| (l, split(frame.layer(l)))).collect();
+    let layer_planes: Vec<(Layer, [Vec<f32>; 3])> = layers.iter().map(|&l| (l, split(frame.layer(l)))).collect();
     let layer_names: Vec<[String; 3]> = layer_planes
         .iter()
         .map(|(l, _)| ["R", "G", "B"].map(|c| format!("{}.{c}", l.name())))
@@ -88,24 +83,16 @@ pub fn write_exr(
             });
         }
     }
-    write_atomically(path, |tmp| {
-        image_io::write_exr(
-            tmp,
-            frame.width,
-            frame.height,
-            &channels,
-            attributes,
-            half_float,
-        )
-    })
+    if records_layer {
+        channels.push(ChannelPlane { name: "ic_records.Y", data: frame.records() });
+    }
+    write_atomically(path, |tmp| image_io::write_exr(tmp, frame.width, frame.height, &channels, attributes, half_float))
 }
 
 /// Writes the tone-mapped composite as an 8-bit PNG.
 pub fn write_preview(path: &Path, frame: &FrameBuffer) -> Result<(), String> {
     let rgb = tone_map(&frame.composite());
-    write_atomically(path, |tmp| {
-        image_io::write_png(tmp, frame.width, frame.height, &rgb)
-    })
+    write_atomically(path, |tmp| image_io::write_png(tmp, frame.width, frame.height, &rgb))
 }
 
 #[cfg(test)]

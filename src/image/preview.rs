@@ -15,18 +15,13 @@ pub fn tone_map(pixels: &[Vec3]) -> Vec<u8> {
     let exposure = if lit.is_empty() {
         1.0
     } else {
-        let log_mean =
-            lit.iter().map(|l| (l.max(1e-8) as f64).ln()).sum::<f64>() / lit.len() as f64;
+        let log_mean = lit.iter().map(|l| (l.max(1e-8) as f64).ln()).sum::<f64>() / lit.len() as f64;
         MIDDLE_GREY / (log_mean.exp() as f32)
     };
     let mut out = Vec::with_capacity(pixels.len() * 3);
     for &p in pixels {
         let v = p * exposure;
-        let mapped = if v.is_finite() {
-            v / (Vec3::ONE + v)
-        } else {
-            Vec3::ZERO
-        };
+        let mapped = if v.is_finite() { v / (Vec3::ONE + v) } else { Vec3::ZERO };
         for c in mapped.to_array() {
             out.push((linear_to_srgb(c.clamp(0.0, 1.0)) * 255.0 + 0.5) as u8);
         }
@@ -48,12 +43,7 @@ mod tests {
 
     #[test]
     fn maps_black_nan_and_bright_into_range() {
-        let px = [
-            Vec3::ZERO,
-            Vec3::splat(f32::NAN),
-            Vec3::splat(1e30),
-            Vec3::splat(0.5),
-        ];
+        let px = [Vec3::ZERO, Vec3::splat(f32::NAN), Vec3::splat(1e30), Vec3::splat(0.5)];
         let out = tone_map(&px);
         assert_eq!(out.len(), 12);
         assert_eq!(&out[0..3], &[0, 0, 0]);

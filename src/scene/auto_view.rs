@@ -23,12 +23,7 @@ pub struct Probe {
 }
 
 /// `probe(origin, unit direction)` reports the first surface along a ray, if any.
-pub fn auto_view(
-    bounds_min: Vec3,
-    bounds_max: Vec3,
-    aspect: f32,
-    probe: impl Fn(Vec3, Vec3) -> Option<Probe>,
-) -> View {
+pub fn auto_view(bounds_min: Vec3, bounds_max: Vec3, aspect: f32, probe: impl Fn(Vec3, Vec3) -> Option<Probe>) -> View {
     let centre = 0.5 * (bounds_min + bounds_max);
     let extent = (bounds_max - bounds_min).max(Vec3::splat(f32::MIN_POSITIVE));
     // Depth axis: Z unless X is clearly longer.
@@ -94,10 +89,7 @@ mod tests {
             1.0,
             |o: Vec3, d: Vec3| {
                 let t = (-1.0 - o.z) / d.z;
-                (t > 0.0).then_some(Probe {
-                    distance: t,
-                    lit: true,
-                })
+                (t > 0.0).then_some(Probe { distance: t, lit: true })
             },
         );
         assert!(v.position.z > 1.0);
@@ -130,10 +122,6 @@ mod tests {
         };
         let v = auto_view(Vec3::ZERO, Vec3::new(10.0, 5.0, 5.0), 1.0, hit);
         assert_eq!(v.direction, -Vec3::X);
-        assert!(
-            v.position.x > 0.0 && v.position.x < wall,
-            "eye at {}",
-            v.position.x
-        );
+        assert!(v.position.x > 0.0 && v.position.x < wall, "eye at {}", v.position.x);
     }
 }

@@ -173,10 +173,7 @@ impl EmitterSet {
             return None;
         }
         let target = u1 as f64 * self.total_power;
-        let index = self
-            .cdf
-            .partition_point(|&c| c <= target)
-            .min(self.triangles.len() - 1);
+        let index = self.cdf.partition_point(|&c| c <= target).min(self.triangles.len() - 1);
         let t = &self.triangles[index];
         // Uniform point on a triangle by the square-root warp.
         let su = u2.sqrt();

@@ -57,11 +57,7 @@ pub struct SurfacePoint {
 }
 
 fn sanitize(v: f32, lo: f32, hi: f32, default: f32) -> f32 {
-    if v.is_finite() {
-        v.clamp(lo, hi)
-    } else {
-        default
-    }
+    if v.is_finite() { v.clamp(lo, hi) } else { default }
 }
 
 fn sanitize3(v: [f32; 3], hi: f32) -> Vec3 {
@@ -105,14 +101,9 @@ impl Material {
         let dielectric_f0 = (0.04 * s * sanitize3(m.specular_color, 1.0 / 0.04)).min(Vec3::ONE);
         let strength = sanitize(m.emissive_strength, 0.0, f32::MAX, 1.0);
         let emission = sanitize3(m.emissive, f32::MAX) * strength;
-        let emission = if emission.is_finite() {
-            emission
-        } else {
-            Vec3::ZERO
-        };
+        let emission = if emission.is_finite() { emission } else { Vec3::ZERO };
         let specular_at_factors = metallic * base_color + (1.0 - metallic) * dielectric_f0;
-        let traces_specular =
-            specular_at_factors.max_element() >= specular_threshold && roughness < 1.0;
+        let traces_specular = specular_at_factors.max_element() >= specular_threshold && roughness < 1.0;
         Material {
             name: m.name.clone(),
             base_color,
@@ -143,9 +134,7 @@ impl Material {
     pub fn may_be_transparent(&self) -> bool {
         match self.alpha_mode {
             AlphaMode::Opaque => false,
-            AlphaMode::Mask | AlphaMode::Blend => {
-                self.base_alpha < 1.0 || self.base_color_texture.is_some()
-            }
+            AlphaMode::Mask | AlphaMode::Blend => self.base_alpha < 1.0 || self.base_color_texture.is_some(),
         }
     }
 
@@ -169,11 +158,7 @@ impl Material {
             diffuse += specular;
             specular = Vec3::ZERO;
         }
-        let alpha = if self.alpha < MIRROR_ALPHA {
-            0.0
-        } else {
-            self.alpha
-        };
+        let alpha = if self.alpha < MIRROR_ALPHA { 0.0 } else { self.alpha };
         SurfacePoint {
             diffuse: diffuse.min(Vec3::ONE),
             specular,
@@ -258,12 +243,7 @@ mod tests {
         // With threshold 0 the same material traces a glossy lobe instead.
         let glossy = Material::from_gltf(&gltf(0.0, 0.5, 1.0), 0.0);
         assert!(glossy.traces_specular);
-        assert!(
-            (glossy.at(None, &[]).specular - Vec3::splat(0.04))
-                .abs()
-                .max_element()
-                < 1e-6
-        );
+        assert!((glossy.at(None, &[]).specular - Vec3::splat(0.04)).abs().max_element() < 1e-6);
     }
 
     #[test]

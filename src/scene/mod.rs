@@ -153,10 +153,7 @@ impl Scene {
         for l in &gltf.lights {
             match PunctualLight::from_gltf(l) {
                 Some(light) => punctual_lights.push(light),
-                None => warnings.push(format!(
-                    "light '{}' ignored: non-finite position or direction",
-                    l.name
-                )),
+                None => warnings.push(format!("light '{}' ignored: non-finite position or direction", l.name)),
             }
         }
         Ok(Scene {
@@ -180,9 +177,7 @@ impl Scene {
 
     /// Length of the bounding box's diagonal: the scale every tolerance is relative to.
     pub fn size(&self) -> f32 {
-        (self.bounds_max - self.bounds_min)
-            .length()
-            .max(f32::MIN_POSITIVE)
+        (self.bounds_max - self.bounds_min).length().max(f32::MIN_POSITIVE)
     }
 
     pub fn has_lights(&self) -> bool {
@@ -192,9 +187,7 @@ impl Scene {
     pub fn needs(&self) -> SceneNeeds {
         let used: Vec<&Material> = {
             let mut seen = vec![false; self.materials.len()];
-            self.meshes
-                .iter()
-                .for_each(|m| seen[m.material as usize] = true);
+            self.meshes.iter().for_each(|m| seen[m.material as usize] = true);
             self.materials
                 .iter()
                 .zip(seen)
@@ -236,26 +229,17 @@ fn place_mesh(source: &scene_io::GltfMesh, world: Mat4, material: u32) -> (World
         .map(|&p| world.transform_point3(Vec3::from(p)))
         .collect();
     let normal_matrix = Mat3::from_mat4(world).inverse().transpose();
-    let normals = source
-        .normals
-        .as_ref()
-        .filter(|_| normal_matrix.is_finite())
-        .map(|ns| {
-            ns.iter()
-                .map(|&n| (normal_matrix * Vec3::from(n)).normalize_or_zero())
-                .collect::<Vec<_>>()
-        });
+    let normals = source.normals.as_ref().filter(|_| normal_matrix.is_finite()).map(|ns| {
+        ns.iter()
+            .map(|&n| (normal_matrix * Vec3::from(n)).normalize_or_zero())
+            .collect::<Vec<_>>()
+    });
     let mut indices = Vec::with_capacity(source.indices.len());
     let mut dropped = 0;
     for &[a, b, c] in &source.indices {
-        let (pa, pb, pc) = (
-            positions[a as usize],
-            positions[b as usize],
-            positions[c as usize],
-        );
+        let (pa, pb, pc) = (positions[a as usize], positions[b as usize], positions[c as usize]);
         let area2 = (pb - pa).cross(pc - pa).length_squared();
-        if valid_point(pa) && valid_point(pb) && valid_point(pc) && area2 > 0.0 && area2.is_finite()
-        {
+        if valid_point(pa) && valid_point(pb) && valid_point(pc) && area2 > 0.0 && area2.is_finite() {
             indices.push(if mirrored { [a, c, b] } else { [a, b, c] });
         } else {
             dropped += 1;
@@ -264,13 +248,7 @@ fn place_mesh(source: &scene_io::GltfMesh, world: Mat4, material: u32) -> (World
     // Unreferenced vertices may hold NaN; Embree never reads them, but keep the buffer clean.
     let positions = positions
         .into_iter()
-        .map(|p| {
-            if valid_point(p) {
-                p.to_array()
-            } else {
-                [0.0; 3]
-            }
-        })
+        .map(|p| if valid_point(p) { p.to_array() } else { [0.0; 3] })
         .collect();
     let mesh = WorldMesh {
         positions,
@@ -282,22 +260,14 @@ fn place_mesh(source: &scene_io::GltfMesh, world: Mat4, material: u32) -> (World
     (mesh, dropped)
 }
 
-fn collect_emitters(
-    mesh: &WorldMesh,
-    radiance: Vec3,
-    geom_id: u32,
-    out: &mut Vec<EmitterTriangle>,
-) {
+fn collect_emitters(mesh: &WorldMesh, radiance: Vec3, geom_id: u32, out: &mut Vec<EmitterTriangle>) {
     for (prim_id, &[a, b, c]) in mesh.indices.iter().enumerate() {
         let p0 = Vec3::from(mesh.positions[a as usize]);
         let e1 = Vec3::from(mesh.positions[b as usize]) - p0;
         let e2 = Vec3::from(mesh.positions[c as usize]) - p0;
         let cross = e1.cross(e2);
         let area = 0.5 * cross.length();
-        if let Some(normal) = cross
-            .try_normalize()
-            .filter(|_| area > 0.0 && area.is_finite())
-        {
+        if let Some(normal) = cross.try_normalize().filter(|_| area > 0.0 && area.is_finite()) {
             out.push(EmitterTriangle {
                 p0,
                 e1,

@@ -31,11 +31,7 @@ fn wrap(coord: i64, size: u32, mode: i32) -> usize {
         WRAP_CLAMP => coord.clamp(0, n - 1),
         WRAP_MIRROR => {
             let period = coord.rem_euclid(2 * n);
-            if period < n {
-                period
-            } else {
-                2 * n - 1 - period
-            }
+            if period < n { period } else { 2 * n - 1 - period }
         }
         _ => coord.rem_euclid(n),
     };

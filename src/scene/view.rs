@@ -39,11 +39,7 @@ impl View {
     /// The horizontal extent that keeps square pixels at the given image aspect.
     pub fn horizontal_for_aspect(projection: Projection, vertical: f32, aspect: f32) -> f32 {
         match projection {
-            Projection::Perspective => {
-                2.0 * ((vertical.to_radians() * 0.5).tan() * aspect)
-                    .atan()
-                    .to_degrees()
-            }
+            Projection::Perspective => 2.0 * ((vertical.to_radians() * 0.5).tan() * aspect).atan().to_degrees(),
             Projection::Parallel => vertical * aspect,
         }
     }
@@ -124,15 +120,11 @@ impl Camera {
         let sy = 1.0 - 2.0 * y / self.height as f32;
         match self.view.projection {
             Projection::Perspective => {
-                let d = self.forward
-                    + sx * self.half_width * self.right
-                    + sy * self.half_height * self.up;
+                let d = self.forward + sx * self.half_width * self.right + sy * self.half_height * self.up;
                 (self.view.position, d.normalize())
             }
             Projection::Parallel => {
-                let o = self.view.position
-                    + sx * self.half_width * self.right
-                    + sy * self.half_height * self.up;
+                let o = self.view.position + sx * self.half_width * self.right + sy * self.half_height * self.up;
                 (o, self.forward)
             }
         }

@@ -45,8 +45,7 @@ pub fn direct_light(
             }
             let origin = tracer.spawn_point(hit, wi);
             // Stop short of the emitter so its own surface does not count as a blocker.
-            let reach =
-                (light.position - origin).length() - tracer.epsilon_at(light.position) * 2.0;
+            let reach = (light.position - origin).length() - tracer.epsilon_at(light.position) * 2.0;
             if reach <= 0.0 {
                 continue;
             }
@@ -68,8 +67,8 @@ pub fn direct_light(
         if cos_surface <= 0.0 || wi.dot(hit.facing_normal) <= 0.0 {
             continue;
         }
-        let brdf_cos = diffuse_brdf * cos_surface
-            + surface.specular * glossy::eval_cos(hit.normal, wo, wi, surface.alpha);
+        let brdf_cos =
+            diffuse_brdf * cos_surface + surface.specular * glossy::eval_cos(hit.normal, wo, wi, surface.alpha);
         if brdf_cos.max_element() <= 0.0 {
             continue;
         }

@@ -33,8 +33,7 @@ pub fn eval_cos(n: Vec3, wo: Vec3, wi: Vec3, alpha: f32) -> f32 {
         return 0.0;
     }
     let h = (wo + wi).normalize_or_zero();
-    let value =
-        ggx_d(n.dot(h), alpha) * smith_g1(cos_o, alpha) * smith_g1(cos_i, alpha) / (4.0 * cos_o);
+    let value = ggx_d(n.dot(h), alpha) * smith_g1(cos_o, alpha) * smith_g1(cos_i, alpha) / (4.0 * cos_o);
     if value.is_finite() { value } else { 0.0 }
 }
 
@@ -63,8 +62,7 @@ pub fn sample(n: Vec3, wo: Vec3, alpha: f32, u1: f32, u2: f32) -> Option<(Vec3, 
         return None;
     }
     // f cos / pdf = G * (o.h) / ((n.o)(n.h)) for this sampling.
-    let weight =
-        smith_g1(cos_o, alpha) * smith_g1(cos_i, alpha) * o_dot_h / (cos_o * cos_h).max(1e-30);
+    let weight = smith_g1(cos_o, alpha) * smith_g1(cos_i, alpha) * o_dot_h / (cos_o * cos_h).max(1e-30);
     (weight.is_finite() && weight > 0.0).then_some((wi, weight))
 }
 

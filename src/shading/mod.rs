@@ -10,12 +10,16 @@ pub mod components;
 pub mod direct;
 pub mod glossy;
 
-use crate::sampling::{Rng, cosine_hemisphere, grid_side};
+use crate::irradiance::IrradianceCache;
+use crate::irradiance::hemisphere::{CellSample, Hemisphere, cell_direction};
+use crate::irradiance::record::Record;
+use crate::sampling::{Rng, basis, cosine_hemisphere, grid_side};
 use crate::scene::Scene;
 use crate::sys::embree::Coherence;
 use crate::tracer::{SurfaceHit, Tracer};
 use components::Components;
 use glam::Vec3;
+use std::time::Instant;
 
 /// The options that decide how each component is computed (Radiance names where they exist).
 #[derive(Clone, Debug)]
@@ -47,7 +51,8 @@ impl Default for ShadingOptions {
     }
 }
 
-/// Rays traced, by purpose; per thread, summed at the end.
+/// What one thread did: rays by purpose, irradiance cache traffic, time in L_a. Summed at the
+/// end.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct RayCounts {
     pub primary: u64,
@@ -56,6 +61,19 @@ pub struct RayCounts {
     pub ambient: u64,
     /// Contributions that came out NaN or infinite and were dropped (should stay 0).
     pub nonfinite: u64,
+    /// Cache lookups, and those answered by existing records.
+    pub lookups: u64,
+    pub hits: u64,
+    /// New records computed (cache misses).
+    pub records_computed: u64,
+    /// New records that another thread's record, made meanwhile, would have made unneeded.
+    pub duplicates: u64,
+    /// Records computed at level 0 (for the ic_records debug layer).
+    pub records_level0: u64,
+    /// Seconds spent computing L_a (lookups and new records), the paper's T_amb.
+    pub t_amb: f64,
+    /// Nesting of ambient computations, so T_amb counts only the outermost.
+    ambient_depth: u32,
 }
 
 impl RayCounts {
@@ -65,6 +83,12 @@ impl RayCounts {
         self.specular += o.specular;
         self.ambient += o.ambient;
         self.nonfinite += o.nonfinite;
+        self.lookups += o.lookups;
+        self.hits += o.hits;
+        self.records_computed += o.records_computed;
+        self.duplicates += o.duplicates;
+        self.records_level0 += o.records_level0;
+        self.t_amb += o.t_amb;
     }
     pub fn total(&self) -> u64 {
         self.primary + self.shadow + self.specular + self.ambient
@@ -74,7 +98,7 @@ impl RayCounts {
 /// Where on a path a point is: diffuse bounces so far, specular depth, and the weight jT the
 /// path carries to the eye.
 #[derive(Clone, Copy, Debug)]
-struct PathState {
+pub struct PathState {
     level: u32,
     specular_depth: u32,
     weight: f32,
@@ -86,28 +110,25 @@ pub struct Integrator<'a> {
     pub scene: &'a Scene,
     pub tracer: &'a Tracer,
     pub options: &'a ShadingOptions,
+    /// The irradiance cache; None computes L_a by brute force at every point (-aa 0).
+    pub cache: Option<&'a IrradianceCache>,
 }
 
 /// Passes through fully transparent (alpha-masked) points before a ray gives up.
 const MAX_MASKED_PASSES: u32 = 64;
 
 impl<'a> Integrator<'a> {
-    pub fn new(scene: &'a Scene, tracer: &'a Tracer, options: &'a ShadingOptions) -> Self {
-        Integrator {
-            scene,
-            tracer,
-            options,
-        }
+    pub fn new(
+        scene: &'a Scene,
+        tracer: &'a Tracer,
+        options: &'a ShadingOptions,
+        cache: Option<&'a IrradianceCache>,
+    ) -> Self {
+        Integrator { scene, tracer, options, cache }
     }
 
     /// The components of light arriving at the eye along a primary ray.
-    pub fn primary(
-        &self,
-        origin: Vec3,
-        dir: Vec3,
-        rng: &mut Rng,
-        counts: &mut RayCounts,
-    ) -> Components {
+    pub fn primary(&self, origin: Vec3, dir: Vec3, rng: &mut Rng, counts: &mut RayCounts) -> Components {
         counts.primary += 1;
         let state = PathState {
             level: 0,
@@ -115,9 +136,11 @@ impl<'a> Integrator<'a> {
             weight: 1.0,
             count_emission: true,
         };
-        self.trace(origin, dir, state, Coherence::Coherent, rng, counts)
+        self.trace(origin, dir, state, Coherence::Coherent, rng, counts).0
     }
 
+    /// The components along a ray, and how far it went to the first surface that stopped it
+    /// (infinite when it left the scene).
     fn trace(
         &self,
         origin: Vec3,
@@ -126,11 +149,12 @@ impl<'a> Integrator<'a> {
         coherence: Coherence,
         rng: &mut Rng,
         counts: &mut RayCounts,
-    ) -> Components {
+    ) -> (Components, f32) {
+        let start = origin;
         let mut origin = origin;
         for _ in 0..MAX_MASKED_PASSES {
             let Some(hit) = self.tracer.intersect(self.scene, origin, dir, coherence) else {
-                return Components::default();
+                return (Components::default(), f32::INFINITY);
             };
             let material = &self.scene.materials[hit.material as usize];
             let surface = material.at(hit.uv, &self.scene.textures);
@@ -142,9 +166,9 @@ impl<'a> Integrator<'a> {
             if surface.opacity < 1.0 {
                 c.specular += self.transmit(&hit, dir, 1.0 - surface.opacity, state, rng, counts);
             }
-            return c;
+            return (c, (hit.position - start).length());
         }
-        Components::default()
+        (Components::default(), f32::INFINITY)
     }
 
     /// Light behind a partly transparent surface: a specular transmission with jT = 1 - opacity.
@@ -157,21 +181,15 @@ impl<'a> Integrator<'a> {
         rng: &mut Rng,
         counts: &mut RayCounts,
     ) -> Vec3 {
-        if state.specular_depth >= self.options.max_specular_depth
-            || state.weight * jt < self.options.min_weight
-        {
+        if state.specular_depth >= self.options.max_specular_depth || state.weight * jt < self.options.min_weight {
             return Vec3::ZERO;
         }
         counts.specular += 1;
-        let next = PathState {
-            specular_depth: state.specular_depth + 1,
-            weight: state.weight * jt,
-            count_emission: true,
-            ..state
-        };
+        // Seeing an emitter through a transparent surface is seeing it straight: counted where
+        // the path would count it anyway (direct lighting's shadow rays pass the same surface).
+        let next = PathState { specular_depth: state.specular_depth + 1, weight: state.weight * jt, ..state };
         let origin = self.tracer.spawn_point(hit, dir);
-        self.trace(origin, dir, next, Coherence::Incoherent, rng, counts)
-            .total()
+        self.trace(origin, dir, next, Coherence::Incoherent, rng, counts).0.total()
             * jt
     }
 
@@ -237,31 +255,38 @@ impl<'a> Integrator<'a> {
             return Vec3::ZERO;
         }
         counts.specular += 1;
-        let next = PathState {
-            specular_depth: state.specular_depth + 1,
-            weight,
-            count_emission: true,
-            ..state
-        };
+        // Emitters seen in a mirror count on eye paths. After a diffuse bounce they do not: such
+        // caustic paths (diffuse -> mirror -> light) are what make indirect diffuse values noisy
+        // and cached records blotchy, and Radiance leaves them out of its ambient calculation
+        // as well.
+        let next = PathState { specular_depth: state.specular_depth + 1, weight, count_emission: state.level == 0, ..state };
         let origin = self.tracer.spawn_point(hit, wi);
-        jt * self
-            .trace(origin, wi, next, Coherence::Incoherent, rng, counts)
-            .total()
+        jt * self.trace(origin, wi, next, Coherence::Incoherent, rng, counts).0.total()
     }
 
     /// Irradiance / pi arriving at a diffuse point from other surfaces (the part of L_a before
-    /// the albedo), by cosine-weighted sampling of the hemisphere: -ad stratified samples at the
-    /// first bounce, one per further bounce (an unbiased path continuation), -av past the last.
-    fn ambient_radiance(
-        &self,
-        hit: &SurfaceHit,
-        state: PathState,
-        rng: &mut Rng,
-        counts: &mut RayCounts,
-    ) -> Vec3 {
+    /// the albedo); -av past the last bounce. Timed as T_amb at the outermost call.
+    fn ambient_radiance(&self, hit: &SurfaceHit, state: PathState, rng: &mut Rng, counts: &mut RayCounts) -> Vec3 {
         if state.level >= self.options.ambient_bounces {
             return self.options.ambient_value;
         }
+        let outermost = counts.ambient_depth == 0;
+        let start = outermost.then(Instant::now);
+        counts.ambient_depth += 1;
+        let value = match self.cache {
+            Some(cache) => self.cached_ambient(cache, hit, state, rng, counts),
+            None => self.brute_force_ambient(hit, state, rng, counts),
+        };
+        counts.ambient_depth -= 1;
+        if let Some(start) = start {
+            counts.t_amb += start.elapsed().as_secs_f64();
+        }
+        value
+    }
+
+    /// Brute force (-aa 0): -ad stratified cosine-weighted samples at the first bounce, one per
+    /// further bounce (an unbiased path continuation).
+    fn brute_force_ambient(&self, hit: &SurfaceHit, state: PathState, rng: &mut Rng, counts: &mut RayCounts) -> Vec3 {
         let next = PathState {
             level: state.level + 1,
             specular_depth: state.specular_depth,
@@ -287,9 +312,115 @@ impl<'a> Integrator<'a> {
             let origin = self.tracer.spawn_point(hit, wi);
             sum += self
                 .trace(origin, wi, next, Coherence::Incoherent, rng, counts)
+                .0
                 .total();
         }
         sum / count as f32
+    }
+
+    /// L_a through the cache: existing records if any may be used here, else a new record.
+    fn cached_ambient(
+        &self,
+        cache: &IrradianceCache,
+        hit: &SurfaceHit,
+        state: PathState,
+        rng: &mut Rng,
+        counts: &mut RayCounts,
+    ) -> Vec3 {
+        counts.lookups += 1;
+        if let Some(value) = cache.lookup(hit.position, hit.normal, state.level) {
+            counts.hits += 1;
+            return value;
+        }
+        let record = self.compute_record(cache, hit, state, rng, counts);
+        counts.records_computed += 1;
+        if state.level == 0 {
+            counts.records_level0 += 1;
+        }
+        // Another thread may have covered this point while we sampled: the work was done twice.
+        if cache.lookup(hit.position, hit.normal, state.level).is_some() {
+            counts.duplicates += 1;
+        }
+        let value = record.value;
+        cache.insert(record);
+        value
+    }
+
+    /// Samples the hemisphere over an n x n cosine-weighted grid (n from -ad and the level's
+    /// weight), adds -as samples where neighbouring cells differ most, and makes a record.
+    pub fn compute_record(
+        &self,
+        cache: &IrradianceCache,
+        hit: &SurfaceHit,
+        state: PathState,
+        rng: &mut Rng,
+        counts: &mut RayCounts,
+    ) -> Record {
+        let n = cache.settings.grid_side(state.level);
+        let normal = hit.normal;
+        let (tangent, bitangent) = basis(normal);
+        let next = PathState {
+            level: state.level + 1,
+            specular_depth: state.specular_depth,
+            weight: state.weight,
+            count_emission: false,
+        };
+        let sample = |i: usize, j: usize, rng: &mut Rng, counts: &mut RayCounts| {
+            let wi = cell_direction(normal, tangent, bitangent, n, i, j, rng.next_f32(), rng.next_f32());
+            if wi.dot(hit.facing_normal) <= 0.0 {
+                // Below the true surface (a bent shading normal): nothing arrives from there.
+                return CellSample {
+                    radiance: Vec3::ZERO,
+                    distance: f32::INFINITY,
+                    direction: wi,
+                };
+            }
+            counts.ambient += 1;
+            let origin = self.tracer.spawn_point(hit, wi);
+            let (c, distance) = self.trace(origin, wi, next, Coherence::Incoherent, rng, counts);
+            let floor = self.tracer.epsilon_at(hit.position);
+            CellSample {
+                radiance: c.total(),
+                distance: distance.max(floor),
+                direction: wi,
+            }
+        };
+        let mut cells = Vec::with_capacity(n * n);
+        for i in 0..n {
+            for j in 0..n {
+                cells.push(sample(i, j, rng, counts));
+            }
+        }
+        let mut hemisphere = Hemisphere {
+            n,
+            normal,
+            tangent,
+            bitangent,
+            cells,
+        };
+        let extra = cache.settings.extra_samples(state.level);
+        if extra > 0 {
+            let differences = hemisphere.cell_differences();
+            let mut order: Vec<usize> = (0..n * n).collect();
+            order.sort_by(|&a, &b| differences[b].total_cmp(&differences[a]));
+            let mut taken = vec![1u32; n * n];
+            let mut sums: Vec<Vec3> = hemisphere.cells.iter().map(|c| c.radiance).collect();
+            for k in 0..extra {
+                let cell = order[k % order.len()];
+                if differences[cell] <= 0.0 {
+                    break;
+                }
+                let s = sample(cell / n, cell % n, rng, counts);
+                sums[cell] += s.radiance;
+                taken[cell] += 1;
+                let c = &mut hemisphere.cells[cell];
+                c.distance = c.distance.min(s.distance);
+            }
+            for (c, (sum, count)) in hemisphere.cells.iter_mut().zip(sums.iter().zip(&taken)) {
+                c.radiance = *sum / *count as f32;
+            }
+        }
+        cache.make_record(&hemisphere, hit.position, state.level)
     }
 }
 

@@ -20,11 +20,7 @@ struct ErrorSink {
     messages: Mutex<Vec<String>>,
 }
 
-extern "C" fn error_callback(
-    user: *mut c_void,
-    code: rtc::RTCError,
-    text: *const std::os::raw::c_char,
-) {
+extern "C" fn error_callback(user: *mut c_void, code: rtc::RTCError, text: *const std::os::raw::c_char) {
     if user.is_null() {
         return;
     }
@@ -53,9 +49,7 @@ impl Device {
         if raw.is_null() {
             // SAFETY: rtcGetDeviceError accepts NULL and reports the creation error.
             let code = unsafe { rtc::rtcGetDeviceError(std::ptr::null_mut()) };
-            return Err(EmbreeError(format!(
-                "could not create a device (error {code})"
-            )));
+            return Err(EmbreeError(format!("could not create a device (error {code})")));
         }
         let sink = Box::new(ErrorSink {
             messages: Mutex::new(Vec::new()),
@@ -152,10 +146,7 @@ fn make_ray(org: [f32; 3], dir: [f32; 3], tnear: f32, tfar: f32) -> rtc::RTCRay 
 impl Scene {
     /// Builds and commits a scene from triangle meshes. Robust traversal is asked for, since
     /// rays start on surfaces and must not slip through shared edges.
-    pub fn build(
-        device: &Arc<Device>,
-        meshes: &[TriangleMeshData<'_>],
-    ) -> Result<Scene, EmbreeError> {
+    pub fn build(device: &Arc<Device>, meshes: &[TriangleMeshData<'_>]) -> Result<Scene, EmbreeError> {
         // SAFETY: creating a scene on a live device.
         let raw = unsafe { rtc::rtcNewScene(device.raw) };
         if raw.is_null() {
@@ -192,22 +183,12 @@ impl Scene {
             }
             let vcount = mesh.positions.len();
             let tcount = mesh.indices.len();
-            let vbuf = rtc::rtcSetNewGeometryBuffer(
-                geom,
-                rtc::RTC_BUFFER_TYPE_VERTEX,
-                0,
-                rtc::RTC_FORMAT_FLOAT3,
-                12,
-                vcount,
-            ) as *mut [f32; 3];
-            let ibuf = rtc::rtcSetNewGeometryBuffer(
-                geom,
-                rtc::RTC_BUFFER_TYPE_INDEX,
-                0,
-                rtc::RTC_FORMAT_UINT3,
-                12,
-                tcount,
-            ) as *mut [u32; 3];
+            let vbuf =
+                rtc::rtcSetNewGeometryBuffer(geom, rtc::RTC_BUFFER_TYPE_VERTEX, 0, rtc::RTC_FORMAT_FLOAT3, 12, vcount)
+                    as *mut [f32; 3];
+            let ibuf =
+                rtc::rtcSetNewGeometryBuffer(geom, rtc::RTC_BUFFER_TYPE_INDEX, 0, rtc::RTC_FORMAT_UINT3, 12, tcount)
+                    as *mut [u32; 3];
             if (vbuf.is_null() && vcount > 0) || (ibuf.is_null() && tcount > 0) {
                 rtc::rtcReleaseGeometry(geom);
                 self.device.check("allocating geometry buffers")?;
@@ -306,10 +287,7 @@ fn intersect_context(coherence: Coherence) -> rtc::RTCIntersectContext {
         },
         ..Default::default()
     };
-    context
-        .instID
-        .iter_mut()
-        .for_each(|id| *id = INVALID_GEOMETRY_ID);
+    context.instID.iter_mut().for_each(|id| *id = INVALID_GEOMETRY_ID);
     context
 }
 

@@ -8,8 +8,7 @@ use std::os::raw::c_char;
 use std::path::Path;
 
 fn c_path(path: &Path) -> Result<CString, String> {
-    CString::new(path.as_os_str().as_encoded_bytes())
-        .map_err(|_| "path contains a NUL byte".to_string())
+    CString::new(path.as_os_str().as_encoded_bytes()).map_err(|_| "path contains a NUL byte".to_string())
 }
 
 fn c_text(text: &str) -> CString {
@@ -51,10 +50,7 @@ pub fn write_exr(
             data: c.data.as_ptr(),
         })
         .collect();
-    let attr_text: Vec<(CString, CString)> = attributes
-        .iter()
-        .map(|(k, v)| (c_text(k), c_text(v)))
-        .collect();
+    let attr_text: Vec<(CString, CString)> = attributes.iter().map(|(k, v)| (c_text(k), c_text(v))).collect();
     let attrs: Vec<abi::icr_attribute> = attr_text
         .iter()
         .map(|(k, v)| abi::icr_attribute {
@@ -79,11 +75,7 @@ pub fn write_exr(
             err.len(),
         )
     };
-    if rc == 0 {
-        Ok(())
-    } else {
-        Err(buffer_message(&err))
-    }
+    if rc == 0 { Ok(()) } else { Err(buffer_message(&err)) }
 }
 
 /// Writes an 8-bit RGB PNG to exactly `path`.
@@ -94,21 +86,8 @@ pub fn write_png(path: &Path, width: u32, height: u32, rgb: &[u8]) -> Result<(),
     let path = c_path(path)?;
     let mut err = vec![0 as c_char; ERR_LEN];
     // SAFETY: the buffer holds 3*width*height bytes, checked above.
-    let rc = unsafe {
-        abi::icr_png_write(
-            path.as_ptr(),
-            width,
-            height,
-            rgb.as_ptr(),
-            err.as_mut_ptr(),
-            err.len(),
-        )
-    };
-    if rc == 0 {
-        Ok(())
-    } else {
-        Err(buffer_message(&err))
-    }
+    let rc = unsafe { abi::icr_png_write(path.as_ptr(), width, height, rgb.as_ptr(), err.as_mut_ptr(), err.len()) };
+    if rc == 0 { Ok(()) } else { Err(buffer_message(&err)) }
 }
 
 /// An image read back: named float planes and the header's string attributes we asked for.
@@ -121,16 +100,10 @@ pub struct ImageData {
 
 impl ImageData {
     pub fn channel(&self, name: &str) -> Option<&[f32]> {
-        self.channels
-            .iter()
-            .find(|(n, _)| n == name)
-            .map(|(_, d)| d.as_slice())
+        self.channels.iter().find(|(n, _)| n == name).map(|(_, d)| d.as_slice())
     }
     pub fn attribute(&self, name: &str) -> Option<&str> {
-        self.attributes
-            .iter()
-            .find(|(n, _)| n == name)
-            .map(|(_, v)| v.as_str())
+        self.attributes.iter().find(|(n, _)| n == name).map(|(_, v)| v.as_str())
     }
 }
 

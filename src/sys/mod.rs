@@ -13,13 +13,7 @@ mod embree_bindings {
     include!(concat!(env!("OUT_DIR"), "/embree_bindings.rs"));
 }
 
-#[allow(
-    non_upper_case_globals,
-    non_camel_case_types,
-    non_snake_case,
-    dead_code,
-    clippy::all
-)]
+#[allow(non_upper_case_globals, non_camel_case_types, non_snake_case, dead_code, clippy::all)]
 mod abi_bindings {
     include!(concat!(env!("OUT_DIR"), "/abi_bindings.rs"));
 }
@@ -36,11 +30,7 @@ const ERR_LEN: usize = 1024;
 
 /// Text of a NUL-terminated error buffer written by C++.
 fn buffer_message(buf: &[c_char]) -> String {
-    let bytes: Vec<u8> = buf
-        .iter()
-        .take_while(|&&c| c != 0)
-        .map(|&c| c as u8)
-        .collect();
+    let bytes: Vec<u8> = buf.iter().take_while(|&&c| c != 0).map(|&c| c as u8).collect();
     let text = String::from_utf8_lossy(&bytes).trim().to_string();
     if text.is_empty() {
         "unknown error".to_string()
@@ -58,9 +48,7 @@ unsafe fn owned_string(ptr: *const c_char) -> String {
         String::new()
     } else {
         // SAFETY: guaranteed by the caller.
-        unsafe { CStr::from_ptr(ptr) }
-            .to_string_lossy()
-            .into_owned()
+        unsafe { CStr::from_ptr(ptr) }.to_string_lossy().into_owned()
     }
 }
 

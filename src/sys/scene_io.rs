@@ -114,8 +114,8 @@ impl Drop for Handle {
 /// Loads a glTF 2.0 file (.gltf or .glb). The error is the loader's one-line message; the caller
 /// adds the file name.
 pub fn load_gltf(path: &Path) -> Result<GltfScene, String> {
-    let c_path = CString::new(path.as_os_str().as_encoded_bytes())
-        .map_err(|_| "path contains a NUL byte".to_string())?;
+    let c_path =
+        CString::new(path.as_os_str().as_encoded_bytes()).map_err(|_| "path contains a NUL byte".to_string())?;
     let mut err = vec![0 as std::os::raw::c_char; ERR_LEN];
     // SAFETY: valid C string and error buffer of the stated length.
     let raw = unsafe { abi::icr_scene_load(c_path.as_ptr(), err.as_mut_ptr(), err.len()) };
@@ -138,10 +138,9 @@ unsafe fn copy_scene(view: abi::icr_scene_view) -> Result<GltfScene, String> {
             let nv = m.vertex_count as usize;
             let nt = m.triangle_count as usize;
             let positions = slice_or_empty(m.positions as *const [f32; 3], nv).to_vec();
-            let normals = (!m.normals.is_null())
-                .then(|| slice_or_empty(m.normals as *const [f32; 3], nv).to_vec());
-            let texcoords = (!m.texcoords.is_null())
-                .then(|| slice_or_empty(m.texcoords as *const [f32; 2], nv).to_vec());
+            let normals = (!m.normals.is_null()).then(|| slice_or_empty(m.normals as *const [f32; 3], nv).to_vec());
+            let texcoords =
+                (!m.texcoords.is_null()).then(|| slice_or_empty(m.texcoords as *const [f32; 2], nv).to_vec());
             let indices = slice_or_empty(m.indices as *const [u32; 3], nt).to_vec();
             if indices.iter().flatten().any(|&i| i as usize >= nv) {
                 return Err("a triangle index is past the vertex count".into());

@@ -24,10 +24,7 @@ pub fn shared_scene(relative: &str) -> PathBuf {
 
 /// Runs icrender with arguments; returns the process output.
 pub fn run(args: &[&str]) -> Output {
-    Command::new(binary())
-        .args(args)
-        .output()
-        .expect("icrender runs")
+    Command::new(binary()).args(args).output().expect("icrender runs")
 }
 
 pub fn stderr(out: &Output) -> String {
@@ -41,24 +38,13 @@ pub fn stdout(out: &Output) -> String {
 /// Runs icrender and fails the test with its stderr if it did not succeed.
 pub fn run_ok(args: &[&str]) -> Output {
     let out = run(args);
-    assert!(
-        out.status.success(),
-        "icrender {args:?} failed:\n{}",
-        stderr(&out)
-    );
+    assert!(out.status.success(), "icrender {args:?} failed:\n{}", stderr(&out));
     out
 }
 
 pub fn read_exr(path: &Path) -> ImageData {
-    read_image(
-        path,
-        &[
-            "icrender/options",
-            "icrender/statistics",
-            "icrender/command",
-        ],
-    )
-    .unwrap_or_else(|e| panic!("reading {}: {e}", path.display()))
+    read_image(path, &["icrender/options", "icrender/statistics", "icrender/command"])
+        .unwrap_or_else(|e| panic!("reading {}: {e}", path.display()))
 }
 
 /// R, G, B planes of a layer ("" for the composite).
@@ -139,28 +125,12 @@ impl GltfBuilder {
     }
 
     /// Adds a mesh of triangles (positions, indices) with a material; returns the mesh index.
-    pub fn mesh(
-        &mut self,
-        positions: &[[f32; 3]],
-        indices: &[[u32; 3]],
-        material: Option<usize>,
-    ) -> usize {
-        let pos_bytes: Vec<u8> = positions
-            .iter()
-            .flatten()
-            .flat_map(|v| v.to_le_bytes())
-            .collect();
-        let idx_bytes: Vec<u8> = indices
-            .iter()
-            .flatten()
-            .flat_map(|v| v.to_le_bytes())
-            .collect();
+    pub fn mesh(&mut self, positions: &[[f32; 3]], indices: &[[u32; 3]], material: Option<usize>) -> usize {
+        let pos_bytes: Vec<u8> = positions.iter().flatten().flat_map(|v| v.to_le_bytes()).collect();
+        let idx_bytes: Vec<u8> = indices.iter().flatten().flat_map(|v| v.to_le_bytes()).collect();
         let pv = self.push_view(&pos_bytes, Some(34962));
         let iv = self.push_view(&idx_bytes, Some(34963));
-        let finite: Vec<&[f32; 3]> = positions
-            .iter()
-            .filter(|p| p.iter().all(|v| v.is_finite()))
-            .collect();
+        let finite: Vec<&[f32; 3]> = positions.iter().filter(|p| p.iter().all(|v| v.is_finite())).collect();
         let (mut lo, mut hi) = ([f32::MAX; 3], [f32::MIN; 3]);
         for p in &finite {
             for c in 0..3 {
@@ -170,7 +140,8 @@ impl GltfBuilder {
         }
         self.accessors.push(json!({"bufferView": pv, "componentType": 5126, "count": positions.len(), "type": "VEC3", "min": lo, "max": hi}));
         let pa = self.accessors.len() - 1;
-        self.accessors.push(json!({"bufferView": iv, "componentType": 5125, "count": indices.len() * 3, "type": "SCALAR"}));
+        self.accessors
+            .push(json!({"bufferView": iv, "componentType": 5125, "count": indices.len() * 3, "type": "SCALAR"}));
         let ia = self.accessors.len() - 1;
         let mut primitive = json!({"attributes": {"POSITION": pa}, "indices": ia, "mode": 4});
         if let Some(m) = material {
@@ -259,11 +230,7 @@ impl GltfBuilder {
         let bin_name = format!("{name}.bin");
         std::fs::write(dir.join(&bin_name), &self.bin).unwrap();
         let path = dir.join(format!("{name}.gltf"));
-        std::fs::write(
-            &path,
-            serde_json::to_string_pretty(&self.to_json(&bin_name)).unwrap(),
-        )
-        .unwrap();
+        std::fs::write(&path, serde_json::to_string_pretty(&self.to_json(&bin_name)).unwrap()).unwrap();
         path
     }
 }

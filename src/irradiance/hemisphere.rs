@@ -1,0 +1,308 @@
+//! The hemisphere of a new record: a stratified n x n grid of cosine-weighted cells (rings of
+//! equal sin^2 theta, sectors of equal phi), and what the samples in it say about the
+//! irradiance nearby: its gradients over translation and rotation, the Hessian that sets the
+//! record's radii, Ward's harmonic mean distance, and the horizon for the leak test.
+
+use super::record::HORIZON_SECTORS;
+use crate::scene::light::luminance;
+use glam::Vec3;
+use std::f32::consts::{PI, TAU};
+
+/// One cell's sample: the radiance that came back, the distance to what it hit (infinite when
+/// nothing) and the unit direction it went.
+#[derive(Clone, Copy, Debug)]
+pub struct CellSample {
+    pub radiance: Vec3,
+    pub distance: f32,
+    pub direction: Vec3,
+}
+
+/// The n x n sampled hemisphere about `normal`, with tangent frame (tangent, bitangent).
+/// Cell (ring i, sector j) is at index i * n + j.
+pub struct Hemisphere {
+    pub n: usize,
+    pub normal: Vec3,
+    pub tangent: Vec3,
+    pub bitangent: Vec3,
+    pub cells: Vec<CellSample>,
+}
+
+/// Direction of a point (u, v) in [0,1)^2 inside cell (i, j) of an n x n cosine-weighted grid.
+pub fn cell_direction(
+    normal: Vec3,
+    tangent: Vec3,
+    bitangent: Vec3,
+    n: usize,
+    i: usize,
+    j: usize,
+    u: f32,
+    v: f32,
+) -> Vec3 {
+    let sin2 = (i as f32 + u) / n as f32;
+    let sin_t = sin2.sqrt();
+    let cos_t = (1.0 - sin2).max(0.0).sqrt();
+    let phi = TAU * (j as f32 + v) / n as f32;
+    (tangent * (sin_t * phi.cos()) + bitangent * (sin_t * phi.sin()) + normal * cos_t).normalize()
+}
+
+impl Hemisphere {
+    fn at(&self, i: usize, j: usize) -> &CellSample {
+        &self.cells[i * self.n + (j % self.n)]
+    }
+
+    /// Irradiance over pi: the mean of the cells (each covers an equal share of cos-weighted
+    /// solid angle).
+    pub fn value(&self) -> Vec3 {
+        self.cells.iter().map(|c| c.radiance).sum::<Vec3>() / self.cells.len().max(1) as f32
+    }
+
+    /// Luminance variation between each cell and its ring and sector neighbours: where extra
+    /// samples (-as) pay most.
+    pub fn cell_differences(&self) -> Vec<f32> {
+        let n = self.n;
+        (0..n * n)
+            .map(|k| {
+                let (i, j) = (k / n, k % n);
+                let me = luminance(self.at(i, j).radiance);
+                let mut d = (me - luminance(self.at(i, j + 1).radiance)).abs()
+                    + (me - luminance(self.at(i, j + n - 1).radiance)).abs();
+                if i > 0 {
+                    d += (me - luminance(self.at(i - 1, j).radiance)).abs();
+                }
+                if i + 1 < n {
+                    d += (me - luminance(self.at(i + 1, j).radiance)).abs();
+                }
+                d
+            })
+            .collect()
+    }
+
+    /// Gradient of the irradiance's luminance over translation in the tangent plane, from the
+    /// differences between neighbouring cells across their shared boundaries (Ward & Heckbert
+    /// 1992): a boundary moves as the point moves, at a rate set by its distance.
+    pub fn translation_gradient(&self) -> Vec3 {
+        let n = self.n;
+        let nf = n as f32;
+        let mut gradient = Vec3::ZERO;
+        for j in 0..n {
+            let phi_centre = TAU * (j as f32 + 0.5) / nf;
+            let phi_edge = TAU * j as f32 / nf;
+            let radial = self.tangent * phi_centre.cos() + self.bitangent * phi_centre.sin();
+            let across = -self.tangent * phi_edge.sin() + self.bitangent * phi_edge.cos();
+            let mut radial_sum = 0.0;
+            let mut across_sum = 0.0;
+            for i in 0..n {
+                let here = self.at(i, j);
+                // Moving the point by d towards this sector turns the ring boundary at theta by
+                // d cos(theta) / r, sweeping sin(theta) cos(theta) dtheta dphi of the hemisphere.
+                if i > 0 {
+                    let inner = self.at(i - 1, j);
+                    let sin2 = i as f32 / nf;
+                    let closest = here.distance.min(inner.distance);
+                    radial_sum +=
+                        sin2.sqrt() * (1.0 - sin2) / closest * (luminance(here.radiance) - luminance(inner.radiance));
+                }
+                // Moving it by d across a sector boundary turns that boundary by d / (r sin theta),
+                // sweeping cos(theta) sin(theta) dtheta dphi: the ring's share is
+                // (sin theta_hi - sin theta_lo) / r.
+                let previous = self.at(i, j + n - 1);
+                let sin_lo = (i as f32 / nf).sqrt();
+                let sin_hi = ((i + 1) as f32 / nf).sqrt();
+                let closest = here.distance.min(previous.distance);
+                across_sum += (sin_hi - sin_lo) / closest * (luminance(here.radiance) - luminance(previous.radiance));
+            }
+            gradient += radial * (TAU / nf * radial_sum) + across * across_sum;
+        }
+        if gradient.is_finite() { gradient } else { Vec3::ZERO }
+    }
+
+    /// Gradient of the irradiance's luminance over the normal's direction: tilting the normal
+    /// by d changes each cell's cosine by (its tangential part) . d.
+    pub fn rotation_gradient(&self) -> Vec3 {
+        let share = PI / self.cells.len().max(1) as f32;
+        let mut gradient = Vec3::ZERO;
+        for c in &self.cells {
+            let cos = c.direction.dot(self.normal);
+            if cos > 1e-4 {
+                let tangential = c.direction - self.normal * cos;
+                gradient += tangential * (luminance(c.radiance) / cos);
+            }
+        }
+        gradient *= share;
+        if gradient.is_finite() { gradient } else { Vec3::ZERO }
+    }
+
+    /// Harmonic mean of the hit distances (Ward's split-sphere radius); infinite if nothing
+    /// was hit.
+    pub fn harmonic_distance(&self) -> f32 {
+        let inverse: f32 = self.cells.iter().map(|c| 1.0 / c.distance).sum::<f32>() / self.cells.len().max(1) as f32;
+        if inverse > 0.0 { 1.0 / inverse } else { f32::INFINITY }
+    }
+
+    /// Principal axes and curvatures of the Hessian of irradiance over translation, from the
+    /// geometry alone: each hit is a small patch of unit radiance whose contribution
+    /// cos(theta) A / r^2 changes with the point's position (in the tangent plane its Hessian is
+    /// (pi/N) / r^2 (15 t t^T sin^2 - 3 I) along the sample's horizontal direction t). The
+    /// curvatures are the absolute eigenvalues of the sum, floored at a twentieth of what the
+    /// patches would give with nothing cancelling, so a lucky cancellation cannot make a radius
+    /// unbounded. Returns (axis of the largest curvature, [largest, smallest]).
+    pub fn geometric_hessian(&self) -> (Vec3, [f32; 2]) {
+        let share = PI / self.cells.len().max(1) as f32;
+        let mut signed = [0.0f32; 3];
+        let mut bound = 0.0f32;
+        for s in &self.cells {
+            if !s.distance.is_finite() || s.distance <= 0.0 {
+                continue;
+            }
+            let cos = s.direction.dot(self.normal);
+            let tangential = s.direction - self.normal * cos;
+            let sin2 = tangential.length_squared();
+            let scale = share / (s.distance * s.distance);
+            let (tx, ty) = if sin2 > 1e-12 {
+                let t = tangential / sin2.sqrt();
+                (t.dot(self.tangent), t.dot(self.bitangent))
+            } else {
+                (1.0, 0.0)
+            };
+            let along = 15.0 * sin2;
+            // scale (along t t^T - 3 I), in the tangent frame.
+            signed[0] += scale * (along * tx * tx - 3.0);
+            signed[1] += scale * along * tx * ty;
+            signed[2] += scale * (along * ty * ty - 3.0);
+            bound += scale * ((along - 3.0).abs() + 3.0);
+        }
+        let [a, b, c] = signed;
+        let mean = 0.5 * (a + c);
+        let spread = (0.25 * (a - c) * (a - c) + b * b).sqrt();
+        let (l1, l2) = (mean + spread, mean - spread);
+        // Eigenvector of l1 is (b, l1 - a), or an axis when b vanishes.
+        let first = if b.abs() > 1e-12 * (a.abs() + c.abs()) {
+            (self.tangent * b + self.bitangent * (l1 - a)).normalize_or_zero()
+        } else if a >= c {
+            self.tangent
+        } else {
+            self.bitangent
+        };
+        let first = if first == Vec3::ZERO { self.tangent } else { first };
+        let second = self.normal.cross(first);
+        let floor = 0.05 * bound;
+        let (k1, k2) = (l1.abs().max(floor), l2.abs().max(floor));
+        if k1 >= k2 { (first, [k1, k2]) } else { (second, [k2, k1]) }
+    }
+
+    /// Per sector around `u_axis` (v = normal x u_axis), the nearest horizontal distance of a
+    /// low hit (below 45 degrees of elevation): a surface standing there could hide the region
+    /// beyond it from this record.
+    pub fn horizon(&self, u_axis: Vec3) -> [f32; HORIZON_SECTORS] {
+        let v_axis = self.normal.cross(u_axis);
+        let mut horizon = [f32::INFINITY; HORIZON_SECTORS];
+        for s in &self.cells {
+            let cos = s.direction.dot(self.normal);
+            if !s.distance.is_finite() || cos > std::f32::consts::FRAC_1_SQRT_2 {
+                continue;
+            }
+            let tangential = s.direction - self.normal * cos;
+            let angle = tangential.dot(v_axis).atan2(tangential.dot(u_axis));
+            let turn = (angle / TAU).rem_euclid(1.0);
+            let sector = ((turn * HORIZON_SECTORS as f32) as usize).min(HORIZON_SECTORS - 1);
+            horizon[sector] = horizon[sector].min(s.distance * tangential.length());
+        }
+        horizon
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sampling::Rng;
+
+    /// A hemisphere under an infinite ceiling at height h whose radiance is 1 where x > 0 and
+    /// 0 elsewhere.
+    fn half_bright_ceiling(n: usize, h: f32) -> Hemisphere {
+        bright_beyond(n, h, 0.0)
+    }
+
+    /// The same with the bright part starting at x = edge.
+    fn bright_beyond(n: usize, h: f32, edge: f32) -> Hemisphere {
+        let (normal, tangent, bitangent) = (Vec3::Z, Vec3::X, Vec3::Y);
+        let mut rng = Rng::new(5, 5);
+        let mut cells = Vec::new();
+        for i in 0..n {
+            for j in 0..n {
+                let d = cell_direction(normal, tangent, bitangent, n, i, j, rng.next_f32(), rng.next_f32());
+                let distance = h / d.z;
+                let bright = d.x * distance > edge;
+                cells.push(CellSample {
+                    radiance: Vec3::splat(if bright { 1.0 } else { 0.0 }),
+                    distance,
+                    direction: d,
+                });
+            }
+        }
+        Hemisphere {
+            n,
+            normal,
+            tangent,
+            bitangent,
+            cells,
+        }
+    }
+
+    #[test]
+    fn value_of_half_a_bright_sky_is_one_half() {
+        let h = half_bright_ceiling(32, 1.0);
+        assert!((h.value().x - 0.5).abs() < 0.01);
+    }
+
+    #[test]
+    fn translation_gradient_matches_the_closed_form() {
+        // dE/dx at the origin under a half-bright ceiling at height h is pi / (2 h).
+        let height = 2.0;
+        let h = half_bright_ceiling(64, height);
+        let g = h.translation_gradient();
+        let expected = PI / (2.0 * height);
+        assert!(
+            (g.x - expected).abs() / expected < 0.05,
+            "gradient {g:?}, expected {expected}"
+        );
+        assert!(g.y.abs() < 0.05 * expected && g.z.abs() < 1e-6);
+    }
+
+    #[test]
+    fn translation_gradient_across_rings_and_sectors_matches_the_closed_form() {
+        // With the edge at x = c the boundary crosses rings and sectors alike:
+        // dE/dx = h^2 pi / (2 (c^2 + h^2)^(3/2)).
+        let (height, edge) = (1.0f32, 1.0f32);
+        let g = bright_beyond(64, height, edge).translation_gradient();
+        let expected = height * height * PI / (2.0 * (edge * edge + height * height).powf(1.5));
+        assert!((g.x - expected).abs() / expected < 0.05, "gradient {g:?}, expected {expected}");
+    }
+
+    #[test]
+    fn rotation_gradient_matches_the_closed_form() {
+        // Tilting the normal towards +x by d raises E by (pi / 2) d.
+        let h = half_bright_ceiling(64, 1.0);
+        let g = h.rotation_gradient();
+        assert!((g.x - PI / 2.0).abs() / (PI / 2.0) < 0.05, "gradient {g:?}");
+        assert!(g.y.abs() < 0.05);
+    }
+
+    #[test]
+    fn hessian_grows_as_geometry_comes_closer_and_points_at_a_near_wall() {
+        let far = half_bright_ceiling(16, 4.0).geometric_hessian().1;
+        let near = half_bright_ceiling(16, 1.0).geometric_hessian().1;
+        assert!((near[0] / far[0] - 16.0).abs() < 0.1, "1/r^2 scaling: {near:?} {far:?}");
+        // A wall at x = 0.2 (everything towards +x hits it close): curvature largest along x.
+        let mut h = half_bright_ceiling(16, 4.0);
+        for c in &mut h.cells {
+            if c.direction.x > 0.0 {
+                c.distance = c.distance.min(0.2 / c.direction.x);
+            }
+        }
+        let (axis, [large, small]) = h.geometric_hessian();
+        assert!(axis.x.abs() > 0.9, "axis {axis:?}");
+        assert!(large > 2.0 * small);
+        let horizon = h.horizon(Vec3::X);
+        assert!(horizon[0] < 0.25 && horizon[4] > 1.0, "{horizon:?}");
+    }
+}

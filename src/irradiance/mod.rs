@@ -1,0 +1,211 @@
+//! Ward's irradiance cache with Radiance's semantics and option names: records made from a
+//! stratified hemisphere (-ad) with extra samples where it varies most (-as), radii from the
+//! Hessian bounded by -ar, lookups weighted by -aa, an index shared by every thread, and an
+//! optional file (-af) that persists records across runs.
+
+pub mod codec;
+pub mod hemisphere;
+pub mod index;
+pub mod persist;
+pub mod record;
+
+use glam::Vec3;
+use hemisphere::Hemisphere;
+use index::RecordIndex;
+use persist::{CacheFile, LoadReport};
+use record::{Metric, Record};
+
+/// Smallest hemisphere grid side, so deep levels still see their surroundings.
+pub const MIN_DIVISIONS: usize = 4;
+
+/// The cache's options (Radiance's meanings) resolved for a scene.
+#[derive(Clone, Debug)]
+pub struct CacheSettings {
+    /// -aa: larger means larger radii and fewer records.
+    pub accuracy: f32,
+    /// -ad: hemisphere samples of a new level-0 record.
+    pub divisions: u32,
+    /// -as: extra samples on the cells that differ most.
+    pub supersamples: u32,
+    /// -ar: minimum radius is scene size / ar (0: no minimum).
+    pub resolution: u32,
+    pub metric: Metric,
+    pub min_radius: f32,
+    pub max_radius: f32,
+}
+
+impl CacheSettings {
+    pub fn new(
+        accuracy: f32,
+        divisions: u32,
+        supersamples: u32,
+        resolution: u32,
+        metric: Metric,
+        scene_size: f32,
+    ) -> Self {
+        let size = scene_size.max(f32::MIN_POSITIVE);
+        let min_radius = if resolution > 0 { size / resolution as f32 } else { 0.0 };
+        let max_radius = if resolution > 0 {
+            (64.0 * min_radius).min(0.2 * size)
+        } else {
+            0.2 * size
+        };
+        CacheSettings {
+            accuracy,
+            divisions,
+            supersamples,
+            resolution,
+            metric,
+            min_radius,
+            max_radius: max_radius.max(min_radius),
+        }
+    }
+
+    /// Weight of a record made at `level`: halves with every bounce, as Radiance's does.
+    pub fn weight(level: u32) -> f32 {
+        0.5f32.powi(level.min(60) as i32)
+    }
+
+    /// Side of the hemisphere grid for a record at `level`.
+    pub fn grid_side(&self, level: u32) -> usize {
+        let wanted = (self.divisions as f32 * Self::weight(level)).sqrt().round() as usize;
+        wanted.max(MIN_DIVISIONS)
+    }
+
+    /// Extra samples for a record at `level`.
+    pub fn extra_samples(&self, level: u32) -> usize {
+        (self.supersamples as f32 * Self::weight(level)).round() as usize
+    }
+}
+
+pub struct IrradianceCache {
+    pub settings: CacheSettings,
+    index: RecordIndex,
+    file: Option<CacheFile>,
+    pub load_report: LoadReport,
+}
+
+impl IrradianceCache {
+    pub fn new(settings: CacheSettings) -> IrradianceCache {
+        let finest = if settings.min_radius > 0.0 {
+            settings.min_radius
+        } else {
+            settings.max_radius * 1e-3
+        };
+        IrradianceCache {
+            index: RecordIndex::new(finest),
+            settings,
+            file: None,
+            load_report: LoadReport::default(),
+        }
+    }
+
+    /// Attaches a persistent file: its records join the cache, new ones are appended to it.
+    pub fn with_file(mut self, path: &std::path::Path, settings_line: &str) -> Result<IrradianceCache, String> {
+        let (file, records, report) = CacheFile::open(path, settings_line)?;
+        for r in records {
+            self.index.insert(r);
+        }
+        self.file = Some(file);
+        self.load_report = report;
+        Ok(self)
+    }
+
+    pub fn len(&self) -> usize {
+        self.index.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.index.is_empty()
+    }
+
+    pub fn contention(&self) -> u64 {
+        self.index.contention()
+    }
+
+    pub fn records(&self) -> Vec<Record> {
+        self.index.all()
+    }
+
+    /// The cached value (irradiance over pi) at a point, or None when no record may be used.
+    pub fn lookup(&self, point: Vec3, normal: Vec3, level: u32) -> Option<Vec3> {
+        let (mut sum, mut total) = (Vec3::ZERO, 0.0f32);
+        let (metric, accuracy) = (self.settings.metric, self.settings.accuracy);
+        self.index.for_each_near(point, |r| {
+            let reach = r.reach();
+            if (r.position - point).length_squared() > reach * reach {
+                return;
+            }
+            if let Some(w) = r.weight_at(point, normal, level, metric, accuracy) {
+                sum += r.extrapolate(point, normal) * w;
+                total += w;
+            }
+        });
+        (total > 0.0).then(|| sum / total).filter(|v| v.is_finite())
+    }
+
+    /// Adds a record (and appends it to the file, if any).
+    pub fn insert(&self, record: Record) {
+        if let Some(file) = &self.file {
+            file.append(&record);
+        }
+        self.index.insert(record);
+    }
+
+    /// Flushes the file; its first write error, if any.
+    pub fn finish(&self) -> Result<(), String> {
+        self.file.as_ref().map_or(Ok(()), CacheFile::finish)
+    }
+
+    /// Turns a sampled hemisphere into a record: value, gradients, radii, leak horizon.
+    pub fn make_record(&self, hemisphere: &Hemisphere, position: Vec3, level: u32) -> Record {
+        let s = &self.settings;
+        let value = hemisphere.value();
+        let brightness = crate::scene::light::luminance(value) * std::f32::consts::PI;
+        let relative = |g: Vec3| if brightness > 0.0 { g / brightness } else { Vec3::ZERO };
+        let translation_gradient = relative(hemisphere.translation_gradient());
+        let rotation_gradient = relative(hemisphere.rotation_gradient());
+        let clamp_radius = |r: f32| {
+            let r = if r.is_finite() { r } else { s.max_radius };
+            r.clamp(s.min_radius, s.max_radius).max(f32::MIN_POSITIVE)
+        };
+        let (u_axis, radii) = match s.metric {
+            Metric::Hessian => {
+                let (axis, [large, small]) = hemisphere.geometric_hessian();
+                // Second-order error over radius R along an axis of curvature lambda is about
+                // lambda R^2 / 2; keep it under the accuracy times the (unit) irradiance pi.
+                let radius = |lambda: f32| (2.0 * s.accuracy * std::f32::consts::PI / lambda).sqrt();
+                // First-order change over R stays under 100 % of the value.
+                let gradient_limit = 1.0 / translation_gradient.length().max(1e-30);
+                let r0 = clamp_radius(radius(large).min(gradient_limit));
+                let r1 = clamp_radius(radius(small).min(gradient_limit));
+                // At most 2:1 anisotropy.
+                (axis, [r0, r1.min(2.0 * r0)])
+            }
+            Metric::Ward88 => {
+                let r = clamp_radius(s.accuracy * hemisphere.harmonic_distance());
+                (hemisphere.tangent, [r, r])
+            }
+        };
+        // Ward's metric measures distance in units of the harmonic distance; keep the two
+        // consistent with the clamped radius (valid region = accuracy x harmonic distance).
+        let harmonic_distance = match s.metric {
+            Metric::Ward88 => radii[0] / s.accuracy.max(1e-6),
+            Metric::Hessian => clamp_radius(hemisphere.harmonic_distance()),
+        };
+        let horizon = hemisphere.horizon(u_axis);
+        Record {
+            position,
+            normal: hemisphere.normal,
+            u_axis,
+            radii,
+            harmonic_distance,
+            level,
+            weight: CacheSettings::weight(level),
+            value,
+            translation_gradient,
+            rotation_gradient,
+            horizon,
+        }
+    }
+}

@@ -1,0 +1,238 @@
+//! The persistent cache file (-af), like Radiance's ambient file: loaded at start, appended to
+//! as records are made (flushed in small batches, so a crash loses at most the last batch), and
+//! reusable by a later run with the same settings. The header carries the settings the records
+//! were made with; a file made with other settings is refused rather than silently mixed in.
+//! A torn last record (the writer was killed mid-write) is dropped and cut off, not fatal.
+
+use super::codec::{self, CODEC_VERSION, DecodeError, RECORD_BYTES};
+use super::record::Record;
+use std::fs::{File, OpenOptions};
+use std::io::{BufWriter, Read, Write};
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+
+const MAGIC: &[u8; 8] = b"ICRCACHE";
+/// Records written between flushes: what a crash can lose at most.
+pub const FLUSH_BATCH: usize = 16;
+
+struct Writer {
+    file: BufWriter<File>,
+    pending: usize,
+    error: Option<String>,
+}
+
+pub struct CacheFile {
+    path: PathBuf,
+    writer: Mutex<Writer>,
+}
+
+/// What loading found.
+#[derive(Debug, Default, Clone)]
+pub struct LoadReport {
+    pub loaded: usize,
+    /// Bytes of a torn last record that were cut off.
+    pub torn_bytes: usize,
+    /// Records inside the file that failed their checksum or validation and were skipped.
+    pub corrupt: usize,
+}
+
+fn header(settings: &str) -> Vec<u8> {
+    let mut out = Vec::new();
+    out.extend_from_slice(MAGIC);
+    out.extend_from_slice(&CODEC_VERSION.to_le_bytes());
+    out.extend_from_slice(&(settings.len() as u32).to_le_bytes());
+    out.extend_from_slice(settings.as_bytes());
+    out
+}
+
+/// Splits a file's bytes into its settings line and the records after it.
+fn parse_header(bytes: &[u8]) -> Result<(String, usize), String> {
+    if bytes.len() < 16 || &bytes[..8] != MAGIC {
+        return Err("not an icrender cache file".into());
+    }
+    let version = u32::from_le_bytes(bytes[8..12].try_into().expect("4 bytes"));
+    if version != CODEC_VERSION {
+        return Err(format!(
+            "cache file version {version}; this icrender reads version {CODEC_VERSION}"
+        ));
+    }
+    let len = u32::from_le_bytes(bytes[12..16].try_into().expect("4 bytes")) as usize;
+    let end = 16usize
+        .checked_add(len)
+        .filter(|&e| e <= bytes.len())
+        .ok_or("cache file header is truncated")?;
+    let settings = std::str::from_utf8(&bytes[16..end])
+        .map_err(|_| "cache file header is not text")?
+        .to_string();
+    Ok((settings, end))
+}
+
+impl CacheFile {
+    /// Opens (or creates) the file; returns it with the records it already holds.
+    pub fn open(path: &Path, settings: &str) -> Result<(CacheFile, Vec<Record>, LoadReport), String> {
+        let mut records = Vec::new();
+        let mut report = LoadReport::default();
+        let mut bytes = Vec::new();
+        if path.exists() {
+            File::open(path)
+                .and_then(|mut f| f.read_to_end(&mut bytes))
+                .map_err(|e| format!("cannot read: {e}"))?;
+        }
+        let mut keep = bytes.len();
+        if bytes.is_empty() {
+            std::fs::write(path, header(settings)).map_err(|e| format!("cannot write: {e}"))?;
+        } else {
+            let (theirs, start) = parse_header(&bytes)?;
+            if theirs != settings {
+                return Err(format!(
+                    "was made with other settings ({theirs}); this render uses ({settings}); \
+                     use the same settings or another file"
+                ));
+            }
+            let body = &bytes[start..];
+            let whole = body.len() / RECORD_BYTES;
+            for i in 0..whole {
+                match codec::decode(&body[i * RECORD_BYTES..]) {
+                    Ok(r) => records.push(r),
+                    // A bad last record is a torn write; one inside the file is damage.
+                    Err(DecodeError::Checksum) if i + 1 == whole => {
+                        report.torn_bytes += RECORD_BYTES;
+                        keep -= RECORD_BYTES;
+                    }
+                    Err(_) => report.corrupt += 1,
+                }
+            }
+            let partial = body.len() % RECORD_BYTES;
+            report.torn_bytes += partial;
+            keep -= partial;
+        }
+        report.loaded = records.len();
+        let file = OpenOptions::new()
+            .write(true)
+            .open(path)
+            .map_err(|e| format!("cannot write: {e}"))?;
+        if keep < bytes.len() {
+            // Cut the torn tail so appended records stay aligned.
+            file.set_len(keep as u64)
+                .map_err(|e| format!("cannot repair the torn tail: {e}"))?;
+        }
+        let mut file = BufWriter::new(file);
+        use std::io::Seek;
+        file.seek(std::io::SeekFrom::End(0))
+            .map_err(|e| format!("cannot write: {e}"))?;
+        let writer = Writer {
+            file,
+            pending: 0,
+            error: None,
+        };
+        Ok((
+            CacheFile {
+                path: path.to_path_buf(),
+                writer: Mutex::new(writer),
+            },
+            records,
+            report,
+        ))
+    }
+
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// Appends a record; flushes every FLUSH_BATCH records. The first write error is kept and
+    /// reported by `finish` (the render goes on; only persistence is lost).
+    pub fn append(&self, record: &Record) {
+        let mut bytes = Vec::with_capacity(RECORD_BYTES);
+        codec::encode(record, &mut bytes);
+        let mut w = self.writer.lock().unwrap_or_else(|e| e.into_inner());
+        if w.error.is_some() {
+            return;
+        }
+        let mut result = w.file.write_all(&bytes);
+        w.pending += 1;
+        if result.is_ok() && w.pending >= FLUSH_BATCH {
+            result = w.file.flush();
+            w.pending = 0;
+        }
+        if let Err(e) = result {
+            w.error = Some(e.to_string());
+        }
+    }
+
+    /// Flushes what is pending; returns the first write error, if any.
+    pub fn finish(&self) -> Result<(), String> {
+        let mut w = self.writer.lock().unwrap_or_else(|e| e.into_inner());
+        if let Err(e) = w.file.flush() {
+            w.error.get_or_insert(e.to_string());
+        }
+        w.pending = 0;
+        match &w.error {
+            Some(e) => Err(e.clone()),
+            None => Ok(()),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::irradiance::record::tests::flat_record;
+
+    #[test]
+    fn records_survive_a_reopen_and_other_settings_are_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("c.icc");
+        let (file, loaded, _) = CacheFile::open(&path, "-aa 0.2").unwrap();
+        assert!(loaded.is_empty());
+        for i in 0..40 {
+            file.append(&flat_record(i as f32, 1.0));
+        }
+        // Two full batches reach the disk before finish; the rest only at finish.
+        let (_, seen, _) = CacheFile::open(&path, "-aa 0.2").unwrap();
+        assert!(seen.len() >= 2 * FLUSH_BATCH && seen.len() < 40);
+        file.finish().unwrap();
+        let (_, all, report) = CacheFile::open(&path, "-aa 0.2").unwrap();
+        assert_eq!(all.len(), 40);
+        assert_eq!(report.loaded, 40);
+        let err = CacheFile::open(&path, "-aa 0.1").err().unwrap();
+        assert!(err.contains("other settings"), "{err}");
+    }
+
+    #[test]
+    fn torn_tail_is_dropped_and_cut_then_appending_works() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("c.icc");
+        let (file, _, _) = CacheFile::open(&path, "s").unwrap();
+        for i in 0..3 {
+            file.append(&flat_record(i as f32 + 1.0, 1.0));
+        }
+        file.finish().unwrap();
+        drop(file);
+        // A killed writer leaves half a record.
+        let mut bytes = std::fs::read(&path).unwrap();
+        bytes.truncate(bytes.len() - 50);
+        std::fs::write(&path, &bytes).unwrap();
+        let (file, records, report) = CacheFile::open(&path, "s").unwrap();
+        assert_eq!(records.len(), 2);
+        assert_eq!(report.torn_bytes, RECORD_BYTES - 50);
+        file.append(&flat_record(9.0, 1.0));
+        file.finish().unwrap();
+        let (_, records, report) = CacheFile::open(&path, "s").unwrap();
+        assert_eq!(records.len(), 3);
+        assert_eq!(records[2].value.x, 9.0);
+        assert_eq!(report.torn_bytes, 0);
+    }
+
+    #[test]
+    fn garbage_is_not_a_cache_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("g");
+        std::fs::write(&path, b"hello world, this is not a cache").unwrap();
+        assert!(
+            CacheFile::open(&path, "s")
+                .err()
+                .unwrap()
+                .contains("not an icrender cache file")
+        );
+    }
+}

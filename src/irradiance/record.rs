@@ -1,0 +1,214 @@
+//! One irradiance cache record and the test that decides whether, and how much, it may stand in
+//! for the irradiance at another point.
+
+use glam::Vec3;
+
+/// Number of tangent-plane sectors the leak test divides a record's surroundings into.
+pub const HORIZON_SECTORS: usize = 8;
+
+/// A cached indirect diffuse value, as Radiance keeps it: position, normal, the recursion level
+/// and path weight it was made at, two radii along the principal directions of the irradiance
+/// Hessian, relative gradients for translation and rotation, and the value itself (irradiance
+/// over pi, so it is multiplied by the diffuse albedo to give L_a).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Record {
+    pub position: Vec3,
+    pub normal: Vec3,
+    /// First principal direction (unit, in the tangent plane); the second is normal x u_axis.
+    pub u_axis: Vec3,
+    /// Validity radii along u_axis and along normal x u_axis.
+    pub radii: [f32; 2],
+    /// Harmonic mean distance of the hemisphere's hits (Ward's split-sphere radius).
+    pub harmonic_distance: f32,
+    pub level: u32,
+    pub weight: f32,
+    pub value: Vec3,
+    /// Gradient of the value's luminance over position, divided by that luminance.
+    pub translation_gradient: Vec3,
+    /// Gradient over the normal's direction, divided by the luminance.
+    pub rotation_gradient: Vec3,
+    /// Per tangent-plane sector around u_axis, the horizontal distance to the nearest low
+    /// obstacle the hemisphere saw: light cannot be extrapolated past it (leak test).
+    pub horizon: [f32; HORIZON_SECTORS],
+}
+
+/// Which error metric weighs records.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Metric {
+    /// Radiance 5+: ellipse of Hessian radii, angle limit, smooth fall-off.
+    Hessian,
+    /// Ward et al. 1988: the split-sphere error, harmonic mean distance, weight 1 / error.
+    Ward88,
+}
+
+/// The extrapolation factor of a record's gradients is held within these bounds, so a noisy
+/// gradient cannot turn a value negative or blow it up.
+const MIN_EXTRAPOLATION: f32 = 0.5;
+const MAX_EXTRAPOLATION: f32 = 2.0;
+
+impl Record {
+    pub fn v_axis(&self) -> Vec3 {
+        self.normal.cross(self.u_axis)
+    }
+
+    /// Largest distance from the record's position at which it can contribute.
+    pub fn reach(&self) -> f32 {
+        self.radii[0].max(self.radii[1])
+    }
+
+    /// The record's value moved to (point, normal) by its gradients.
+    pub fn extrapolate(&self, point: Vec3, normal: Vec3) -> Vec3 {
+        let factor = 1.0
+            + self.translation_gradient.dot(point - self.position)
+            + self.rotation_gradient.dot(normal - self.normal);
+        let factor = if factor.is_finite() {
+            factor.clamp(MIN_EXTRAPOLATION, MAX_EXTRAPOLATION)
+        } else {
+            1.0
+        };
+        self.value * factor
+    }
+
+    fn sector_of(&self, tangent_offset: Vec3) -> usize {
+        let angle = tangent_offset.dot(self.v_axis()).atan2(tangent_offset.dot(self.u_axis));
+        let turn = (angle / std::f32::consts::TAU).rem_euclid(1.0);
+        ((turn * HORIZON_SECTORS as f32) as usize).min(HORIZON_SECTORS - 1)
+    }
+
+    /// Weight of this record at a query point with unit normal `normal` (None when it may not
+    /// be used there): same or lower level, not behind the point, within the metric's bounds,
+    /// and no obstacle between them.
+    pub fn weight_at(&self, point: Vec3, normal: Vec3, level: u32, metric: Metric, accuracy: f32) -> Option<f32> {
+        if self.level > level {
+            return None;
+        }
+        let offset = point - self.position;
+        // Ward's "in front" test: the point may not lie behind the record's surface.
+        let average_normal = (normal + self.normal) * 0.5;
+        let along = offset.dot(average_normal);
+        let tangent_offset = offset - self.normal * offset.dot(self.normal);
+        let distance = tangent_offset.length();
+        let cos_normals = normal.dot(self.normal).clamp(-1.0, 1.0);
+        if along < -0.05 * self.radii[0].min(self.radii[1]) || cos_normals <= 0.0 {
+            return None;
+        }
+        if distance > self.horizon[self.sector_of(tangent_offset)] {
+            return None;
+        }
+        match metric {
+            Metric::Hessian => {
+                let max_angle = (std::f32::consts::SQRT_2 * accuracy).min(std::f32::consts::FRAC_PI_4);
+                let angle = cos_normals.acos();
+                if angle >= max_angle {
+                    return None;
+                }
+                let du = tangent_offset.dot(self.u_axis) / self.radii[0];
+                let dv = tangent_offset.dot(self.v_axis()) / self.radii[1];
+                let t2 = du * du + dv * dv;
+                if !(t2 < 1.0) {
+                    return None;
+                }
+                Some((1.0 - t2.sqrt()) * (1.0 - angle / max_angle))
+            }
+            Metric::Ward88 => {
+                let error = offset.length() / self.harmonic_distance + (1.0 - cos_normals).max(0.0).sqrt();
+                // Valid where the error stays under the accuracy; weight 1/error, less the
+                // threshold so it falls to zero at the edge instead of jumping.
+                (error < accuracy)
+                    .then(|| 1.0 / error.max(1e-6) - 1.0 / accuracy)
+                    .filter(|w| *w > 0.0)
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+pub(crate) mod tests {
+    use super::*;
+
+    pub fn flat_record(value: f32, radius: f32) -> Record {
+        Record {
+            position: Vec3::ZERO,
+            normal: Vec3::Z,
+            u_axis: Vec3::X,
+            radii: [radius, radius],
+            harmonic_distance: radius / 0.2,
+            level: 0,
+            weight: 1.0,
+            value: Vec3::splat(value),
+            translation_gradient: Vec3::ZERO,
+            rotation_gradient: Vec3::ZERO,
+            horizon: [f32::INFINITY; HORIZON_SECTORS],
+        }
+    }
+
+    #[test]
+    fn weight_falls_to_zero_at_the_radius_and_respects_level_and_side() {
+        let r = flat_record(1.0, 1.0);
+        let w0 = r.weight_at(Vec3::ZERO, Vec3::Z, 0, Metric::Hessian, 0.2).unwrap();
+        let w_half = r
+            .weight_at(Vec3::new(0.5, 0.0, 0.0), Vec3::Z, 0, Metric::Hessian, 0.2)
+            .unwrap();
+        assert!((w0 - 1.0).abs() < 1e-6 && (w_half - 0.5).abs() < 1e-6);
+        assert!(
+            r.weight_at(Vec3::new(1.01, 0.0, 0.0), Vec3::Z, 0, Metric::Hessian, 0.2)
+                .is_none()
+        );
+        // A level-1 record may not serve a level-0 query; a level-0 record serves level 1.
+        let mut deep = r.clone();
+        deep.level = 1;
+        assert!(deep.weight_at(Vec3::ZERO, Vec3::Z, 0, Metric::Hessian, 0.2).is_none());
+        assert!(r.weight_at(Vec3::ZERO, Vec3::Z, 1, Metric::Hessian, 0.2).is_some());
+        // Behind the surface, or facing away, is refused.
+        assert!(
+            r.weight_at(Vec3::new(0.0, 0.0, -0.2), Vec3::Z, 0, Metric::Hessian, 0.2)
+                .is_none()
+        );
+        assert!(r.weight_at(Vec3::ZERO, -Vec3::Z, 0, Metric::Hessian, 0.2).is_none());
+        // Tilted normals beyond the angle bound are refused.
+        let tilted = Vec3::new(0.5, 0.0, 1.0).normalize();
+        assert!(r.weight_at(Vec3::ZERO, tilted, 0, Metric::Hessian, 0.2).is_none());
+    }
+
+    #[test]
+    fn leak_test_stops_at_an_obstacle() {
+        let mut r = flat_record(1.0, 1.0);
+        // An obstacle 0.3 away in the +X sector.
+        r.horizon[0] = 0.3;
+        assert!(
+            r.weight_at(Vec3::new(0.2, 0.01, 0.0), Vec3::Z, 0, Metric::Hessian, 0.2)
+                .is_some()
+        );
+        assert!(
+            r.weight_at(Vec3::new(0.5, 0.01, 0.0), Vec3::Z, 0, Metric::Hessian, 0.2)
+                .is_none()
+        );
+        assert!(
+            r.weight_at(Vec3::new(-0.5, 0.01, 0.0), Vec3::Z, 0, Metric::Hessian, 0.2)
+                .is_some()
+        );
+    }
+
+    #[test]
+    fn extrapolation_follows_the_gradient_and_is_clamped() {
+        let mut r = flat_record(1.0, 1.0);
+        r.translation_gradient = Vec3::new(0.5, 0.0, 0.0);
+        assert!((r.extrapolate(Vec3::new(0.2, 0.0, 0.0), Vec3::Z).x - 1.1).abs() < 1e-6);
+        assert_eq!(r.extrapolate(Vec3::new(100.0, 0.0, 0.0), Vec3::Z).x, 2.0);
+        assert_eq!(r.extrapolate(Vec3::new(-100.0, 0.0, 0.0), Vec3::Z).x, 0.5);
+    }
+
+    #[test]
+    fn ward88_weight() {
+        let r = flat_record(1.0, 0.2);
+        // Harmonic distance 1: at 0.1 away the error is 0.1 < 0.2.
+        assert!(
+            r.weight_at(Vec3::new(0.1, 0.0, 0.0), Vec3::Z, 0, Metric::Ward88, 0.2)
+                .is_some()
+        );
+        assert!(
+            r.weight_at(Vec3::new(0.3, 0.0, 0.0), Vec3::Z, 0, Metric::Ward88, 0.2)
+                .is_none()
+        );
+    }
+}

@@ -1,0 +1,164 @@
+//! Everything a render needs, prepared from the command line once: the scene, its Embree
+//! BVH, the shading options, the view, and the irradiance cache (with its file). Every way of
+//! rendering (serial now, the MPI modes later) starts from a Job.
+
+use crate::cli::{parse_tile, MetricArg, RenderArgs};
+use crate::commands::{warn, CommandError};
+use crate::irradiance::record::Metric;
+use crate::irradiance::{CacheSettings, IrradianceCache};
+use crate::render::RenderSettings;
+use crate::scene::view::{Camera, View};
+use crate::scene::{MaterialOptions, Scene};
+use crate::shading::ShadingOptions;
+use crate::tracer::Tracer;
+use glam::Vec3;
+use std::time::Instant;
+
+pub struct Job {
+    pub scene: Scene,
+    pub tracer: Tracer,
+    pub shading: ShadingOptions,
+    pub view: View,
+    pub camera: Camera,
+    pub settings: RenderSettings,
+    pub cache: Option<IrradianceCache>,
+    pub load_s: f64,
+    pub build_s: f64,
+}
+
+/// Largest image side we accept: beyond it framebuffers stop fitting in memory sensibly.
+const MAX_IMAGE_SIDE: u32 = 65_536;
+
+/// Refuses option values that cannot work, before anything is loaded.
+pub fn validate(args: &RenderArgs) -> Result<(), String> {
+    if args.width == 0 || args.height == 0 || args.width > MAX_IMAGE_SIDE || args.height > MAX_IMAGE_SIDE {
+        return Err(format!("image size -x {} -y {} must be between 1 and {MAX_IMAGE_SIDE}", args.width, args.height));
+    }
+    if args.spp == 0 {
+        return Err("--spp must be at least 1".into());
+    }
+    if args.ambient_divisions == 0 {
+        return Err("-ad must be at least 1".into());
+    }
+    if !(args.ambient_accuracy.is_finite() && args.ambient_accuracy >= 0.0) {
+        return Err("-aa must be a finite, non-negative number".into());
+    }
+    if args.threads == Some(0) {
+        return Err("--threads must be at least 1".into());
+    }
+    if let Some(av) = &args.ambient_value
+        && av.iter().any(|v| !v.is_finite() || *v < 0.0)
+    {
+        return Err("-av values must be finite and not negative".into());
+    }
+    if !(args.specular_threshold.is_finite() && args.specular_threshold >= 0.0) {
+        return Err("-st must be a finite, non-negative number".into());
+    }
+    if !(args.min_weight.is_finite() && args.min_weight >= 0.0) {
+        return Err("-lw must be a finite, non-negative number".into());
+    }
+    if args.ambient_file.is_some() && args.ambient_accuracy == 0.0 {
+        return Err("-af needs the irradiance cache, which -aa 0 turns off".into());
+    }
+    parse_tile(&args.tile)?;
+    Ok(())
+}
+
+fn shading_options(args: &RenderArgs) -> ShadingOptions {
+    ShadingOptions {
+        ambient_bounces: args.ambient_bounces,
+        ambient_divisions: args.ambient_divisions,
+        ambient_value: args.ambient_value.as_deref().map_or(Vec3::ZERO, |v| Vec3::new(v[0], v[1], v[2])),
+        max_specular_depth: args.max_specular_depth,
+        min_weight: args.min_weight,
+        light_samples: args.light_samples.max(1),
+    }
+}
+
+/// What a cache file must agree on to be reused: everything that changes a record's value,
+/// radius or meaning.
+pub fn cache_settings_line(args: &RenderArgs, scene: &Scene) -> String {
+    let av = args.ambient_value.as_deref().unwrap_or(&[0.0, 0.0, 0.0]);
+    format!(
+        "scene {} size {:.6e}; -ab {} -aa {} -ad {} -as {} -ar {} -av {} {} {}; -st {}; metric {:?}; lambertian {}",
+        scene.path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default(),
+        scene.size(),
+        args.ambient_bounces,
+        args.ambient_accuracy,
+        args.ambient_divisions,
+        args.ambient_supersamples,
+        args.ambient_resolution,
+        av[0],
+        av[1],
+        av[2],
+        args.specular_threshold,
+        args.ic_metric,
+        args.lambertian
+    )
+}
+
+impl Job {
+    pub fn prepare(args: &RenderArgs) -> Result<Job, CommandError> {
+        let load_start = Instant::now();
+        let material_options = MaterialOptions { specular_threshold: args.specular_threshold, lambertian: args.lambertian };
+        let scene = Scene::load(&args.scene, &material_options)?;
+        let load_s = load_start.elapsed().as_secs_f64();
+        for w in &scene.warnings {
+            warn(&format!("{}: {w}", args.scene.display()));
+        }
+        let shading = shading_options(args);
+        if !scene.has_lights() && shading.ambient_value.max_element() <= 0.0 {
+            return Err(CommandError(format!(
+                "{}: the scene has no light sources (no emissive material, no KHR_lights_punctual light); \
+                 it would render black (give -av for an ambient-only render)",
+                args.scene.display()
+            )));
+        }
+        let build_start = Instant::now();
+        let tracer = Tracer::new(&scene).map_err(|e| CommandError(format!("{}: {e}", args.scene.display())))?;
+        let build_s = build_start.elapsed().as_secs_f64();
+        let view = crate::commands::view::choose_view(&scene, &tracer, &args.view, args.width, args.height)
+            .map_err(|e| CommandError(format!("view: {e}")))?;
+        let camera = view.camera(args.width, args.height);
+        let (tile_width, tile_height) = parse_tile(&args.tile)?;
+        let threads = args.threads.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+        let settings = RenderSettings { spp: args.spp, seed: args.seed, tile_width, tile_height, threads };
+        let needs_ambient = shading.ambient_bounces > 0 && scene.needs().diffuse;
+        let cache = if args.ambient_accuracy > 0.0 && needs_ambient {
+            let metric = match args.ic_metric {
+                MetricArg::Hessian => Metric::Hessian,
+                MetricArg::Ward88 => Metric::Ward88,
+            };
+            let settings = CacheSettings::new(
+                args.ambient_accuracy,
+                args.ambient_divisions,
+                args.ambient_supersamples,
+                args.ambient_resolution,
+                metric,
+                scene.size(),
+            );
+            let cache = IrradianceCache::new(settings);
+            Some(match &args.ambient_file {
+                Some(path) => {
+                    let cache = cache
+                        .with_file(path, &cache_settings_line(args, &scene))
+                        .map_err(|e| CommandError(format!("{}: {e}", path.display())))?;
+                    let report = &cache.load_report;
+                    if report.torn_bytes > 0 || report.corrupt > 0 {
+                        warn(&format!(
+                            "{}: dropped a torn last record ({} bytes) and {} damaged record(s)",
+                            path.display(),
+                            report.torn_bytes,
+                            report.corrupt
+                        ));
+                    }
+                    cache
+                }
+                None => cache,
+            })
+        } else {
+            None
+        };
+        Ok(Job { scene, tracer, shading, view, camera, settings, cache, load_s, build_s })
+    }
+}
