@@ -42,6 +42,36 @@ pub enum Command {
     Compare(CompareArgs),
     /// Benchmarks (print figures; not tests).
     Bench(BenchArgs),
+    /// Render a converged reference: brute force, progressive, with its own noise estimate.
+    Reference(Box<ReferenceArgs>),
+    /// Write the scene as Radiance input (geometry, materials, light sources) for rpict.
+    Export(ExportArgs),
+}
+
+#[derive(Args, Debug, Clone)]
+pub struct ReferenceArgs {
+    /// The render to converge: scene, view, size and shading options as for `render`
+    /// (-aa is ignored: a reference never uses the cache).
+    #[command(flatten)]
+    pub render: RenderArgs,
+    /// Stop when the estimated relative noise (RMS, of the composite) falls below this.
+    #[arg(long = "noise", default_value_t = 0.005)]
+    pub noise: f64,
+    /// Stop after this many seconds even if the noise target is not reached.
+    #[arg(long = "max-seconds", default_value_t = 600.0)]
+    pub max_seconds: f64,
+}
+
+#[derive(Args, Debug)]
+pub struct ExportArgs {
+    /// The glTF scene.
+    pub scene: PathBuf,
+    /// The Radiance scene file to write (.rad).
+    #[arg(short = 'o', long = "output")]
+    pub output: PathBuf,
+    /// Every material becomes a Lambertian of its base colour, as `render --lambertian`.
+    #[arg(long = "lambertian")]
+    pub lambertian: bool,
 }
 
 #[derive(Args, Debug, Clone)]

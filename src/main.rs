@@ -24,6 +24,8 @@ fn main() -> ExitCode {
         cli::Command::Info(args) => commands::info::run(args),
         cli::Command::Compare(args) => commands::compare::run(args),
         cli::Command::Bench(args) => commands::bench::run(args),
+        cli::Command::Reference(args) => commands::reference::run(args),
+        cli::Command::Export(args) => commands::export::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -17,7 +17,13 @@ pub struct RayStats {
 
 impl From<&RayCounts> for RayStats {
     fn from(c: &RayCounts) -> Self {
-        RayStats { primary: c.primary, shadow: c.shadow, specular: c.specular, ambient: c.ambient, total: c.total() }
+        RayStats {
+            primary: c.primary,
+            shadow: c.shadow,
+            specular: c.specular,
+            ambient: c.ambient,
+            total: c.total(),
+        }
     }
 }
 
@@ -88,6 +94,11 @@ pub struct RenderStats {
     /// Contributions dropped for being NaN or infinite (should be 0).
     pub nonfinite_dropped: u64,
     pub layers: Vec<&'static str>,
+    /// For `icrender reference`: its estimated relative noise (RMS) and number of passes.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub reference_noise: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub reference_passes: Option<u64>,
     pub per_thread: Vec<ThreadReport>,
 }
 

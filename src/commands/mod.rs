@@ -2,7 +2,9 @@
 
 pub mod bench;
 pub mod compare;
+pub mod export;
 pub mod info;
+pub mod reference;
 pub mod render;
 pub mod view;
 

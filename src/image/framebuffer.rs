@@ -70,6 +70,19 @@ impl FrameBuffer {
         &self.records
     }
 
+    /// Adds another frame's layers (and record counts) to this one's, pixel by pixel.
+    pub fn accumulate(&mut self, other: &FrameBuffer) {
+        for (mine, theirs) in self.layers.iter_mut().zip(&other.layers) {
+            mine.iter_mut().zip(theirs).for_each(|(a, b)| *a += *b);
+        }
+        self.records.iter_mut().zip(&other.records).for_each(|(a, b)| *a += *b);
+    }
+
+    /// Multiplies every layer by `factor`.
+    pub fn scale(&mut self, factor: f32) {
+        self.layers.iter_mut().flatten().for_each(|v| *v *= factor);
+    }
+
     /// Sum of all layers, pixel by pixel.
     pub fn composite(&self) -> Vec<Vec3> {
         (0..self.layers[0].len())

@@ -6,7 +6,7 @@
 use crate::sys::image_io::ImageData;
 use serde::Serialize;
 
-const REL_EPSILON: f64 = 0.01;
+pub const REL_EPSILON: f64 = 0.01;
 
 #[derive(Clone, Debug, Serialize)]
 pub struct LayerError {

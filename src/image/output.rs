@@ -84,9 +84,14 @@ pub fn write_exr(
         }
     }
     if records_layer {
-        channels.push(ChannelPlane { name: "ic_records.Y", data: frame.records() });
+        channels.push(ChannelPlane {
+            name: "ic_records.Y",
+            data: frame.records(),
+        });
     }
-    write_atomically(path, |tmp| image_io::write_exr(tmp, frame.width, frame.height, &channels, attributes, half_float))
+    write_atomically(path, |tmp| {
+        image_io::write_exr(tmp, frame.width, frame.height, &channels, attributes, half_float)
+    })
 }
 
 /// Writes the tone-mapped composite as an 8-bit PNG.

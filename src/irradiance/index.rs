@@ -195,9 +195,16 @@ mod tests {
             });
         }
         let per_query = start.elapsed().as_secs_f64() / queries as f64;
-        assert!(covering / queries >= 5, "{} covering records per query", covering / queries);
+        assert!(
+            covering / queries >= 5,
+            "{} covering records per query",
+            covering / queries
+        );
         // The grid hands out a bounded multiple of the records that really cover the point.
-        assert!(candidates < 40 * covering, "{candidates} candidates for {covering} covering");
+        assert!(
+            candidates < 40 * covering,
+            "{candidates} candidates for {covering} covering"
+        );
         // Generous (debug builds, a busy machine): a query takes microseconds, not milliseconds.
         assert!(per_query < 1e-4, "{per_query} s per query");
     }

@@ -1,0 +1,406 @@
+//! The irradiance cache through the real binary: analytic answers, agreement with brute force,
+//! persistence, statistics, and numerical extremes.
+
+mod common;
+use common::*;
+use serde_json::Value;
+use std::path::{Path, PathBuf};
+
+fn furnace(dir: &Path, rho: f32, e: f32, scale: f32) -> PathBuf {
+    let mut b = GltfBuilder::new();
+    let m = b.material(emissive_lambertian("wall", [rho; 3], e));
+    inward_box(&mut b, [0.0; 3], [scale; 3], m);
+    b.write(dir, "furnace")
+}
+
+fn stats_of(path: &Path) -> Value {
+    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
+
+fn render_to(dir: &Path, scene: &Path, name: &str, extra: &[&str]) -> (ImageData, Value) {
+    let out = dir.join(format!("{name}.exr"));
+    let stats = dir.join(format!("{name}.json"));
+    let mut args = vec![
+        "render",
+        scene.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "-q",
+        "--no-preview",
+    ];
+    args.extend_from_slice(&["--stats", stats.to_str().unwrap()]);
+    args.extend_from_slice(extra);
+    run_ok(&args);
+    (read_exr(&out), stats_of(&stats))
+}
+
+fn relmse(a: &ImageData, b: &ImageData, layer: &str) -> f64 {
+    let (x, y) = (rgb(a, layer), rgb(b, layer));
+    let mut sum = 0.0;
+    let mut n = 0;
+    for c in 0..3 {
+        for (p, q) in x[c].iter().zip(&y[c]) {
+            let d = (*p - *q) as f64;
+            sum += d * d / ((*q as f64).powi(2) + 0.01);
+            n += 1;
+        }
+    }
+    sum / n as f64
+}
+
+/// In a white furnace the irradiance is the same everywhere, so interpolation is exact and the
+/// cached answer must be E / (1 - rho) through every bounce level, as brute force gives.
+#[test]
+fn furnace_through_the_cache_at_every_level() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = furnace(dir.path(), 0.5, 1.0, 1.0);
+    let view = [
+        "-vp", "0.5", "0.5", "0.5", "-vd", "0", "0", "-1", "-vh", "60", "-vv", "60",
+    ];
+    let mut args = vec![
+        "-x",
+        "32",
+        "-y",
+        "32",
+        "-ab",
+        "8",
+        "-aa",
+        "0.2",
+        "-ad",
+        "256",
+        "--light-samples",
+        "64",
+    ];
+    args.extend_from_slice(&view);
+    let (image, stats) = render_to(dir.path(), &scene, "cached", &args);
+    let total = mean(&rgb(&image, "").concat());
+    assert!((total - 2.0).abs() / 2.0 < 0.01, "furnace through the cache: {total}");
+    // Records were made at every level and reused: far fewer records than lookups.
+    let records = stats["records_computed"].as_u64().unwrap();
+    let lookups = stats["lookups"].as_u64().unwrap();
+    assert!(
+        records > 8 && records * 5 < lookups,
+        "{records} records for {lookups} lookups"
+    );
+}
+
+/// A vanishing accuracy makes every lookup miss, so the cache path must give brute force's
+/// answer (the same integral), within the noise of both.
+#[test]
+fn vanishing_accuracy_reproduces_brute_force() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = project_dir().join("scenes/cornell.gltf");
+    let common = [
+        "-x",
+        "24",
+        "-y",
+        "24",
+        "-ad",
+        "256",
+        "--spp",
+        "4",
+        "--light-samples",
+        "4",
+        "-ar",
+        "0",
+    ];
+    let mut brute_args = common.to_vec();
+    brute_args.extend_from_slice(&["-aa", "0"]);
+    let (brute, _) = render_to(dir.path(), &scene, "brute", &brute_args);
+    let mut tiny_args = common.to_vec();
+    tiny_args.extend_from_slice(&["-aa", "1e-5", "-as", "0"]);
+    let (tiny, stats) = render_to(dir.path(), &scene, "tiny", &tiny_args);
+    // Practically every lookup misses (two jittered samples may still land on the same spot).
+    let (hits, lookups) = (stats["hits"].as_u64().unwrap(), stats["lookups"].as_u64().unwrap());
+    assert!(hits * 100 <= lookups, "{hits} of {lookups} lookups hit");
+    let (b, t) = (
+        mean(&rgb(&brute, "indirect").concat()),
+        mean(&rgb(&tiny, "indirect").concat()),
+    );
+    assert!(
+        (b - t).abs() / b < 0.03,
+        "indirect means: brute {b}, vanishing accuracy {t}"
+    );
+    assert!(relmse(&tiny, &brute, "") < 0.01, "images differ more than their noise");
+}
+
+/// The cache at default accuracy stays close to brute force on the default scene and is much
+/// faster.
+#[test]
+fn default_accuracy_is_close_to_brute_force_and_cheaper() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = project_dir().join("scenes/cornell.gltf");
+    let common = [
+        "-x",
+        "48",
+        "-y",
+        "48",
+        "-ad",
+        "256",
+        "--spp",
+        "4",
+        "--light-samples",
+        "4",
+        "--threads",
+        "2",
+    ];
+    let mut brute_args = common.to_vec();
+    brute_args.extend_from_slice(&["-aa", "0"]);
+    let (brute, brute_stats) = render_to(dir.path(), &scene, "brute", &brute_args);
+    let (cached, stats) = render_to(dir.path(), &scene, "cached", &common);
+    let (b, c) = (
+        mean(&rgb(&brute, "indirect").concat()),
+        mean(&rgb(&cached, "indirect").concat()),
+    );
+    assert!((b - c).abs() / b < 0.05, "indirect means: brute {b}, cached {c}");
+    assert!(relmse(&cached, &brute, "indirect") < 0.01);
+    let rays = |s: &Value| s["rays"]["total"].as_u64().unwrap();
+    assert!(
+        rays(&stats) * 5 < rays(&brute_stats),
+        "cache should trace far fewer rays"
+    );
+    for key in ["records_computed", "lookups", "hits", "t_amb_s", "t_notamb_s", "wall_s"] {
+        assert!(stats.get(key).is_some(), "stats lack {key}");
+    }
+    assert!(
+        stats["hits"].as_u64().unwrap() + stats["records_computed"].as_u64().unwrap()
+            >= stats["lookups"].as_u64().unwrap()
+    );
+    assert!(stats["t_amb_s"].as_f64().unwrap() > 0.0);
+}
+
+#[test]
+fn cache_file_is_reused_refused_when_settings_differ_and_survives_a_torn_tail() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = project_dir().join("scenes/cornell.gltf");
+    let cache = dir.path().join("cornell.icc");
+    let base = [
+        "-x",
+        "32",
+        "-y",
+        "32",
+        "-ad",
+        "64",
+        "--threads",
+        "1",
+        "-af",
+        cache.to_str().unwrap(),
+    ];
+    let (first, s1) = render_to(dir.path(), &scene, "first", &base);
+    let made = s1["records_computed"].as_u64().unwrap();
+    assert!(made > 10);
+    let (second, s2) = render_to(dir.path(), &scene, "second", &base);
+    assert_eq!(s2["records_loaded"].as_u64().unwrap(), made);
+    let again = s2["records_computed"].as_u64().unwrap();
+    assert!(again * 20 <= made, "second run made {again} records after {made}");
+    assert!(relmse(&second, &first, "indirect") < 0.01);
+
+    // Other settings: refused with a message naming the file.
+    let out = dir.path().join("other.exr");
+    let result = run(&[
+        "render",
+        scene.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "-x",
+        "32",
+        "-y",
+        "32",
+        "-ad",
+        "64",
+        "-aa",
+        "0.1",
+        "-af",
+        cache.to_str().unwrap(),
+    ]);
+    assert!(!result.status.success());
+    let err = stderr(&result);
+    assert!(err.contains("cornell.icc") && err.contains("other settings"), "{err}");
+    assert!(!out.exists());
+
+    // A writer killed mid-record leaves a torn tail: dropped with a warning, not fatal.
+    let len = std::fs::metadata(&cache).unwrap().len();
+    let file = std::fs::OpenOptions::new().write(true).open(&cache).unwrap();
+    file.set_len(len - 37).unwrap();
+    drop(file);
+    let out = dir.path().join("torn.exr");
+    let result = run_ok(&[
+        "render",
+        scene.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "-x",
+        "32",
+        "-y",
+        "32",
+        "-ad",
+        "64",
+        "--threads",
+        "1",
+        "-af",
+        cache.to_str().unwrap(),
+    ]);
+    assert!(stderr(&result).contains("torn"), "{}", stderr(&result));
+}
+
+#[test]
+fn debug_layer_marks_where_records_were_made() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = project_dir().join("scenes/cornell.gltf");
+    let (image, stats) = render_to(
+        dir.path(),
+        &scene,
+        "dbg",
+        &["-x", "32", "-y", "32", "-ad", "64", "-ab", "1", "--ic-records"],
+    );
+    let marks = image.channel("ic_records.Y").expect("ic_records layer");
+    let total: f64 = marks.iter().map(|&v| v as f64).sum();
+    // With -ab 1 every record is made at level 0, by the pixel whose primary hit missed.
+    assert_eq!(total as u64, stats["records_computed"].as_u64().unwrap());
+}
+
+/// Scenes scaled by 1e-4 and 1e5 give the same image: every tolerance is relative to size.
+#[test]
+fn scene_scale_does_not_matter() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut images = Vec::new();
+    for scale in [1.0f32, 1e-4, 1e5] {
+        let sub = dir.path().join(format!("s{scale}"));
+        std::fs::create_dir(&sub).unwrap();
+        let mut b = GltfBuilder::new();
+        let wall = b.material(lambertian("wall", [0.6, 0.5, 0.4]));
+        let light = b.material(emissive_lambertian("light", [0.0; 3], 5.0));
+        inward_box(&mut b, [0.0; 3], [scale; 3], wall);
+        let (lo, hi, y) = (0.35 * scale, 0.65 * scale, 0.99 * scale);
+        b.quad(
+            facing(
+                [[lo, y, lo], [hi, y, lo], [hi, y, hi], [lo, y, hi]],
+                [0.5 * scale, 0.0, 0.5 * scale],
+            ),
+            Some(light),
+        );
+        let scene = b.write(&sub, "box");
+        let p = |v: f32| format!("{}", v * scale);
+        let (x, yv, z) = (p(0.5), p(0.5), p(0.95));
+        let (image, stats) = render_to(
+            &sub,
+            &scene,
+            "img",
+            &[
+                "-x",
+                "24",
+                "-y",
+                "24",
+                "-ad",
+                "64",
+                "--threads",
+                "1",
+                "-vp",
+                &x,
+                &yv,
+                &z,
+                "-vd",
+                "0",
+                "0",
+                "-1",
+                "-vh",
+                "70",
+                "-vv",
+                "70",
+            ],
+        );
+        assert_eq!(stats["nonfinite_dropped"], 0);
+        images.push((image, stats["records_computed"].as_u64().unwrap()));
+    }
+    for (image, records) in &images[1..] {
+        assert!(relmse(image, &images[0].0, "") < 1e-3, "scaled image differs");
+        let base = images[0].1 as f64;
+        assert!(
+            (*records as f64 - base).abs() / base < 0.2,
+            "records {records} vs {base}"
+        );
+    }
+}
+
+/// Extremes: lights from 1e-6 to 1e8, an all-black scene, accuracies near 0 and huge, -ab 0
+/// and 8, a grazing view, a point in a corner. Nothing may be NaN, infinite or negative.
+#[test]
+fn numerical_extremes_stay_finite() {
+    let dir = tempfile::tempdir().unwrap();
+    let check = |image: &ImageData| {
+        for (name, data) in &image.channels {
+            assert!(data.iter().all(|v| v.is_finite() && *v >= 0.0), "bad value in {name}");
+        }
+    };
+    let mut means = Vec::new();
+    for e in [1e-6f32, 1.0, 1e8] {
+        let scene = furnace(dir.path(), 0.5, e, 1.0);
+        let (image, _) = render_to(
+            dir.path(),
+            &scene,
+            "light",
+            &[
+                "-x", "16", "-y", "16", "-ab", "2", "-ad", "64", "-vp", "0.5", "0.5", "0.5", "-vd", "0", "0", "-1",
+            ],
+        );
+        check(&image);
+        means.push(mean(&rgb(&image, "").concat()) / e as f64);
+    }
+    assert!(
+        (means[0] - means[1]).abs() / means[1] < 0.02 && (means[2] - means[1]).abs() / means[1] < 0.02,
+        "{means:?}"
+    );
+
+    let black = furnace(dir.path(), 0.0, 1.0, 1.0);
+    let (image, _) = render_to(
+        dir.path(),
+        &black,
+        "black",
+        &[
+            "-x", "16", "-y", "16", "-ab", "3", "-vp", "0.5", "0.5", "0.5", "-vd", "0", "0", "-1",
+        ],
+    );
+    check(&image);
+    assert!(
+        (mean(&rgb(&image, "").concat()) - 1.0).abs() < 1e-5,
+        "black walls: only emission"
+    );
+
+    let cornell = project_dir().join("scenes/cornell.gltf");
+    for extra in [
+        vec!["-aa", "1e-9"],
+        vec!["-aa", "100"],
+        vec!["-ab", "0"],
+        vec!["-ab", "8", "-ad", "16"],
+        // Grazing: the eye almost in the floor's plane.
+        vec!["-vp", "0", "0.0005", "0.9", "-vd", "0", "0.0001", "-1"],
+        // In a corner: rays start at zero distance from two other surfaces.
+        vec![
+            "-vp", "-0.999", "0.001", "-0.999", "-vd", "1", "1", "1", "-vu", "0", "1", "0",
+        ],
+    ] {
+        let mut args = vec!["-x", "16", "-y", "16"];
+        if !extra.contains(&"-ad") {
+            args.extend_from_slice(&["-ad", "64"]);
+        }
+        args.extend_from_slice(&extra);
+        let (image, _) = render_to(dir.path(), &cornell, "extreme", &args);
+        check(&image);
+    }
+}
+
+#[test]
+fn conference_room_degenerate_triangles_through_the_cache() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = shared_scene("conference_room/conference.gltf");
+    let (image, stats) = render_to(
+        dir.path(),
+        &scene,
+        "conf",
+        &["-x", "32", "-y", "24", "-ad", "64", "-as", "16"],
+    );
+    for (name, data) in &image.channels {
+        assert!(data.iter().all(|v| v.is_finite() && *v >= 0.0), "bad value in {name}");
+    }
+    assert!(stats["records_computed"].as_u64().unwrap() > 0);
+}
