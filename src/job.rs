@@ -2,8 +2,8 @@
 //! BVH, the shading options, the view, and the irradiance cache (with its file). Every way of
 //! rendering (serial now, the MPI modes later) starts from a Job.
 
-use crate::cli::{parse_tile, MetricArg, RenderArgs};
-use crate::commands::{warn, CommandError};
+use crate::cli::{MetricArg, RenderArgs, parse_tile};
+use crate::commands::{CommandError, warn};
 use crate::irradiance::record::Metric;
 use crate::irradiance::{CacheSettings, IrradianceCache};
 use crate::render::RenderSettings;
@@ -32,7 +32,10 @@ const MAX_IMAGE_SIDE: u32 = 65_536;
 /// Refuses option values that cannot work, before anything is loaded.
 pub fn validate(args: &RenderArgs) -> Result<(), String> {
     if args.width == 0 || args.height == 0 || args.width > MAX_IMAGE_SIDE || args.height > MAX_IMAGE_SIDE {
-        return Err(format!("image size -x {} -y {} must be between 1 and {MAX_IMAGE_SIDE}", args.width, args.height));
+        return Err(format!(
+            "image size -x {} -y {} must be between 1 and {MAX_IMAGE_SIDE}",
+            args.width, args.height
+        ));
     }
     if args.spp == 0 {
         return Err("--spp must be at least 1".into());
@@ -68,7 +71,10 @@ fn shading_options(args: &RenderArgs) -> ShadingOptions {
     ShadingOptions {
         ambient_bounces: args.ambient_bounces,
         ambient_divisions: args.ambient_divisions,
-        ambient_value: args.ambient_value.as_deref().map_or(Vec3::ZERO, |v| Vec3::new(v[0], v[1], v[2])),
+        ambient_value: args
+            .ambient_value
+            .as_deref()
+            .map_or(Vec3::ZERO, |v| Vec3::new(v[0], v[1], v[2])),
         max_specular_depth: args.max_specular_depth,
         min_weight: args.min_weight,
         light_samples: args.light_samples.max(1),
@@ -81,7 +87,11 @@ pub fn cache_settings_line(args: &RenderArgs, scene: &Scene) -> String {
     let av = args.ambient_value.as_deref().unwrap_or(&[0.0, 0.0, 0.0]);
     format!(
         "scene {} size {:.6e}; -ab {} -aa {} -ad {} -as {} -ar {} -av {} {} {}; -st {}; metric {:?}; lambertian {}",
-        scene.path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default(),
+        scene
+            .path
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default(),
         scene.size(),
         args.ambient_bounces,
         args.ambient_accuracy,
@@ -100,7 +110,10 @@ pub fn cache_settings_line(args: &RenderArgs, scene: &Scene) -> String {
 impl Job {
     pub fn prepare(args: &RenderArgs) -> Result<Job, CommandError> {
         let load_start = Instant::now();
-        let material_options = MaterialOptions { specular_threshold: args.specular_threshold, lambertian: args.lambertian };
+        let material_options = MaterialOptions {
+            specular_threshold: args.specular_threshold,
+            lambertian: args.lambertian,
+        };
         let scene = Scene::load(&args.scene, &material_options)?;
         let load_s = load_start.elapsed().as_secs_f64();
         for w in &scene.warnings {
@@ -121,8 +134,16 @@ impl Job {
             .map_err(|e| CommandError(format!("view: {e}")))?;
         let camera = view.camera(args.width, args.height);
         let (tile_width, tile_height) = parse_tile(&args.tile)?;
-        let threads = args.threads.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
-        let settings = RenderSettings { spp: args.spp, seed: args.seed, tile_width, tile_height, threads };
+        let threads = args
+            .threads
+            .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+        let settings = RenderSettings {
+            spp: args.spp,
+            seed: args.seed,
+            tile_width,
+            tile_height,
+            threads,
+        };
         let needs_ambient = shading.ambient_bounces > 0 && scene.needs().diffuse;
         let cache = if args.ambient_accuracy > 0.0 && needs_ambient {
             let metric = match args.ic_metric {
@@ -159,6 +180,16 @@ impl Job {
         } else {
             None
         };
-        Ok(Job { scene, tracer, shading, view, camera, settings, cache, load_s, build_s })
+        Ok(Job {
+            scene,
+            tracer,
+            shading,
+            view,
+            camera,
+            settings,
+            cache,
+            load_s,
+            build_s,
+        })
     }
 }

@@ -1,11 +1,11 @@
 //! `icrender render`: prepare the job, trace, write the layered EXR, the preview and the
 //! statistics, and report the error against a reference if one is given.
 
-use super::{warn, CommandError, CommandResult};
+use super::{CommandError, CommandResult, warn};
 use crate::cli::RenderArgs;
 use crate::image::framebuffer::{FrameBuffer, Layer};
 use crate::image::{metrics, output};
-use crate::job::{validate, Job};
+use crate::job::{Job, validate};
 use crate::progress::Progress;
 use crate::render::{render, tiles};
 use crate::scene::SceneNeeds;
@@ -30,7 +30,10 @@ pub fn producible_layers(needs: SceneNeeds, shading: &ShadingOptions) -> Vec<Lay
 }
 
 fn default_output(scene: &Path) -> PathBuf {
-    let stem = scene.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "render".into());
+    let stem = scene
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "render".into());
     PathBuf::from(format!("{stem}.exr"))
 }
 
@@ -72,20 +75,36 @@ impl Outputs {
     pub fn check(args: &RenderArgs) -> Result<Outputs, CommandError> {
         let exr = args.output.clone().unwrap_or_else(|| default_output(&args.scene));
         let png = (!args.no_preview).then(|| exr.with_extension("png"));
-        let outputs = Outputs { exr, png, stats: args.stats.clone() };
-        for path in std::iter::once(&outputs.exr).chain(outputs.png.iter()).chain(outputs.stats.iter()) {
+        let outputs = Outputs {
+            exr,
+            png,
+            stats: args.stats.clone(),
+        };
+        for path in std::iter::once(&outputs.exr)
+            .chain(outputs.png.iter())
+            .chain(outputs.stats.iter())
+        {
             output::check_writable(path).map_err(|e| CommandError(format!("{}: {e}", path.display())))?;
         }
         Ok(outputs)
     }
 
     /// Writes the EXR (with header), the preview and the statistics.
-    pub fn write(&self, args: &RenderArgs, job: &Job, frame: &FrameBuffer, stats: &RenderStats) -> Result<(), CommandError> {
+    pub fn write(
+        &self,
+        args: &RenderArgs,
+        job: &Job,
+        frame: &FrameBuffer,
+        stats: &RenderStats,
+    ) -> Result<(), CommandError> {
         let layers = producible_layers(job.scene.needs(), &job.shading);
         let stats_json = serde_json::to_string(stats)?;
         let command_line: Vec<String> = std::env::args().collect();
         let attributes = vec![
-            ("Software".to_string(), format!("icrender {}", env!("CARGO_PKG_VERSION"))),
+            (
+                "Software".to_string(),
+                format!("icrender {}", env!("CARGO_PKG_VERSION")),
+            ),
             ("icrender/command".to_string(), command_line.join(" ")),
             ("icrender/scene".to_string(), args.scene.display().to_string()),
             ("icrender/options".to_string(), options_line(args)),
@@ -110,11 +129,20 @@ impl Outputs {
 }
 
 /// Prints the error of the written image against the reference, next to the run time.
-pub fn report_error(exr: &Path, reference: &image_io::ImageData, reference_path: &Path, seconds: f64) -> Result<(), CommandError> {
+pub fn report_error(
+    exr: &Path,
+    reference: &image_io::ImageData,
+    reference_path: &Path,
+    seconds: f64,
+) -> Result<(), CommandError> {
     let written = image_io::read_image(exr, &[]).map_err(|e| CommandError(format!("{}: {e}", exr.display())))?;
-    let errors = metrics::compare(&written, reference).map_err(|e| CommandError(format!("{}: {e}", reference_path.display())))?;
+    let errors = metrics::compare(&written, reference)
+        .map_err(|e| CommandError(format!("{}: {e}", reference_path.display())))?;
     for e in &errors {
-        println!("error {:<10} rmse {:.6e}  relmse {:.6e}  time {:.3} s", e.layer, e.rmse, e.rel_mse, seconds);
+        println!(
+            "error {:<10} rmse {:.6e}  relmse {:.6e}  time {:.3} s",
+            e.layer, e.rmse, e.rel_mse, seconds
+        );
     }
     Ok(())
 }
@@ -124,20 +152,28 @@ pub fn run(args: &RenderArgs) -> CommandResult {
     validate(args)?;
     let outputs = Outputs::check(args)?;
     let reference = match &args.reference {
-        Some(path) => Some(image_io::read_image(path, &[]).map_err(|e| CommandError(format!("{}: {e}", path.display())))?),
+        Some(path) => {
+            Some(image_io::read_image(path, &[]).map_err(|e| CommandError(format!("{}: {e}", path.display())))?)
+        }
         None => None,
     };
     let job = Job::prepare(args)?;
     let integrator = Integrator::new(&job.scene, &job.tracer, &job.shading, job.cache.as_ref());
     let s = &job.settings;
-    let progress = Progress::new(tiles(args.width, args.height, s.tile_width, s.tile_height).len(), args.quiet);
+    let progress = Progress::new(
+        tiles(args.width, args.height, s.tile_width, s.tile_height).len(),
+        args.quiet,
+    );
     let render_start = Instant::now();
     let (frame, thread_stats) = render(&integrator, &job.camera, s, &progress);
     let render_s = render_start.elapsed().as_secs_f64();
     if let Some(cache) = &job.cache
         && let Err(e) = cache.finish()
     {
-        warn(&format!("{}: cache file not fully written: {e}", args.ambient_file.as_deref().unwrap_or(Path::new("")).display()));
+        warn(&format!(
+            "{}: cache file not fully written: {e}",
+            args.ambient_file.as_deref().unwrap_or(Path::new("")).display()
+        ));
     }
 
     let mut stats = RenderStats {
@@ -154,7 +190,10 @@ pub fn run(args: &RenderArgs) -> CommandResult {
         load_s: job.load_s,
         build_s: job.build_s,
         render_s,
-        layers: producible_layers(job.scene.needs(), &job.shading).iter().map(|l| l.name()).collect(),
+        layers: producible_layers(job.scene.needs(), &job.shading)
+            .iter()
+            .map(|l| l.name())
+            .collect(),
         records_loaded: job.cache.as_ref().map_or(0, |c| c.load_report.loaded as u64),
         cache_records: job.cache.as_ref().map_or(0, |c| c.len() as u64),
         lock_contention: job.cache.as_ref().map_or(0, |c| c.contention()),
@@ -162,7 +201,10 @@ pub fn run(args: &RenderArgs) -> CommandResult {
     };
     stats.add_threads(&thread_stats);
     if stats.nonfinite_dropped > 0 {
-        warn(&format!("{} non-finite contribution(s) were dropped", stats.nonfinite_dropped));
+        warn(&format!(
+            "{} non-finite contribution(s) were dropped",
+            stats.nonfinite_dropped
+        ));
     }
     stats.wall_s = wall.elapsed().as_secs_f64();
     outputs.write(args, &job, &frame, &stats)?;

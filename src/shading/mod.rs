@@ -124,7 +124,12 @@ impl<'a> Integrator<'a> {
         options: &'a ShadingOptions,
         cache: Option<&'a IrradianceCache>,
     ) -> Self {
-        Integrator { scene, tracer, options, cache }
+        Integrator {
+            scene,
+            tracer,
+            options,
+            cache,
+        }
     }
 
     /// The components of light arriving at the eye along a primary ray.
@@ -187,9 +192,15 @@ impl<'a> Integrator<'a> {
         counts.specular += 1;
         // Seeing an emitter through a transparent surface is seeing it straight: counted where
         // the path would count it anyway (direct lighting's shadow rays pass the same surface).
-        let next = PathState { specular_depth: state.specular_depth + 1, weight: state.weight * jt, ..state };
+        let next = PathState {
+            specular_depth: state.specular_depth + 1,
+            weight: state.weight * jt,
+            ..state
+        };
         let origin = self.tracer.spawn_point(hit, dir);
-        self.trace(origin, dir, next, Coherence::Incoherent, rng, counts).0.total()
+        self.trace(origin, dir, next, Coherence::Incoherent, rng, counts)
+            .0
+            .total()
             * jt
     }
 
@@ -259,9 +270,17 @@ impl<'a> Integrator<'a> {
         // caustic paths (diffuse -> mirror -> light) are what make indirect diffuse values noisy
         // and cached records blotchy, and Radiance leaves them out of its ambient calculation
         // as well.
-        let next = PathState { specular_depth: state.specular_depth + 1, weight, count_emission: state.level == 0, ..state };
+        let next = PathState {
+            specular_depth: state.specular_depth + 1,
+            weight,
+            count_emission: state.level == 0,
+            ..state
+        };
         let origin = self.tracer.spawn_point(hit, wi);
-        jt * self.trace(origin, wi, next, Coherence::Incoherent, rng, counts).0.total()
+        jt * self
+            .trace(origin, wi, next, Coherence::Incoherent, rng, counts)
+            .0
+            .total()
     }
 
     /// Irradiance / pi arriving at a diffuse point from other surfaces (the part of L_a before
