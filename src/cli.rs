@@ -109,6 +109,21 @@ pub struct RenderArgs {
     /// Record weighting: Radiance's Hessian-based error control, or Ward's 1988 split sphere.
     #[arg(long = "ic-metric", value_enum, default_value_t = MetricArg::Hessian)]
     pub ic_metric: MetricArg,
+    /// How ranks share the work under mpirun (serial without mpirun).
+    #[arg(long = "mode", value_enum)]
+    pub mode: Option<ModeArg>,
+    /// Records a rank gathers before it shares them (default: 50; 8 for PAs in component mode).
+    #[arg(long = "sync")]
+    pub sync: Option<u32>,
+    /// Requests a PR gathers before it sends them to a PA (component mode).
+    #[arg(long = "send", default_value_t = 32)]
+    pub send: u32,
+    /// Ranks that act as PAs in component mode (default: half the workers).
+    #[arg(long = "pa")]
+    pub pa: Option<u32>,
+    /// Seconds the master controller waits for any message before it gives up on the job.
+    #[arg(long = "timeout", default_value_t = 600.0)]
+    pub timeout: f64,
     /// Add a debug layer `ic_records` counting the records each pixel made.
     #[arg(long = "ic-records")]
     pub ic_records: bool,
@@ -159,6 +174,21 @@ pub struct RenderArgs {
     pub quiet: bool,
     #[command(flatten)]
     pub view: ViewArgs,
+}
+
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ModeArg {
+    /// One process, threads over tiles (the default without mpirun).
+    Serial,
+    /// Every worker keeps a private cache.
+    Noshare,
+    /// Workers exchange records through the master controller (Robertson et al.).
+    #[value(alias = "centralized")]
+    Centralised,
+    /// Workers send their records to every other rank (Koholka et al.).
+    Broadcast,
+    /// PRs render all but indirect diffuse; PAs own the cache (Debattista et al.).
+    Component,
 }
 
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]

@@ -3,9 +3,11 @@
 
 pub mod cli;
 pub mod commands;
+pub mod export;
 pub mod image;
 pub mod irradiance;
 pub mod job;
+pub mod parallel;
 pub mod progress;
 pub mod render;
 pub mod sampling;

@@ -30,7 +30,10 @@ fn main() -> ExitCode {
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(commands::CommandError(message)) => {
-            eprintln!("icrender: error: {message}");
+            // An empty message: another rank already said why.
+            if !message.is_empty() {
+                eprintln!("icrender: error: {message}");
+            }
             ExitCode::FAILURE
         }
     }

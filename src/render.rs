@@ -85,6 +85,49 @@ pub fn render_pixel(
     sum * (1.0 / samples as f32)
 }
 
+/// One rendered pixel: its components and the records of the cache it made at level 0.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct PixelValue {
+    pub components: Components,
+    pub records: f32,
+}
+
+/// Renders a tile's pixels in scanline order. `after_pixel` runs after each pixel (the MPI
+/// modes share cache records there).
+pub fn render_tile(
+    integrator: &Integrator<'_>,
+    camera: &Camera,
+    settings: &RenderSettings,
+    tile: &Tile,
+    counts: &mut RayCounts,
+    mut after_pixel: impl FnMut(&mut RayCounts),
+) -> Vec<PixelValue> {
+    let mut values = Vec::with_capacity(((tile.x1 - tile.x0) * (tile.y1 - tile.y0)) as usize);
+    for y in tile.y0..tile.y1 {
+        for x in tile.x0..tile.x1 {
+            let before = counts.records_level0;
+            let components = render_pixel(integrator, camera, settings, x, y, counts);
+            values.push(PixelValue { components, records: (counts.records_level0 - before) as f32 });
+            after_pixel(counts);
+        }
+    }
+    values
+}
+
+/// Stores a rendered tile's pixels in the frame.
+pub fn store_tile(frame: &mut FrameBuffer, tile: &Tile, values: &[PixelValue]) {
+    let mut it = values.iter();
+    for y in tile.y0..tile.y1 {
+        for x in tile.x0..tile.x1 {
+            if let Some(v) = it.next() {
+                frame.set(x, y, &v.components);
+                frame.set_records(x, y, v.records);
+            }
+        }
+    }
+}
+
+/// Renders the whole image on `settings.threads` threads in one process.
 pub fn render(
     integrator: &Integrator<'_>,
     camera: &Camera,
@@ -101,29 +144,11 @@ pub fn render(
                 scope.spawn(|| {
                     let mut stats = ThreadStats::default();
                     let start = Instant::now();
-                    let mut values = Vec::new();
                     loop {
                         let index = next.fetch_add(1, Ordering::Relaxed);
                         let Some(tile) = all.get(index) else { break };
-                        values.clear();
-                        for y in tile.y0..tile.y1 {
-                            for x in tile.x0..tile.x1 {
-                                let before = stats.rays.records_level0;
-                                let value = render_pixel(integrator, camera, settings, x, y, &mut stats.rays);
-                                values.push((value, (stats.rays.records_level0 - before) as f32));
-                            }
-                        }
-                        let mut frame = frame.lock().unwrap_or_else(|e| e.into_inner());
-                        let mut it = values.iter();
-                        for y in tile.y0..tile.y1 {
-                            for x in tile.x0..tile.x1 {
-                                if let Some((v, records)) = it.next() {
-                                    frame.set(x, y, v);
-                                    frame.set_records(x, y, *records);
-                                }
-                            }
-                        }
-                        drop(frame);
+                        let values = render_tile(integrator, camera, settings, tile, &mut stats.rays, |_| {});
+                        store_tile(&mut frame.lock().unwrap_or_else(|e| e.into_inner()), tile, &values);
                         stats.tiles += 1;
                         progress.advance(1);
                     }

@@ -59,6 +59,32 @@ impl From<&ThreadStats> for ThreadReport {
     }
 }
 
+/// One rank's share of an MPI render (the serial mode reports itself as one rank too).
+#[derive(Clone, Debug, Default, Serialize, serde::Deserialize)]
+pub struct RankReport {
+    pub rank: u32,
+    /// "serial", "mc" (master controller), "worker", "pr" or "pa".
+    pub role: String,
+    pub threads: usize,
+    pub tiles: usize,
+    pub records_computed: u64,
+    pub lookups: u64,
+    pub hits: u64,
+    pub t_amb_s: f64,
+    pub t_notamb_s: f64,
+    /// Time waiting for work or messages.
+    pub idle_s: f64,
+    /// Messages and bytes this rank sent.
+    pub messages: u64,
+    pub bytes: u64,
+    pub messages_received: u64,
+    pub bytes_received: u64,
+    /// Records that arrived from other ranks, and those refused as invalid.
+    pub records_received: u64,
+    pub records_rejected: u64,
+    pub wall_s: f64,
+}
+
 #[derive(Clone, Debug, Default, Serialize)]
 pub struct RenderStats {
     pub version: &'static str,
@@ -89,6 +115,11 @@ pub struct RenderStats {
     pub lock_contention: u64,
     pub t_amb_s: f64,
     pub t_notamb_s: f64,
+    /// Summed over ranks: time waiting, messages and bytes sent, invalid records refused.
+    pub idle_s: f64,
+    pub messages: u64,
+    pub bytes: u64,
+    pub records_rejected: u64,
     pub rays: RayStats,
     pub mrays_per_s: f64,
     /// Contributions dropped for being NaN or infinite (should be 0).
@@ -100,6 +131,7 @@ pub struct RenderStats {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub reference_passes: Option<u64>,
     pub per_thread: Vec<ThreadReport>,
+    pub per_rank: Vec<RankReport>,
 }
 
 impl RenderStats {
@@ -119,5 +151,36 @@ impl RenderStats {
         self.rays = RayStats::from(&total);
         self.nonfinite_dropped = total.nonfinite;
         self.mrays_per_s = total.total() as f64 / self.render_s.max(1e-9) / 1e6;
+    }
+
+    /// The serial render as the one rank of `per_rank`, so every mode writes the same keys.
+    pub fn single_rank(&mut self) {
+        self.per_rank = vec![RankReport {
+            rank: 0,
+            role: "serial".into(),
+            threads: self.threads,
+            tiles: self.per_thread.iter().map(|t| t.tiles).sum(),
+            records_computed: self.records_computed,
+            lookups: self.lookups,
+            hits: self.hits,
+            t_amb_s: self.t_amb_s,
+            t_notamb_s: self.t_notamb_s,
+            wall_s: self.wall_s,
+            ..Default::default()
+        }];
+    }
+
+    /// Totals over the ranks' reports.
+    pub fn add_ranks(&mut self, ranks: Vec<RankReport>) {
+        self.records_computed = ranks.iter().map(|r| r.records_computed).sum();
+        self.lookups = ranks.iter().map(|r| r.lookups).sum();
+        self.hits = ranks.iter().map(|r| r.hits).sum();
+        self.t_amb_s = ranks.iter().map(|r| r.t_amb_s).sum();
+        self.t_notamb_s = ranks.iter().map(|r| r.t_notamb_s).sum();
+        self.idle_s = ranks.iter().map(|r| r.idle_s).sum();
+        self.messages = ranks.iter().map(|r| r.messages).sum();
+        self.bytes = ranks.iter().map(|r| r.bytes).sum();
+        self.records_rejected = ranks.iter().map(|r| r.records_rejected).sum();
+        self.per_rank = ranks;
     }
 }

@@ -6,6 +6,7 @@ use crate::cli::RenderArgs;
 use crate::image::framebuffer::{FrameBuffer, Layer};
 use crate::image::{metrics, output};
 use crate::job::{Job, validate};
+use crate::parallel::{under_mpirun, Mode};
 use crate::progress::Progress;
 use crate::render::{render, tiles};
 use crate::scene::SceneNeeds;
@@ -148,6 +149,17 @@ pub fn report_error(
 }
 
 pub fn run(args: &RenderArgs) -> CommandResult {
+    let mode = match args.mode {
+        Some(m) => Mode::from(m),
+        None if under_mpirun() => Mode::Centralised,
+        None => Mode::Serial,
+    };
+    if mode != Mode::Serial {
+        if mode == Mode::Component {
+            return Err(CommandError("--mode component is not available yet".into()));
+        }
+        return crate::parallel::run(args, mode);
+    }
     let wall = Instant::now();
     validate(args)?;
     let outputs = Outputs::check(args)?;
@@ -207,6 +219,7 @@ pub fn run(args: &RenderArgs) -> CommandResult {
         ));
     }
     stats.wall_s = wall.elapsed().as_secs_f64();
+    stats.single_rank();
     outputs.write(args, &job, &frame, &stats)?;
     if !args.quiet {
         eprintln!(

@@ -14,6 +14,7 @@ use hemisphere::Hemisphere;
 use index::RecordIndex;
 use persist::{CacheFile, LoadReport};
 use record::{Metric, Record};
+use std::sync::Mutex;
 
 /// Smallest hemisphere grid side, so deep levels still see their surroundings.
 pub const MIN_DIVISIONS: usize = 4;
@@ -83,6 +84,8 @@ pub struct IrradianceCache {
     index: RecordIndex,
     file: Option<CacheFile>,
     pub load_report: LoadReport,
+    /// Records made here and not yet shared with other ranks (None when nothing is shared).
+    outbox: Option<Mutex<Vec<Record>>>,
 }
 
 impl IrradianceCache {
@@ -97,6 +100,7 @@ impl IrradianceCache {
             settings,
             file: None,
             load_report: LoadReport::default(),
+            outbox: None,
         }
     }
 
@@ -149,7 +153,31 @@ impl IrradianceCache {
         if let Some(file) = &self.file {
             file.append(&record);
         }
+        if let Some(outbox) = &self.outbox {
+            outbox.lock().unwrap_or_else(|e| e.into_inner()).push(record.clone());
+        }
         self.index.insert(record);
+    }
+
+    /// Adds a record that was made elsewhere (another rank): not written to this process's
+    /// file by default and not shared again.
+    pub fn insert_shared(&self, record: Record) {
+        self.index.insert(record);
+    }
+
+    /// From now on, records made here are also kept for `take_outbox`.
+    pub fn keep_outbox(&mut self) {
+        self.outbox = Some(Mutex::new(Vec::new()));
+    }
+
+    /// How many records wait to be shared.
+    pub fn outbox_len(&self) -> usize {
+        self.outbox.as_ref().map_or(0, |o| o.lock().unwrap_or_else(|e| e.into_inner()).len())
+    }
+
+    /// The records made here since the last call.
+    pub fn take_outbox(&self) -> Vec<Record> {
+        self.outbox.as_ref().map_or_else(Vec::new, |o| std::mem::take(&mut *o.lock().unwrap_or_else(|e| e.into_inner())))
     }
 
     /// Flushes the file; its first write error, if any.

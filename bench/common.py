@@ -1,0 +1,67 @@
+"""Shared helpers of the bench scripts: building and running icrender, reading its numbers.
+
+Benchmarks print figures and write CSVs and plots; they assert nothing (tests do that).
+"""
+
+import json
+import os
+import subprocess
+import sys
+import tempfile
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+SHARED_SCENES = os.path.normpath(os.path.join(ROOT, "..", "shared", "scenes"))
+BINARY = os.path.join(ROOT, "target", "release", "icrender")
+
+
+def build():
+    """Builds the release binary (quietly) and returns its path."""
+    subprocess.run(["cargo", "build", "--release", "--quiet"], cwd=ROOT, check=True)
+    return BINARY
+
+
+def ensure_module(name, package=None):
+    """Imports a module, installing it with pip first if needed (bench-only dependencies)."""
+    try:
+        return __import__(name)
+    except ImportError:
+        subprocess.run([sys.executable, "-m", "pip", "install", "--quiet", package or name], check=True)
+        return __import__(name)
+
+
+def render(scene, out, options, reference=None):
+    """Runs `icrender render`; returns (stats dict, {layer: (rmse, relmse)} against reference)."""
+    stats_path = out + ".json"
+    cmd = [BINARY, "render", scene, "-o", out, "-q", "--no-preview", "--stats", stats_path] + options
+    if reference:
+        cmd += ["--reference", reference]
+    result = subprocess.run(cmd, capture_output=True, text=True)
+    if result.returncode != 0:
+        raise RuntimeError(f"icrender failed: {' '.join(cmd)}\n{result.stderr}")
+    with open(stats_path) as f:
+        stats = json.load(f)
+    errors = {}
+    for line in result.stdout.splitlines():
+        parts = line.split()
+        if len(parts) >= 6 and parts[0] == "error":
+            errors[parts[1]] = (float(parts[3]), float(parts[5]))
+    return stats, errors
+
+
+def compare(image, reference):
+    """`icrender compare --json`: {layer: (rmse, relmse)}."""
+    result = subprocess.run([BINARY, "compare", image, reference, "--json"], capture_output=True, text=True, check=True)
+    return {e["layer"]: (e["rmse"], e["rel_mse"]) for e in json.loads(result.stdout)}
+
+
+def reference(scene, out, options, noise=0.003, max_seconds=600):
+    """Renders (or reuses) a converged brute-force reference."""
+    if os.path.exists(out):
+        return out
+    cmd = [BINARY, "reference", scene, "-o", out, "-q", "--no-preview", "--noise", str(noise), "--max-seconds", str(max_seconds)] + options
+    subprocess.run(cmd, check=True)
+    return out
+
+
+def scratch():
+    return tempfile.mkdtemp(prefix="icrender-bench-")

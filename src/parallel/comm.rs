@@ -1,0 +1,113 @@
+//! Point-to-point messages between ranks, counted (messages, bytes) and timed (idle), over the
+//! `mpi` crate. Receiving polls with a growing pause instead of blocking in MPI, because Open
+//! MPI's blocking calls spin: on an oversubscribed machine a waiting rank would steal the core
+//! from the rank it waits for.
+
+use mpi::point_to_point::{Destination, MatchedReceiveVec, Source};
+use mpi::topology::{Communicator, SimpleCommunicator};
+use mpi::Tag;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::{Duration, Instant};
+
+/// Longest pause between polls: bounds the latency a waiting rank adds.
+const MAX_PAUSE: Duration = Duration::from_micros(500);
+
+/// A received message.
+#[derive(Debug)]
+pub struct Received {
+    pub source: i32,
+    pub tag: Tag,
+    pub data: Vec<u8>,
+}
+
+/// Traffic and waiting of one rank; shared by its threads.
+#[derive(Default, Debug)]
+pub struct Counters {
+    pub messages_sent: AtomicU64,
+    pub bytes_sent: AtomicU64,
+    pub messages_received: AtomicU64,
+    pub bytes_received: AtomicU64,
+    /// Nanoseconds spent waiting for messages.
+    pub idle_ns: AtomicU64,
+}
+
+impl Counters {
+    pub fn idle_s(&self) -> f64 {
+        self.idle_ns.load(Ordering::Relaxed) as f64 * 1e-9
+    }
+}
+
+/// The world communicator, seen from one thread. Cheap to make; every thread makes its own
+/// (the handle is not shared across threads).
+pub struct Comm<'c> {
+    world: SimpleCommunicator,
+    pub counters: &'c Counters,
+}
+
+impl<'c> Comm<'c> {
+    pub fn new(counters: &'c Counters) -> Self {
+        Comm { world: SimpleCommunicator::world(), counters }
+    }
+
+    pub fn rank(&self) -> i32 {
+        self.world.rank()
+    }
+
+    pub fn size(&self) -> i32 {
+        self.world.size()
+    }
+
+    pub fn send(&self, dest: i32, tag: Tag, data: &[u8]) {
+        self.world.process_at_rank(dest).send_with_tag(data, tag);
+        self.counters.messages_sent.fetch_add(1, Ordering::Relaxed);
+        self.counters.bytes_sent.fetch_add(data.len() as u64, Ordering::Relaxed);
+    }
+
+    fn count_received(&self, r: Received) -> Received {
+        self.counters.messages_received.fetch_add(1, Ordering::Relaxed);
+        self.counters.bytes_received.fetch_add(r.data.len() as u64, Ordering::Relaxed);
+        r
+    }
+
+    /// A message with `tag` (any tag when None) from `source` (anyone when None), if one is
+    /// waiting now.
+    pub fn try_receive(&self, source: Option<i32>, tag: Option<Tag>) -> Option<Received> {
+        let probe = match (source, tag) {
+            (Some(s), Some(t)) => self.world.process_at_rank(s).immediate_matched_probe_with_tag(t),
+            (Some(s), None) => self.world.process_at_rank(s).immediate_matched_probe(),
+            (None, Some(t)) => self.world.any_process().immediate_matched_probe_with_tag(t),
+            (None, None) => self.world.any_process().immediate_matched_probe(),
+        };
+        probe.map(|matched| {
+            let (data, status) = matched.matched_receive_vec::<u8>();
+            self.count_received(Received { source: status.source_rank(), tag: status.tag(), data })
+        })
+    }
+
+    /// Waits for a matching message, pausing between polls; the wait counts as idle time.
+    /// Gives up after `timeout` (None: never) and returns None.
+    pub fn receive(&self, source: Option<i32>, tag: Option<Tag>, timeout: Option<Duration>) -> Option<Received> {
+        if let Some(r) = self.try_receive(source, tag) {
+            return Some(r);
+        }
+        let start = Instant::now();
+        let mut pause = Duration::from_micros(5);
+        let result = loop {
+            if let Some(r) = self.try_receive(source, tag) {
+                break Some(r);
+            }
+            if timeout.is_some_and(|t| start.elapsed() >= t) {
+                break None;
+            }
+            std::thread::sleep(pause);
+            pause = (pause * 2).min(MAX_PAUSE);
+        };
+        self.counters.idle_ns.fetch_add(start.elapsed().as_nanos() as u64, Ordering::Relaxed);
+        result
+    }
+
+    /// Ends the whole job (every rank) with an error code.
+    pub fn abort(&self, code: i32) -> ! {
+        self.world.abort(code)
+    }
+}
