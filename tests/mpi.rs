@@ -1,0 +1,206 @@
+//! The MPI modes through mpirun (oversubscribed: this machine has 2 cores), on small images:
+//! complete images that match the serial render within the cache's error, statistics that add
+//! up, the paper's ordering of cache misses, clear errors for impossible layouts, and a job that
+//! ends (naming the rank) when a worker dies.
+
+mod common;
+use common::*;
+use serde_json::Value;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+fn mpirun(np: usize, args: &[&str]) -> Output {
+    mpirun_command(np, args).output().expect("mpirun (openmpi-bin) is installed")
+}
+
+fn mpirun_command(np: usize, args: &[&str]) -> Command {
+    let mut cmd = Command::new("mpirun");
+    cmd.env("OMPI_ALLOW_RUN_AS_ROOT", "1")
+        .env("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
+        // Loopback only; no network probing in tests.
+        .env("OMPI_MCA_btl_tcp_if_include", "lo")
+        .env("OMPI_MCA_oob_tcp_if_include", "lo")
+        .args(["--oversubscribe", "-np", &np.to_string()])
+        .arg(binary())
+        .args(args);
+    cmd
+}
+
+struct Run {
+    image: ImageData,
+    stats: Value,
+}
+
+fn render(dir: &Path, scene: &Path, name: &str, np: Option<usize>, extra: &[&str]) -> Run {
+    let out = dir.join(format!("{name}.exr"));
+    let stats = dir.join(format!("{name}.json"));
+    let mut args = vec!["render", scene.to_str().unwrap(), "-o", out.to_str().unwrap(), "-q", "--no-preview"];
+    args.extend_from_slice(&["--stats", stats.to_str().unwrap(), "-x", "48", "-y", "48", "-ad", "64"]);
+    if !extra.contains(&"--tile") {
+        args.extend_from_slice(&["--tile", "8x8"]);
+    }
+    args.extend_from_slice(extra);
+    let output = match np {
+        Some(np) => mpirun(np, &args),
+        None => run(&args),
+    };
+    assert!(output.status.success(), "{name} failed:\n{}{}", stdout(&output), stderr(&output));
+    Run { image: read_exr(&out), stats: serde_json::from_str(&std::fs::read_to_string(&stats).unwrap()).unwrap() }
+}
+
+fn relmse(a: &ImageData, b: &ImageData) -> f64 {
+    let (x, y) = (rgb(a, ""), rgb(b, ""));
+    let mut sum = 0.0;
+    let mut n = 0;
+    for c in 0..3 {
+        for (p, q) in x[c].iter().zip(&y[c]) {
+            sum += ((*p - *q) as f64).powi(2) / ((*q as f64).powi(2) + 0.01);
+            n += 1;
+        }
+    }
+    sum / n as f64
+}
+
+fn u(v: &Value, key: &str) -> u64 {
+    v[key].as_u64().unwrap_or_else(|| panic!("{key} missing in {v}"))
+}
+
+fn scenes() -> Vec<PathBuf> {
+    vec![project_dir().join("scenes/cornell.gltf"), project_dir().join("scenes/corridor.gltf")]
+}
+
+#[test]
+fn every_mode_matches_serial_and_statistics_add_up() {
+    let dir = tempfile::tempdir().unwrap();
+    for scene in scenes() {
+        let serial = render(dir.path(), &scene, "serial", None, &["--threads", "1"]);
+        let serial_misses = u(&serial.stats, "records_computed");
+        // The cache's own error: the same serial render with records made in other orders.
+        let reordered = [
+            render(dir.path(), &scene, "serial-4x4", None, &["--threads", "1", "--tile", "4x4"]),
+            render(dir.path(), &scene, "serial-2t", None, &["--threads", "2"]),
+        ];
+        let own_error = reordered.iter().map(|r| relmse(&r.image, &serial.image)).fold(0.0, f64::max);
+        let tolerance = (3.0 * own_error).max(1e-3);
+        for np in [3usize, 4] {
+            let mut misses = std::collections::HashMap::new();
+            for mode in ["noshare", "centralised", "broadcast"] {
+                let name = format!("{mode}-{np}");
+                let run = render(dir.path(), &scene, &name, Some(np), &["--mode", mode]);
+                let s = &run.stats;
+                assert_eq!(s["mode"], mode);
+                assert_eq!(u(s, "ranks"), np as u64);
+                // Same pixel samples, different records: within the cache's own error.
+                let err = relmse(&run.image, &serial.image);
+                assert!(err < tolerance, "{} {name}: relMSE {err} against serial (cache's own {own_error})", scene.display());
+                assert!(rgb(&run.image, "").iter().flatten().all(|v| v.is_finite()));
+                let ranks = s["per_rank"].as_array().unwrap();
+                assert_eq!(ranks.len(), np);
+                assert_eq!(ranks[0]["role"], "mc");
+                // 48x48 in 8x8 tiles: 36 tiles, each rendered once.
+                let tiles: u64 = ranks.iter().map(|r| u(r, "tiles")).sum();
+                assert_eq!(tiles, 36);
+                let records: u64 = ranks.iter().map(|r| u(r, "records_computed")).sum();
+                assert_eq!(records, u(s, "records_computed"));
+                let messages: u64 = ranks.iter().map(|r| u(r, "messages")).sum();
+                assert_eq!(messages, u(s, "messages"));
+                for key in ["mode", "ranks", "records_computed", "lookups", "t_amb_s", "t_notamb_s", "idle_s", "messages", "bytes", "wall_s", "per_rank"] {
+                    assert!(s.get(key).is_some(), "{key} missing");
+                }
+                assert_eq!(u(s, "records_rejected"), 0);
+                misses.insert(mode, u(s, "records_computed"));
+            }
+            // The paper's ordering (Figure 3): sharing saves records, not sharing repeats them.
+            // Records made in another order differ a little in number, hence the 10 % margin.
+            let (ns, ce, bc) = (misses["noshare"] as f64, misses["centralised"] as f64, misses["broadcast"] as f64);
+            let serial = serial_misses as f64;
+            assert!(serial <= 1.1 * ce.min(bc), "{}: serial {serial} vs shared {ce} {bc}", scene.display());
+            assert!(ce.max(bc) <= 1.1 * ns, "{}: shared {ce} {bc} vs noshare {ns}", scene.display());
+        }
+    }
+}
+
+#[test]
+fn impossible_layouts_are_refused_on_rank_zero() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = project_dir().join("scenes/cornell.gltf");
+    let out = dir.path().join("x.exr");
+    let base = ["render", scene.to_str().unwrap(), "-o", out.to_str().unwrap(), "-x", "16", "-y", "16"];
+    let check = |np: usize, extra: &[&str], expect: &str| {
+        let mut args = base.to_vec();
+        args.extend_from_slice(extra);
+        let output = mpirun(np, &args);
+        let err = stderr(&output);
+        assert!(!output.status.success(), "{extra:?} should fail");
+        assert_eq!(err.matches("icrender: error:").count(), 1, "one error line, from rank 0:\n{err}");
+        assert!(err.contains(expect), "{expect:?} not in:\n{err}");
+        assert!(!err.contains("panicked"), "{err}");
+        assert!(!out.exists());
+    };
+    check(3, &["--mode", "centralised", "--sync", "0"], "--sync");
+    check(3, &["--mode", "broadcast", "--tile", "16x16"], "only 1 tiles");
+    check(1, &["--mode", "noshare"], "at least 2 MPI ranks");
+}
+
+#[test]
+fn cache_file_keeps_synced_records_for_a_rerun() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = project_dir().join("scenes/cornell.gltf");
+    let cache = dir.path().join("c.icc");
+    for mode in ["centralised", "broadcast", "noshare"] {
+        let _ = std::fs::remove_file(&cache);
+        let first = render(dir.path(), &scene, "first", Some(3), &["--mode", mode, "-af", cache.to_str().unwrap()]);
+        let second = render(dir.path(), &scene, "second", Some(3), &["--mode", mode, "-af", cache.to_str().unwrap()]);
+        let (a, b) = (u(&first.stats, "records_computed"), u(&second.stats, "records_computed"));
+        assert_eq!(u(&second.stats, "records_loaded"), a, "{mode}: every record of the first run is in the file");
+        assert!(b * 10 <= a, "{mode}: rerun made {b} records after {a}");
+    }
+}
+
+#[test]
+fn a_dying_worker_ends_the_job_naming_its_rank() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = project_dir().join("scenes/cornell.gltf");
+    let out = dir.path().join("killed.exr");
+    // Brute force at 256x256: several seconds of work per rank, so the kill lands mid-render.
+    let args = [
+        "render", scene.to_str().unwrap(), "-o", out.to_str().unwrap(), "-x", "256", "-y", "256", "-aa", "0", "-ad", "256",
+        "--mode", "centralised", "--tile", "16x16",
+    ];
+    let mut child = mpirun_command(3, &args).stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().unwrap();
+    let start = Instant::now();
+    let victim = loop {
+        assert!(start.elapsed() < Duration::from_secs(30), "rank 2 never started");
+        if let Some(pid) = rank_pid(out.to_str().unwrap(), 2) {
+            break pid;
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    std::thread::sleep(Duration::from_millis(700));
+    Command::new("kill").args(["-9", &victim.to_string()]).status().unwrap();
+    let output = child.wait_with_output().unwrap();
+    assert!(start.elapsed() < Duration::from_secs(60), "the job did not end in bounded time");
+    assert!(!output.status.success());
+    let all = format!("{}{}", stdout(&output), stderr(&output));
+    assert!(all.contains("rank 2"), "the message should name the rank:\n{all}");
+    assert!(!out.exists(), "no image from an incomplete render");
+}
+
+/// The pid of the icrender process with the given MPI rank whose command line mentions `marker`.
+fn rank_pid(marker: &str, rank: u32) -> Option<u32> {
+    for entry in std::fs::read_dir("/proc").ok()?.flatten() {
+        let Ok(pid) = entry.file_name().to_string_lossy().parse::<u32>() else { continue };
+        let cmdline = std::fs::read(entry.path().join("cmdline")).unwrap_or_default();
+        let cmdline = String::from_utf8_lossy(&cmdline);
+        if !cmdline.contains(marker) || !cmdline.starts_with(binary().to_str().unwrap()) {
+            continue;
+        }
+        let environ = std::fs::read(entry.path().join("environ")).unwrap_or_default();
+        let wanted = format!("OMPI_COMM_WORLD_RANK={rank}");
+        if environ.split(|&b| b == 0).any(|v| v == wanted.as_bytes()) {
+            return Some(pid);
+        }
+    }
+    None
+}
