@@ -3,6 +3,7 @@
 Benchmarks print figures and write CSVs and plots; they assert nothing (tests do that).
 """
 
+import importlib
 import json
 import os
 import subprocess
@@ -23,10 +24,10 @@ def build():
 def ensure_module(name, package=None):
     """Imports a module, installing it with pip first if needed (bench-only dependencies)."""
     try:
-        return __import__(name)
+        return importlib.import_module(name)
     except ImportError:
         subprocess.run([sys.executable, "-m", "pip", "install", "--quiet", package or name], check=True)
-        return __import__(name)
+        return importlib.import_module(name)
 
 
 def render(scene, out, options, reference=None):

@@ -50,8 +50,28 @@ pub fn tiles(width: u32, height: u32, tile_width: u32, tile_height: u32) -> Vec<
 #[derive(Clone, Debug, Default)]
 pub struct ThreadStats {
     pub rays: RayCounts,
+    /// Wall-clock time the thread existed, and the CPU time it used.
     pub busy_s: f64,
+    pub cpu_s: f64,
     pub tiles: usize,
+}
+
+/// Measures a thread's wall-clock and CPU time from now on.
+pub struct ThreadClock {
+    wall: Instant,
+    cpu: cpu_time::ThreadTime,
+}
+
+impl ThreadClock {
+    pub fn start() -> ThreadClock {
+        ThreadClock { wall: Instant::now(), cpu: cpu_time::ThreadTime::now() }
+    }
+
+    /// Stores the elapsed times into `stats`.
+    pub fn stop(&self, stats: &mut ThreadStats) {
+        stats.busy_s = self.wall.elapsed().as_secs_f64();
+        stats.cpu_s = self.cpu.elapsed().as_secs_f64();
+    }
 }
 
 /// The components of one pixel: the mean of its samples.
@@ -143,7 +163,7 @@ pub fn render(
             .map(|_| {
                 scope.spawn(|| {
                     let mut stats = ThreadStats::default();
-                    let start = Instant::now();
+                    let clock = ThreadClock::start();
                     loop {
                         let index = next.fetch_add(1, Ordering::Relaxed);
                         let Some(tile) = all.get(index) else { break };
@@ -152,7 +172,7 @@ pub fn render(
                         stats.tiles += 1;
                         progress.advance(1);
                     }
-                    stats.busy_s = start.elapsed().as_secs_f64();
+                    clock.stop(&mut stats);
                     stats
                 })
             })

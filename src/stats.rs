@@ -32,6 +32,7 @@ impl From<&RayCounts> for RayStats {
 pub struct ThreadReport {
     pub tiles: usize,
     pub busy_s: f64,
+    pub cpu_s: f64,
     pub records_computed: u64,
     pub lookups: u64,
     pub hits: u64,
@@ -42,20 +43,34 @@ pub struct ThreadReport {
     pub rays: RayStats,
 }
 
-impl From<&ThreadStats> for ThreadReport {
-    fn from(t: &ThreadStats) -> Self {
+impl ThreadReport {
+    /// A thread's report. T_amb and T_notamb are CPU seconds, so that aggregated figures mean
+    /// the same on an oversubscribed machine as on a cluster: T_amb is timed by the wall clock
+    /// (cheap enough to read at every lookup) and scaled by the share of its active wall time
+    /// the thread really ran; `idle_s` is the wall time it spent waiting for messages.
+    pub fn new(t: &ThreadStats, idle_s: f64) -> Self {
         let c = &t.rays;
+        let active = (t.busy_s - idle_s).max(1e-9);
+        let running = (t.cpu_s / active).clamp(0.0, 1.0);
+        let t_amb_s = (c.t_amb * running).min(t.cpu_s);
         ThreadReport {
             tiles: t.tiles,
             busy_s: t.busy_s,
+            cpu_s: t.cpu_s,
             records_computed: c.records_computed,
             lookups: c.lookups,
             hits: c.hits,
             duplicates: c.duplicates,
-            t_amb_s: c.t_amb,
-            t_notamb_s: (t.busy_s - c.t_amb).max(0.0),
+            t_amb_s,
+            t_notamb_s: (t.cpu_s - t_amb_s).max(0.0),
             rays: RayStats::from(c),
         }
+    }
+}
+
+impl From<&ThreadStats> for ThreadReport {
+    fn from(t: &ThreadStats) -> Self {
+        ThreadReport::new(t, 0.0)
     }
 }
 
@@ -146,7 +161,7 @@ impl RenderStats {
         self.lookups = total.lookups;
         self.hits = total.hits;
         self.duplicates = total.duplicates;
-        self.t_amb_s = total.t_amb;
+        self.t_amb_s = self.per_thread.iter().map(|t| t.t_amb_s).sum();
         self.t_notamb_s = self.per_thread.iter().map(|t| t.t_notamb_s).sum();
         self.rays = RayStats::from(&total);
         self.nonfinite_dropped = total.nonfinite;

@@ -14,35 +14,10 @@ fn white_furnace_converges_to_e_over_one_minus_rho() {
     inward_box(&mut b, [0.0; 3], [1.0; 3], m);
     let scene = b.write(dir.path(), "furnace");
     let out = dir.path().join("furnace.exr");
-    run_ok(&[
-        "render",
-        scene.to_str().unwrap(),
-        "-o",
-        out.to_str().unwrap(),
-        "-q",
-        "-x",
-        "32",
-        "-y",
-        "32",
-        "-ab",
-        "10",
-        "-ad",
-        "64",
-        "--light-samples",
-        "64",
-        "-vp",
-        "0.5",
-        "0.5",
-        "0.5",
-        "-vd",
-        "0",
-        "0",
-        "-1",
-        "-vh",
-        "60",
-        "-vv",
-        "60",
-    ]);
+    let options = "-q -x 32 -y 32 -ab 10 -aa 0 -ad 256 --light-samples 64 -vp 0.5 0.5 0.5 -vd 0 0 -1 -vh 60 -vv 60";
+    let mut args = vec!["render", scene.to_str().unwrap(), "-o", out.to_str().unwrap()];
+    args.extend(options.split_whitespace());
+    run_ok(&args);
     let image = read_exr(&out);
     let expected = e / (1.0 - rho);
     let composite: Vec<f32> = rgb(&image, "").concat();

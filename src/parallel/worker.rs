@@ -9,7 +9,7 @@ use super::Mode;
 use super::WorkerSetup;
 use crate::irradiance::record::Record;
 use crate::irradiance::IrradianceCache;
-use crate::render::{render_tile, ThreadStats};
+use crate::render::{render_tile, ThreadClock, ThreadStats};
 use crate::shading::{Integrator, RayCounts};
 use crate::stats::{RankReport, ThreadReport};
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -100,7 +100,7 @@ pub fn run(setup: &WorkerSetup<'_>, mode: Mode, sync: usize, persist_local: bool
                     let comm = Comm::new(counters);
                     let integrator = Integrator::new(setup.scene, setup.tracer, setup.shading, cache);
                     let mut stats = ThreadStats::default();
-                    let busy = Instant::now();
+                    let clock = ThreadClock::start();
                     let mut finished: Option<(u32, Vec<_>)> = None;
                     loop {
                         let request = encode_work_request(thread, finished.as_ref().map(|(t, p)| (*t, p.as_slice())));
@@ -121,7 +121,7 @@ pub fn run(setup: &WorkerSetup<'_>, mode: Mode, sync: usize, persist_local: bool
                         finished = Some((index, pixels));
                         stats.tiles += 1;
                     }
-                    stats.busy_s = busy.elapsed().as_secs_f64();
+                    clock.stop(&mut stats);
                     stats
                 })
             })
@@ -152,10 +152,12 @@ pub fn run(setup: &WorkerSetup<'_>, mode: Mode, sync: usize, persist_local: bool
         stats
     });
 
-    let threads_report: Vec<ThreadReport> = thread_stats.iter().map(ThreadReport::from).collect();
     let idle_s = counters.idle_s();
-    let busy_s: f64 = threads_report.iter().map(|t| t.busy_s).sum();
+    // Waiting is counted per rank; each rendering thread waited for its own replies.
+    let idle_per_thread = idle_s / thread_stats.len().max(1) as f64;
+    let threads_report: Vec<ThreadReport> = thread_stats.iter().map(|t| ThreadReport::new(t, idle_per_thread)).collect();
     let t_amb_s: f64 = threads_report.iter().map(|t| t.t_amb_s).sum();
+    let t_notamb_s: f64 = threads_report.iter().map(|t| t.t_notamb_s).sum();
     let sent = |c: &Counters| c.messages_sent.load(Ordering::Relaxed);
     let report = RankReport {
         rank: comm.rank() as u32,
@@ -166,8 +168,7 @@ pub fn run(setup: &WorkerSetup<'_>, mode: Mode, sync: usize, persist_local: bool
         lookups: threads_report.iter().map(|t| t.lookups).sum(),
         hits: threads_report.iter().map(|t| t.hits).sum(),
         t_amb_s,
-        // Busy time less indirect diffuse work and waiting for the master.
-        t_notamb_s: (busy_s - t_amb_s - idle_s).max(0.0),
+        t_notamb_s,
         idle_s,
         messages: sent(&counters) + sent(&listener_counters),
         bytes: counters.bytes_sent.load(Ordering::Relaxed),

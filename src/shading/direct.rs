@@ -26,8 +26,21 @@ pub fn direct_light(
 
     if surface.diffuse.max_element() > 0.0 && !scene.emitters.is_empty() {
         let mut sum = Vec3::ZERO;
-        for _ in 0..emitter_samples {
-            let (u1, u2, u3) = (rng.next_f32(), rng.next_f32(), rng.next_f32());
+        // Stratified: the choice among emitters over k strata, the point on it over a grid,
+        // so k samples spread over the lights instead of clumping. The grid cells are dealt
+        // out in random order: pairing stratum k with cell k would tie each emitter to one
+        // part of the grid, which is not uniform over the emitter.
+        let side = crate::sampling::grid_side(emitter_samples);
+        let mut cells: Vec<u32> = (0..side * side).collect();
+        for i in (1..cells.len()).rev() {
+            let j = (rng.next_u32() as usize) % (i + 1);
+            cells.swap(i, j);
+        }
+        for k in 0..emitter_samples {
+            let cell = cells[k as usize % cells.len()];
+            let u1 = (k as f32 + rng.next_f32()) / emitter_samples as f32;
+            let u2 = ((cell % side) as f32 + rng.next_f32()) / side as f32;
+            let u3 = ((cell / side) as f32 + rng.next_f32()) / side as f32;
             let Some(light) = scene.emitters.sample(u1, u2, u3) else {
                 continue;
             };
