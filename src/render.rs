@@ -64,7 +64,10 @@ pub struct ThreadClock {
 
 impl ThreadClock {
     pub fn start() -> ThreadClock {
-        ThreadClock { wall: Instant::now(), cpu: cpu_time::ThreadTime::now() }
+        ThreadClock {
+            wall: Instant::now(),
+            cpu: cpu_time::ThreadTime::now(),
+        }
     }
 
     /// Stores the elapsed times into `stats`.
@@ -100,6 +103,9 @@ pub fn render_pixel(
             )
         };
         let (origin, dir) = camera.ray(x as f32 + jx, y as f32 + jy);
+        counts.pixel = pixel_index as u32;
+        counts.sample = s;
+        counts.sample_weight = 1.0 / samples as f32;
         sum += integrator.primary(origin, dir, &mut rng, counts);
     }
     sum * (1.0 / samples as f32)
@@ -127,7 +133,10 @@ pub fn render_tile(
         for x in tile.x0..tile.x1 {
             let before = counts.records_level0;
             let components = render_pixel(integrator, camera, settings, x, y, counts);
-            values.push(PixelValue { components, records: (counts.records_level0 - before) as f32 });
+            values.push(PixelValue {
+                components,
+                records: (counts.records_level0 - before) as f32,
+            });
             after_pixel(counts);
         }
     }

@@ -98,6 +98,16 @@ pub struct RankReport {
     pub records_received: u64,
     pub records_rejected: u64,
     pub wall_s: f64,
+    /// Component mode: L_a requests this rank sent (PR), computed (PA, or PR helping), and
+    /// handed on to an idle PR by load balancing (PA); a PA's queue length over time.
+    #[serde(default)]
+    pub requests_sent: u64,
+    #[serde(default)]
+    pub requests_computed: u64,
+    #[serde(default)]
+    pub requests_forwarded: u64,
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub queue_lengths: Vec<(f64, u32)>,
 }
 
 #[derive(Clone, Debug, Default, Serialize)]
@@ -135,6 +145,10 @@ pub struct RenderStats {
     pub messages: u64,
     pub bytes: u64,
     pub records_rejected: u64,
+    /// Component mode: requests sent by PRs, computed by PAs and helping PRs, forwarded.
+    pub requests_sent: u64,
+    pub requests_computed: u64,
+    pub requests_forwarded: u64,
     pub rays: RayStats,
     pub mrays_per_s: f64,
     /// Contributions dropped for being NaN or infinite (should be 0).
@@ -196,6 +210,9 @@ impl RenderStats {
         self.messages = ranks.iter().map(|r| r.messages).sum();
         self.bytes = ranks.iter().map(|r| r.bytes).sum();
         self.records_rejected = ranks.iter().map(|r| r.records_rejected).sum();
+        self.requests_sent = ranks.iter().map(|r| r.requests_sent).sum();
+        self.requests_computed = ranks.iter().map(|r| r.requests_computed).sum();
+        self.requests_forwarded = ranks.iter().map(|r| r.requests_forwarded).sum();
         self.per_rank = ranks;
     }
 }

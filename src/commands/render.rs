@@ -6,7 +6,7 @@ use crate::cli::RenderArgs;
 use crate::image::framebuffer::{FrameBuffer, Layer};
 use crate::image::{metrics, output};
 use crate::job::{Job, validate};
-use crate::parallel::{under_mpirun, Mode};
+use crate::parallel::{Mode, under_mpirun};
 use crate::progress::Progress;
 use crate::render::{render, tiles};
 use crate::scene::SceneNeeds;
@@ -151,13 +151,10 @@ pub fn report_error(
 pub fn run(args: &RenderArgs) -> CommandResult {
     let mode = match args.mode {
         Some(m) => Mode::from(m),
-        None if under_mpirun() => Mode::Centralised,
+        None if under_mpirun() => Mode::Component,
         None => Mode::Serial,
     };
     if mode != Mode::Serial {
-        if mode == Mode::Component {
-            return Err(CommandError("--mode component is not available yet".into()));
-        }
         return crate::parallel::run(args, mode);
     }
     let wall = Instant::now();

@@ -70,6 +70,41 @@ impl FrameBuffer {
         &self.records
     }
 
+    /// Adds light to one layer of one pixel (index y * width + x); out-of-range pixels are
+    /// ignored (the caller validated them).
+    pub fn add(&mut self, pixel: usize, layer: Layer, value: Vec3) {
+        if let Some(v) = self.layers[layer.index()].get_mut(pixel) {
+            *v += value;
+        }
+    }
+
+    /// Every layer's values, pixel after pixel (12 floats a pixel), for sending between ranks.
+    pub fn to_floats(&self) -> Vec<f32> {
+        let n = self.layers[0].len();
+        let mut out = Vec::with_capacity(n * 12);
+        for i in 0..n {
+            for layer in &self.layers {
+                out.extend_from_slice(&layer[i].to_array());
+            }
+        }
+        out
+    }
+
+    /// The inverse of `to_floats`; None when the count does not fit the size.
+    pub fn from_floats(width: u32, height: u32, floats: &[f32]) -> Option<FrameBuffer> {
+        let n = width as usize * height as usize;
+        if floats.len() != n * 12 {
+            return None;
+        }
+        let mut frame = FrameBuffer::new(width, height);
+        for (i, px) in floats.chunks_exact(12).enumerate() {
+            for (l, layer) in frame.layers.iter_mut().enumerate() {
+                layer[i] = Vec3::new(px[3 * l], px[3 * l + 1], px[3 * l + 2]);
+            }
+        }
+        Some(frame)
+    }
+
     /// Adds another frame's layers (and record counts) to this one's, pixel by pixel.
     pub fn accumulate(&mut self, other: &FrameBuffer) {
         for (mine, theirs) in self.layers.iter_mut().zip(&other.layers) {

@@ -27,17 +27,22 @@ pub struct Hemisphere {
     pub cells: Vec<CellSample>,
 }
 
-/// Direction of a point (u, v) in [0,1)^2 inside cell (i, j) of an n x n cosine-weighted grid.
-pub fn cell_direction(
-    normal: Vec3,
-    tangent: Vec3,
-    bitangent: Vec3,
-    n: usize,
-    i: usize,
-    j: usize,
-    u: f32,
-    v: f32,
-) -> Vec3 {
+/// A unit normal with two tangents completing an orthonormal frame.
+#[derive(Clone, Copy, Debug)]
+pub struct Frame {
+    pub normal: Vec3,
+    pub tangent: Vec3,
+    pub bitangent: Vec3,
+}
+
+/// Direction of the point `uv` in [0,1)^2 inside cell (ring i, sector j) of an n x n
+/// cosine-weighted grid about `frame`.
+pub fn cell_direction(frame: Frame, n: usize, (i, j): (usize, usize), (u, v): (f32, f32)) -> Vec3 {
+    let Frame {
+        normal,
+        tangent,
+        bitangent,
+    } = frame;
     let sin2 = (i as f32 + u) / n as f32;
     let sin_t = sin2.sqrt();
     let cos_t = (1.0 - sin2).max(0.0).sqrt();
@@ -239,7 +244,12 @@ mod tests {
         let mut cells = Vec::new();
         for i in 0..n {
             for j in 0..n {
-                let d = cell_direction(normal, tangent, bitangent, n, i, j, rng.next_f32(), rng.next_f32());
+                let frame = Frame {
+                    normal,
+                    tangent,
+                    bitangent,
+                };
+                let d = cell_direction(frame, n, (i, j), (rng.next_f32(), rng.next_f32()));
                 let distance = h / d.z;
                 let bright = d.x * distance > edge;
                 cells.push(CellSample {

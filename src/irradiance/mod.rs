@@ -172,12 +172,16 @@ impl IrradianceCache {
 
     /// How many records wait to be shared.
     pub fn outbox_len(&self) -> usize {
-        self.outbox.as_ref().map_or(0, |o| o.lock().unwrap_or_else(|e| e.into_inner()).len())
+        self.outbox
+            .as_ref()
+            .map_or(0, |o| o.lock().unwrap_or_else(|e| e.into_inner()).len())
     }
 
     /// The records made here since the last call.
     pub fn take_outbox(&self) -> Vec<Record> {
-        self.outbox.as_ref().map_or_else(Vec::new, |o| std::mem::take(&mut *o.lock().unwrap_or_else(|e| e.into_inner())))
+        self.outbox.as_ref().map_or_else(Vec::new, |o| {
+            std::mem::take(&mut *o.lock().unwrap_or_else(|e| e.into_inner()))
+        })
     }
 
     /// Flushes the file; its first write error, if any.

@@ -105,7 +105,7 @@ impl Record {
                 let du = tangent_offset.dot(self.u_axis) / self.radii[0];
                 let dv = tangent_offset.dot(self.v_axis()) / self.radii[1];
                 let t2 = du * du + dv * dv;
-                if !(t2 < 1.0) {
+                if t2.is_nan() || t2 >= 1.0 {
                     return None;
                 }
                 Some((1.0 - t2.sqrt()) * (1.0 - angle / max_angle))

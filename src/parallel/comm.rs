@@ -3,9 +3,9 @@
 //! MPI's blocking calls spin: on an oversubscribed machine a waiting rank would steal the core
 //! from the rank it waits for.
 
+use mpi::Tag;
 use mpi::point_to_point::{Destination, MatchedReceiveVec, Source};
 use mpi::topology::{Communicator, SimpleCommunicator};
-use mpi::Tag;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
@@ -46,7 +46,10 @@ pub struct Comm<'c> {
 
 impl<'c> Comm<'c> {
     pub fn new(counters: &'c Counters) -> Self {
-        Comm { world: SimpleCommunicator::world(), counters }
+        Comm {
+            world: SimpleCommunicator::world(),
+            counters,
+        }
     }
 
     pub fn rank(&self) -> i32 {
@@ -65,7 +68,9 @@ impl<'c> Comm<'c> {
 
     fn count_received(&self, r: Received) -> Received {
         self.counters.messages_received.fetch_add(1, Ordering::Relaxed);
-        self.counters.bytes_received.fetch_add(r.data.len() as u64, Ordering::Relaxed);
+        self.counters
+            .bytes_received
+            .fetch_add(r.data.len() as u64, Ordering::Relaxed);
         r
     }
 
@@ -80,20 +85,35 @@ impl<'c> Comm<'c> {
         };
         probe.map(|matched| {
             let (data, status) = matched.matched_receive_vec::<u8>();
-            self.count_received(Received { source: status.source_rank(), tag: status.tag(), data })
+            self.count_received(Received {
+                source: status.source_rank(),
+                tag: status.tag(),
+                data,
+            })
         })
     }
 
     /// Waits for a matching message, pausing between polls; the wait counts as idle time.
     /// Gives up after `timeout` (None: never) and returns None.
     pub fn receive(&self, source: Option<i32>, tag: Option<Tag>, timeout: Option<Duration>) -> Option<Received> {
-        if let Some(r) = self.try_receive(source, tag) {
+        self.receive_one_of(&[(source, tag)], timeout)
+    }
+
+    /// Like `receive`, for the first message matching any of several (source, tag) filters,
+    /// tried in order at every poll.
+    pub fn receive_one_of(
+        &self,
+        filters: &[(Option<i32>, Option<Tag>)],
+        timeout: Option<Duration>,
+    ) -> Option<Received> {
+        let poll = || filters.iter().find_map(|&(source, tag)| self.try_receive(source, tag));
+        if let Some(r) = poll() {
             return Some(r);
         }
         let start = Instant::now();
         let mut pause = Duration::from_micros(5);
         let result = loop {
-            if let Some(r) = self.try_receive(source, tag) {
+            if let Some(r) = poll() {
                 break Some(r);
             }
             if timeout.is_some_and(|t| start.elapsed() >= t) {
@@ -102,7 +122,9 @@ impl<'c> Comm<'c> {
             std::thread::sleep(pause);
             pause = (pause * 2).min(MAX_PAUSE);
         };
-        self.counters.idle_ns.fetch_add(start.elapsed().as_nanos() as u64, Ordering::Relaxed);
+        self.counters
+            .idle_ns
+            .fetch_add(start.elapsed().as_nanos() as u64, Ordering::Relaxed);
         result
     }
 

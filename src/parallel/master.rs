@@ -2,13 +2,13 @@
 //! records every worker has shared (centralised mode) and what each worker has already seen,
 //! owns the -af cache file, and gathers the ranks' statistics. It renders nothing itself.
 
+use super::Mode;
 use super::comm::{Comm, Counters};
 use super::protocol::*;
-use super::Mode;
 use crate::image::framebuffer::FrameBuffer;
-use crate::irradiance::record::Record;
 use crate::irradiance::IrradianceCache;
-use crate::render::{store_tile, Tile};
+use crate::irradiance::record::Record;
+use crate::render::{Tile, store_tile};
 use crate::stats::RankReport;
 use std::time::{Duration, Instant};
 
@@ -22,16 +22,29 @@ pub struct MasterResult {
 #[derive(Debug)]
 pub struct MasterError(pub String);
 
-pub fn run(
-    comm: &Comm<'_>,
-    mode: Mode,
-    tiles: &[Tile],
-    width: u32,
-    height: u32,
-    threads_per_worker: u32,
-    cache: Option<&IrradianceCache>,
-    timeout: Duration,
-) -> Result<MasterResult, MasterError> {
+/// What the master controls.
+pub struct Plan<'a> {
+    pub mode: Mode,
+    pub tiles: &'a [Tile],
+    pub width: u32,
+    pub height: u32,
+    pub threads_per_worker: u32,
+    /// The cache holding the -af file's records (the master renders nothing with it).
+    pub cache: Option<&'a IrradianceCache>,
+    /// How long to wait for any message before giving up on the job.
+    pub timeout: Duration,
+}
+
+pub fn run(comm: &Comm<'_>, plan: &Plan<'_>) -> Result<MasterResult, MasterError> {
+    let Plan {
+        mode,
+        tiles,
+        width,
+        height,
+        threads_per_worker,
+        cache,
+        timeout,
+    } = *plan;
     let start = Instant::now();
     let size = comm.size() as usize;
     let workers = size - 1;
@@ -68,8 +81,10 @@ pub fn run(
     };
     while !done(finished_requesters, &reports, end_markers) {
         let Some(msg) = comm.receive(None, None, Some(timeout)) else {
-            let silent: Vec<String> =
-                (1..size).filter(|&r| reports[r].is_none()).map(|r| r.to_string()).collect();
+            let silent: Vec<String> = (1..size)
+                .filter(|&r| reports[r].is_none())
+                .map(|r| r.to_string())
+                .collect();
             return Err(MasterError(format!(
                 "no message from any worker for {:.0} s; still waiting for rank(s) {}",
                 timeout.as_secs_f64(),
@@ -85,14 +100,18 @@ pub fn run(
                     let tile = tiles
                         .get(index as usize)
                         .filter(|_| !tiles_done[index as usize])
-                        .ok_or_else(|| MasterError(format!("rank {source} returned tile {index}, which it was not given")))?;
+                        .ok_or_else(|| {
+                            MasterError(format!("rank {source} returned tile {index}, which it was not given"))
+                        })?;
                     if pixels.len() != ((tile.x1 - tile.x0) * (tile.y1 - tile.y0)) as usize {
-                        return Err(MasterError(format!("rank {source} returned tile {index} with the wrong size")));
+                        return Err(MasterError(format!(
+                            "rank {source} returned tile {index} with the wrong size"
+                        )));
                     }
                     store_tile(&mut frame, tile, &pixels);
                     tiles_done[index as usize] = true;
                 }
-                let assignment = (next_tile < tiles.len()).then(|| next_tile as u32);
+                let assignment = (next_tile < tiles.len()).then_some(next_tile as u32);
                 if assignment.is_some() {
                     next_tile += 1;
                 } else {
@@ -101,17 +120,28 @@ pub fn run(
                 comm.send(msg.source, TAG_WORK_BASE + thread as i32, &encode_work(assignment));
             }
             TAG_RECORDS_UP => {
-                let thread = msg.data.get(..4).map(|b| u32::from_le_bytes(b.try_into().expect("4 bytes")));
-                let thread = thread.ok_or_else(|| MasterError(format!("rank {source} sent an empty record message")))?;
+                let thread = msg
+                    .data
+                    .get(..4)
+                    .map(|b| u32::from_le_bytes(b.try_into().expect("4 bytes")));
+                let thread =
+                    thread.ok_or_else(|| MasterError(format!("rank {source} sent an empty record message")))?;
                 let batch = decode_batch(&msg.data[4..]).map_err(|e| bad("record batch", e))?;
                 records_received += batch.records.len() as u64;
                 records_rejected += batch.rejected as u64;
                 persist(&batch.records);
                 store.extend(batch.records.into_iter().map(|r| (source, r)));
-                let missing: Vec<Record> =
-                    store[seen[source]..].iter().filter(|(from, _)| *from != source).map(|(_, r)| r.clone()).collect();
+                let missing: Vec<Record> = store[seen[source]..]
+                    .iter()
+                    .filter(|(from, _)| *from != source)
+                    .map(|(_, r)| r.clone())
+                    .collect();
                 seen[source] = store.len();
-                comm.send(msg.source, TAG_RECORDS_DOWN_BASE + thread as i32, &encode_batch(&missing, 0));
+                comm.send(
+                    msg.source,
+                    TAG_RECORDS_DOWN_BASE + thread as i32,
+                    &encode_batch(&missing, 0),
+                );
             }
             TAG_RECORDS_BROADCAST | TAG_FINAL_RECORDS => {
                 let batch = decode_batch(&msg.data).map_err(|e| bad("record batch", e))?;
@@ -127,7 +157,11 @@ pub fn run(
                     .map_err(|e| MasterError(format!("rank {source} sent unreadable statistics: {e}")))?;
                 reports[source] = Some(report);
             }
-            other => return Err(MasterError(format!("rank {source} sent a message with unknown tag {other}"))),
+            other => {
+                return Err(MasterError(format!(
+                    "rank {source} sent a message with unknown tag {other}"
+                )));
+            }
         }
     }
     if let Some(missing) = tiles_done.iter().position(|d| !d) {

@@ -4,20 +4,22 @@
 //! the same master, tiles and record transport.
 
 pub mod comm;
+pub mod component;
 pub mod master;
 pub mod protocol;
 pub mod worker;
 
 use crate::cli::{ModeArg, RenderArgs};
-use crate::commands::render::{producible_layers, Outputs};
-use crate::commands::{warn, CommandError, CommandResult};
+use crate::commands::render::{Outputs, producible_layers};
+use crate::commands::{CommandError, CommandResult, warn};
 use crate::irradiance::IrradianceCache;
-use crate::job::{validate, Job};
-use crate::render::{tiles, RenderSettings, Tile};
-use crate::scene::view::Camera;
+use crate::job::{Job, validate};
+use crate::render::ThreadStats;
+use crate::render::{RenderSettings, Tile, tiles};
 use crate::scene::Scene;
+use crate::scene::view::Camera;
 use crate::shading::ShadingOptions;
-use crate::stats::RenderStats;
+use crate::stats::{RankReport, RenderStats, ThreadReport};
 use crate::tracer::Tracer;
 use comm::{Comm, Counters};
 use mpi::Threading;
@@ -56,9 +58,38 @@ impl From<ModeArg> for Mode {
     }
 }
 
+/// A rank's report from its rendering threads and its message counters. `idle_s` is the
+/// waiting of the rendering threads (not of helper threads that wait by design).
+pub fn rank_report(rank: i32, role: &str, threads: &[ThreadStats], counters: &[&Counters], idle_s: f64) -> RankReport {
+    use std::sync::atomic::Ordering::Relaxed;
+    // Waiting is counted per rank; each rendering thread waited for its own replies.
+    let idle_per_thread = idle_s / threads.len().max(1) as f64;
+    let reports: Vec<ThreadReport> = threads.iter().map(|t| ThreadReport::new(t, idle_per_thread)).collect();
+    let sum = |f: &dyn Fn(&Counters) -> u64| counters.iter().map(|c| f(c)).sum::<u64>();
+    RankReport {
+        rank: rank as u32,
+        role: role.into(),
+        threads: threads.len(),
+        tiles: reports.iter().map(|t| t.tiles).sum(),
+        records_computed: reports.iter().map(|t| t.records_computed).sum(),
+        lookups: reports.iter().map(|t| t.lookups).sum(),
+        hits: reports.iter().map(|t| t.hits).sum(),
+        t_amb_s: reports.iter().map(|t| t.t_amb_s).sum(),
+        t_notamb_s: reports.iter().map(|t| t.t_notamb_s).sum(),
+        idle_s,
+        messages: sum(&|c| c.messages_sent.load(Relaxed)),
+        bytes: sum(&|c| c.bytes_sent.load(Relaxed)),
+        messages_received: sum(&|c| c.messages_received.load(Relaxed)),
+        bytes_received: sum(&|c| c.bytes_received.load(Relaxed)),
+        ..Default::default()
+    }
+}
+
 /// Whether this process was started by mpirun (Open MPI, MPICH or a PMIx launcher).
 pub fn under_mpirun() -> bool {
-    ["OMPI_COMM_WORLD_SIZE", "PMI_SIZE", "PMIX_RANK"].iter().any(|v| std::env::var_os(v).is_some())
+    ["OMPI_COMM_WORLD_SIZE", "PMI_SIZE", "PMIX_RANK"]
+        .iter()
+        .any(|v| std::env::var_os(v).is_some())
 }
 
 /// What a worker renders with.
@@ -114,9 +145,18 @@ pub fn run(args: &RenderArgs, mode: Mode) -> CommandResult {
     let (rank, size) = (comm.rank(), comm.size());
     // Only rank 0 speaks; the others stop quietly with the same verdict.
     let fail = |message: String| -> CommandResult {
-        if rank == 0 { Err(CommandError(message)) } else { Err(CommandError(String::new())) }
+        if rank == 0 {
+            Err(CommandError(message))
+        } else {
+            Err(CommandError(String::new()))
+        }
     };
     let threads = args.threads.unwrap_or(1);
+    if mode == Mode::Component && threads != 1 {
+        return fail(
+            "--mode component runs one rendering thread per rank (as in the paper): leave out --threads".into(),
+        );
+    }
     let needs_multiple = mode == Mode::Broadcast || mode == Mode::Component || threads > 1;
     if needs_multiple && granted != Threading::Multiple {
         return fail(format!(
@@ -146,6 +186,9 @@ pub fn run(args: &RenderArgs, mode: Mode) -> CommandResult {
         Err(e) if rank == 0 => return Err(e),
         Err(_) => return Err(CommandError(String::new())),
     };
+    if mode == Mode::Component {
+        return run_component(args, &comm, job, &all_tiles, outputs, wall, universe);
+    }
     let sync = args.sync.unwrap_or(50).max(1) as usize;
     let persist_local = args.ambient_file.is_some();
     if rank != 0 {
@@ -169,16 +212,16 @@ pub fn run(args: &RenderArgs, mode: Mode) -> CommandResult {
     }
 
     let timeout = Duration::from_secs_f64(args.timeout.max(1.0));
-    let result = master::run(
-        &comm,
+    let plan = master::Plan {
         mode,
-        &all_tiles,
-        args.width,
-        args.height,
-        threads as u32,
-        job.cache.as_ref(),
+        tiles: &all_tiles,
+        width: args.width,
+        height: args.height,
+        threads_per_worker: threads as u32,
+        cache: job.cache.as_ref(),
         timeout,
-    );
+    };
+    let result = master::run(&comm, &plan);
     let result = match result {
         Ok(r) => r,
         Err(e) => {
@@ -190,6 +233,36 @@ pub fn run(args: &RenderArgs, mode: Mode) -> CommandResult {
             comm.abort(1);
         }
     };
+    finish_master(
+        args,
+        &job,
+        size,
+        mode,
+        threads,
+        result.frame,
+        result.ranks,
+        result.render_s,
+        outputs,
+        wall,
+    )?;
+    drop(universe);
+    Ok(())
+}
+
+/// Writes the master's results: statistics totals, the EXR and preview, the table.
+#[allow(clippy::too_many_arguments)]
+fn finish_master(
+    args: &RenderArgs,
+    job: &Job,
+    size: i32,
+    mode: Mode,
+    threads: usize,
+    frame: crate::image::framebuffer::FrameBuffer,
+    ranks: Vec<RankReport>,
+    render_s: f64,
+    outputs: Option<Outputs>,
+    wall: Instant,
+) -> CommandResult {
     if let Some(cache) = &job.cache
         && let Err(e) = cache.finish()
     {
@@ -208,18 +281,102 @@ pub fn run(args: &RenderArgs, mode: Mode) -> CommandResult {
         dropped_triangles: job.scene.dropped_triangles,
         load_s: job.load_s,
         build_s: job.build_s,
-        render_s: result.render_s,
-        layers: producible_layers(job.scene.needs(), &job.shading).iter().map(|l| l.name()).collect(),
+        render_s,
+        layers: producible_layers(job.scene.needs(), &job.shading)
+            .iter()
+            .map(|l| l.name())
+            .collect(),
         records_loaded: job.cache.as_ref().map_or(0, |c| c.load_report.loaded as u64),
         ..Default::default()
     };
-    stats.add_ranks(result.ranks);
+    stats.add_ranks(ranks);
     stats.wall_s = wall.elapsed().as_secs_f64();
     let outputs = outputs.expect("rank 0 checked its outputs");
-    outputs.write(args, &job, &result.frame, &stats)?;
+    outputs.write(args, job, &frame, &stats)?;
     if !args.quiet {
         print_table(&stats);
     }
+    Ok(())
+}
+
+/// The component mode on every rank: the master, the PAs and the PRs.
+fn run_component(
+    args: &RenderArgs,
+    comm: &Comm<'_>,
+    mut job: Job,
+    all_tiles: &[Tile],
+    outputs: Option<Outputs>,
+    wall: Instant,
+    universe: mpi::environment::Universe,
+) -> CommandResult {
+    let rank = comm.rank();
+    let needed = job.cache.is_some() || (job.shading.ambient_bounces > 0 && job.scene.needs().diffuse);
+    let roles = match component::Roles::choose(comm.size(), args.pa, needed) {
+        Ok(roles) => roles,
+        Err(e) if rank == 0 => return Err(CommandError(e)),
+        Err(_) => return Err(CommandError(String::new())),
+    };
+    if rank != 0 {
+        if let Some(cache) = job.cache.as_mut() {
+            cache.keep_outbox();
+        }
+        let setup = WorkerSetup {
+            scene: &job.scene,
+            tracer: &job.tracer,
+            shading: &job.shading,
+            camera: &job.camera,
+            settings: &job.settings,
+            tiles: all_tiles,
+            cache: job.cache.as_ref(),
+        };
+        if roles.pas.contains(&rank) {
+            component::pa::run(&setup, args.sync.unwrap_or(8).max(1) as usize, args.seed);
+        } else {
+            component::pr::run(&setup, &roles, args.send.max(1) as usize, args.seed);
+        }
+        drop(universe);
+        return Ok(());
+    }
+    if !args.quiet {
+        eprintln!("icrender: {}", roles.describe());
+        if !needed {
+            eprintln!(
+                "icrender: the scene has no indirect diffuse work (-ab 0 or no diffuse surface): no PA is needed"
+            );
+        }
+    }
+    let timeout = Duration::from_secs_f64(args.timeout.max(1.0));
+    let result = component::master::run(
+        comm,
+        &roles,
+        all_tiles,
+        args.width,
+        args.height,
+        job.cache.as_ref(),
+        timeout,
+    );
+    let result = match result {
+        Ok(r) => r,
+        Err(e) => {
+            if let Some(cache) = &job.cache {
+                let _ = cache.finish();
+            }
+            eprintln!("icrender: error: {e}");
+            comm.abort(1);
+        }
+    };
+    finish_master(
+        args,
+        &job,
+        comm.size(),
+        Mode::Component,
+        1,
+        result.frame,
+        result.ranks,
+        result.render_s,
+        outputs,
+        wall,
+    )?;
     drop(universe);
     Ok(())
 }
@@ -237,7 +394,16 @@ fn print_table(stats: &RenderStats) {
     for r in &stats.per_rank {
         eprintln!(
             "{:>4} {:>6} {:>6} {:>9} {:>9} {:>8.2} {:>9.2} {:>8.2} {:>8} {:>11}",
-            r.rank, r.role, r.tiles, r.records_computed, r.lookups, r.t_amb_s, r.t_notamb_s, r.idle_s, r.messages, r.bytes
+            r.rank,
+            r.role,
+            r.tiles,
+            r.records_computed,
+            r.lookups,
+            r.t_amb_s,
+            r.t_notamb_s,
+            r.idle_s,
+            r.messages,
+            r.bytes
         );
     }
     eprintln!(

@@ -70,13 +70,18 @@ pub fn decode_batch(bytes: &[u8]) -> Result<Batch, ProtocolError> {
     }
     let version = u32_at(bytes, 4)?;
     if version != BATCH_VERSION {
-        return Err(ProtocolError(format!("record batch version {version}, expected {BATCH_VERSION}")));
+        return Err(ProtocolError(format!(
+            "record batch version {version}, expected {BATCH_VERSION}"
+        )));
     }
     let flags = u32_at(bytes, 8)?;
     let count = u32_at(bytes, 12)? as usize;
     let body = &bytes[16..];
     if body.len() != count.saturating_mul(RECORD_BYTES) {
-        return Err(ProtocolError(format!("record batch says {count} records but holds {} bytes", body.len())));
+        return Err(ProtocolError(format!(
+            "record batch says {count} records but holds {} bytes",
+            body.len()
+        )));
     }
     let mut records = Vec::with_capacity(count);
     let mut rejected = 0;
@@ -86,7 +91,11 @@ pub fn decode_batch(bytes: &[u8]) -> Result<Batch, ProtocolError> {
             Err(_) => rejected += 1,
         }
     }
-    Ok(Batch { records, rejected, flags })
+    Ok(Batch {
+        records,
+        rejected,
+        flags,
+    })
 }
 
 /// Worker -> MC work request: the asking thread and, after the first, the finished tile.
@@ -122,9 +131,15 @@ pub fn decode_work_request(bytes: &[u8]) -> Result<WorkRequest, ProtocolError> {
     let count = u32_at(bytes, 8)? as usize;
     let body = &bytes[12..];
     if body.len() != count.saturating_mul(PIXEL_FLOATS * 4) {
-        return Err(ProtocolError(format!("tile result says {count} pixels but holds {} bytes", body.len())));
+        return Err(ProtocolError(format!(
+            "tile result says {count} pixels but holds {} bytes",
+            body.len()
+        )));
     }
-    let floats: Vec<f32> = body.chunks_exact(4).map(|b| f32::from_le_bytes(b.try_into().expect("4 bytes"))).collect();
+    let floats: Vec<f32> = body
+        .chunks_exact(4)
+        .map(|b| f32::from_le_bytes(b.try_into().expect("4 bytes")))
+        .collect();
     let mut pixels = Vec::with_capacity(count);
     for p in floats.chunks_exact(PIXEL_FLOATS) {
         // A pixel that is not finite and non-negative cannot come from a healthy renderer.
@@ -133,7 +148,12 @@ pub fn decode_work_request(bytes: &[u8]) -> Result<WorkRequest, ProtocolError> {
         }
         let v = |i: usize| Vec3::new(p[3 * i], p[3 * i + 1], p[3 * i + 2]);
         pixels.push(PixelValue {
-            components: Components { emission: v(0), direct: v(1), specular: v(2), indirect: v(3) },
+            components: Components {
+                emission: v(0),
+                direct: v(1),
+                specular: v(2),
+                indirect: v(3),
+            },
             records: p[12],
         });
     }
@@ -183,7 +203,12 @@ mod tests {
     #[test]
     fn work_messages_round_trip() {
         let pixels = vec![PixelValue {
-            components: Components { emission: Vec3::ONE, direct: Vec3::X, specular: Vec3::Y, indirect: Vec3::Z },
+            components: Components {
+                emission: Vec3::ONE,
+                direct: Vec3::X,
+                specular: Vec3::Y,
+                indirect: Vec3::Z,
+            },
             records: 2.0,
         }];
         let bytes = encode_work_request(3, Some((7, &pixels)));

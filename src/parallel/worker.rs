@@ -3,22 +3,30 @@
 //! through the master (centralised), or with every other rank (broadcast, with a receiving
 //! thread that merges incoming records while the rendering threads go on).
 
-use super::comm::{Comm, Counters};
-use super::protocol::*;
 use super::Mode;
 use super::WorkerSetup;
-use crate::irradiance::record::Record;
+use super::comm::{Comm, Counters};
+use super::protocol::*;
+use super::rank_report;
 use crate::irradiance::IrradianceCache;
-use crate::render::{render_tile, ThreadClock, ThreadStats};
+use crate::irradiance::record::Record;
+use crate::render::{ThreadClock, ThreadStats, render_tile};
 use crate::shading::{Integrator, RayCounts};
-use crate::stats::{RankReport, ThreadReport};
-use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Mutex;
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Instant;
 
 /// Sends what the cache has gathered since the last share, the mode's way. `thread` is the
 /// calling rendering thread (replies come back on its own tag).
-fn share(comm: &Comm<'_>, mode: Mode, cache: &IrradianceCache, thread: u32, received: &AtomicU64, rejected: &AtomicU64, end: bool) {
+fn share(
+    comm: &Comm<'_>,
+    mode: Mode,
+    cache: &IrradianceCache,
+    thread: u32,
+    received: &AtomicU64,
+    rejected: &AtomicU64,
+    end: bool,
+) {
     let records = cache.take_outbox();
     match mode {
         Mode::Centralised => {
@@ -52,11 +60,19 @@ fn share(comm: &Comm<'_>, mode: Mode, cache: &IrradianceCache, thread: u32, rece
 /// Merges the records other workers broadcast until each of them has sent its end marker.
 /// It has counters of its own: its waiting is not the rank's idle time (the rendering threads
 /// go on meanwhile).
-fn receive_broadcasts(counters: &Counters, cache: &IrradianceCache, peers: usize, received: &AtomicU64, rejected: &AtomicU64) {
+fn receive_broadcasts(
+    counters: &Counters,
+    cache: &IrradianceCache,
+    peers: usize,
+    received: &AtomicU64,
+    rejected: &AtomicU64,
+) {
     let comm = Comm::new(counters);
     let mut ends = 0;
     while ends < peers {
-        let Some(msg) = comm.receive(None, Some(TAG_RECORDS_BROADCAST), None) else { continue };
+        let Some(msg) = comm.receive(None, Some(TAG_RECORDS_BROADCAST), None) else {
+            continue;
+        };
         match decode_batch(&msg.data) {
             Ok(batch) => {
                 received.fetch_add(batch.records.len() as u64, Ordering::Relaxed);
@@ -91,8 +107,9 @@ pub fn run(setup: &WorkerSetup<'_>, mode: Mode, sync: usize, persist_local: bool
     let threads = setup.settings.threads.max(1) as u32;
     let peers = comm.size() as usize - 2;
     let thread_stats: Vec<ThreadStats> = std::thread::scope(|scope| {
-        let listener = (mode == Mode::Broadcast && cache.is_some())
-            .then(|| scope.spawn(|| receive_broadcasts(&listener_counters, cache.expect("checked"), peers, &received, &rejected)));
+        let listener = (mode == Mode::Broadcast && cache.is_some()).then(|| {
+            scope.spawn(|| receive_broadcasts(&listener_counters, cache.expect("checked"), peers, &received, &rejected))
+        });
         let renderers: Vec<_> = (0..threads)
             .map(|thread| {
                 let (counters, received, rejected, share_lock) = (&counters, &received, &rejected, &share_lock);
@@ -106,7 +123,9 @@ pub fn run(setup: &WorkerSetup<'_>, mode: Mode, sync: usize, persist_local: bool
                         let request = encode_work_request(thread, finished.as_ref().map(|(t, p)| (*t, p.as_slice())));
                         comm.send(0, TAG_WORK_REQUEST, &request);
                         let reply = comm.receive(Some(0), Some(TAG_WORK_BASE + thread as i32), None);
-                        let Some(Ok(Some(index))) = reply.map(|r| decode_work(&r.data)) else { break };
+                        let Some(Ok(Some(index))) = reply.map(|r| decode_work(&r.data)) else {
+                            break;
+                        };
                         let tile = &setup.tiles[index as usize];
                         let mut after_pixel = |_: &mut RayCounts| {
                             if let Some(cache) = cache
@@ -117,7 +136,14 @@ pub fn run(setup: &WorkerSetup<'_>, mode: Mode, sync: usize, persist_local: bool
                                 share(&comm, mode, cache, thread, received, rejected, false);
                             }
                         };
-                        let pixels = render_tile(&integrator, setup.camera, setup.settings, tile, &mut stats.rays, &mut after_pixel);
+                        let pixels = render_tile(
+                            &integrator,
+                            setup.camera,
+                            setup.settings,
+                            tile,
+                            &mut stats.rays,
+                            &mut after_pixel,
+                        );
                         finished = Some((index, pixels));
                         stats.tiles += 1;
                     }
@@ -152,34 +178,16 @@ pub fn run(setup: &WorkerSetup<'_>, mode: Mode, sync: usize, persist_local: bool
         stats
     });
 
-    let idle_s = counters.idle_s();
-    // Waiting is counted per rank; each rendering thread waited for its own replies.
-    let idle_per_thread = idle_s / thread_stats.len().max(1) as f64;
-    let threads_report: Vec<ThreadReport> = thread_stats.iter().map(|t| ThreadReport::new(t, idle_per_thread)).collect();
-    let t_amb_s: f64 = threads_report.iter().map(|t| t.t_amb_s).sum();
-    let t_notamb_s: f64 = threads_report.iter().map(|t| t.t_notamb_s).sum();
-    let sent = |c: &Counters| c.messages_sent.load(Ordering::Relaxed);
-    let report = RankReport {
-        rank: comm.rank() as u32,
-        role: "worker".into(),
-        threads: threads as usize,
-        tiles: threads_report.iter().map(|t| t.tiles).sum(),
-        records_computed: threads_report.iter().map(|t| t.records_computed).sum(),
-        lookups: threads_report.iter().map(|t| t.lookups).sum(),
-        hits: threads_report.iter().map(|t| t.hits).sum(),
-        t_amb_s,
-        t_notamb_s,
-        idle_s,
-        messages: sent(&counters) + sent(&listener_counters),
-        bytes: counters.bytes_sent.load(Ordering::Relaxed),
-        messages_received: counters.messages_received.load(Ordering::Relaxed)
-            + listener_counters.messages_received.load(Ordering::Relaxed),
-        bytes_received: counters.bytes_received.load(Ordering::Relaxed)
-            + listener_counters.bytes_received.load(Ordering::Relaxed),
-        records_received: received.load(Ordering::Relaxed),
-        records_rejected: rejected.load(Ordering::Relaxed),
-        wall_s: start.elapsed().as_secs_f64(),
-    };
+    let mut report = rank_report(
+        comm.rank(),
+        "worker",
+        &thread_stats,
+        &[&counters, &listener_counters],
+        counters.idle_s(),
+    );
+    report.records_received = received.load(Ordering::Relaxed);
+    report.records_rejected = rejected.load(Ordering::Relaxed);
+    report.wall_s = start.elapsed().as_secs_f64();
     let json = serde_json::to_vec(&report).unwrap_or_default();
     comm.send(0, TAG_STATS, &json);
 }

@@ -9,9 +9,11 @@
 pub mod components;
 pub mod direct;
 pub mod glossy;
+pub mod request;
 
+use crate::image::framebuffer::Layer;
 use crate::irradiance::IrradianceCache;
-use crate::irradiance::hemisphere::{CellSample, Hemisphere, cell_direction};
+use crate::irradiance::hemisphere::{CellSample, Frame, Hemisphere, cell_direction};
 use crate::irradiance::record::Record;
 use crate::sampling::{Rng, basis, cosine_hemisphere, grid_side};
 use crate::scene::Scene;
@@ -19,6 +21,8 @@ use crate::sys::embree::Coherence;
 use crate::tracer::{SurfaceHit, Tracer};
 use components::Components;
 use glam::Vec3;
+use request::AmbientRequest;
+use std::sync::Mutex;
 use std::time::Instant;
 
 /// The options that decide how each component is computed (Radiance names where they exist).
@@ -72,6 +76,13 @@ pub struct RayCounts {
     pub records_level0: u64,
     /// Seconds spent computing L_a (lookups and new records), the paper's T_amb.
     pub t_amb: f64,
+    /// Indirect diffuse values left to a PA as requests (component mode's PRs).
+    pub deferred: u64,
+    /// The pixel and sample being rendered, and the sample's share of the pixel (what a
+    /// deferred request needs to find its way back).
+    pub pixel: u32,
+    pub sample: u32,
+    pub sample_weight: f32,
     /// Nesting of ambient computations, so T_amb counts only the outermost.
     ambient_depth: u32,
 }
@@ -89,6 +100,7 @@ impl RayCounts {
         self.duplicates += o.duplicates;
         self.records_level0 += o.records_level0;
         self.t_amb += o.t_amb;
+        self.deferred += o.deferred;
     }
     pub fn total(&self) -> u64 {
         self.primary + self.shadow + self.specular + self.ambient
@@ -104,6 +116,9 @@ pub struct PathState {
     weight: f32,
     /// Whether emission seen at this hit counts (not for rays gathering indirect diffuse).
     count_emission: bool,
+    /// What light leaving this point is multiplied by before it reaches the pixel: the
+    /// rippled jT of the specular path and the opacities passed (RGB).
+    throughput: Vec3,
 }
 
 pub struct Integrator<'a> {
@@ -112,6 +127,9 @@ pub struct Integrator<'a> {
     pub options: &'a ShadingOptions,
     /// The irradiance cache; None computes L_a by brute force at every point (-aa 0).
     pub cache: Option<&'a IrradianceCache>,
+    /// Component mode's PR: indirect diffuse values that the cache cannot give are not
+    /// computed here but become requests in this list (left out of the pixel).
+    pub defer: Option<&'a Mutex<Vec<AmbientRequest>>>,
 }
 
 /// Passes through fully transparent (alpha-masked) points before a ray gives up.
@@ -129,7 +147,14 @@ impl<'a> Integrator<'a> {
             tracer,
             options,
             cache,
+            defer: None,
         }
+    }
+
+    /// This integrator leaves indirect diffuse values the cache cannot give to `sink`.
+    pub fn deferring(mut self, sink: &'a Mutex<Vec<AmbientRequest>>) -> Self {
+        self.defer = Some(sink);
+        self
     }
 
     /// The components of light arriving at the eye along a primary ray.
@@ -140,6 +165,7 @@ impl<'a> Integrator<'a> {
             specular_depth: 0,
             weight: 1.0,
             count_emission: true,
+            throughput: Vec3::ONE,
         };
         self.trace(origin, dir, state, Coherence::Coherent, rng, counts).0
     }
@@ -195,6 +221,7 @@ impl<'a> Integrator<'a> {
         let next = PathState {
             specular_depth: state.specular_depth + 1,
             weight: state.weight * jt,
+            throughput: state.throughput * jt,
             ..state
         };
         let origin = self.tracer.spawn_point(hit, dir);
@@ -234,7 +261,12 @@ impl<'a> Integrator<'a> {
             c.specular = self.specular(hit, wo, surface, state, rng, counts);
         }
         if has_diffuse {
-            c.indirect = surface.diffuse * self.ambient_radiance(hit, state, rng, counts);
+            c.indirect = match self.defer {
+                Some(sink) if state.level == 0 && state.level < self.options.ambient_bounces => {
+                    self.cached_or_requested(sink, hit, dir, surface, state, counts)
+                }
+                _ => surface.diffuse * self.ambient_radiance(hit, state, rng, counts),
+            };
         }
         sanitize(c, counts)
     }
@@ -274,6 +306,7 @@ impl<'a> Integrator<'a> {
             specular_depth: state.specular_depth + 1,
             weight,
             count_emission: state.level == 0,
+            throughput: state.throughput * surface.opacity * jt,
             ..state
         };
         let origin = self.tracer.spawn_point(hit, wi);
@@ -281,6 +314,70 @@ impl<'a> Integrator<'a> {
             .trace(origin, wi, next, Coherence::Incoherent, rng, counts)
             .0
             .total()
+    }
+
+    /// A PR's L_a: the local cache's value if it has one; otherwise a request for a PA, and
+    /// nothing in the pixel for now (the PA adds it to its own image, which is summed in).
+    fn cached_or_requested(
+        &self,
+        sink: &Mutex<Vec<AmbientRequest>>,
+        hit: &SurfaceHit,
+        dir: Vec3,
+        surface: &crate::scene::material::SurfacePoint,
+        state: PathState,
+        counts: &mut RayCounts,
+    ) -> Vec3 {
+        counts.lookups += 1;
+        if let Some(value) = self.cache.and_then(|c| c.lookup(hit.position, hit.normal, state.level)) {
+            counts.hits += 1;
+            return surface.diffuse * value;
+        }
+        let layer = if state.specular_depth == 0 {
+            Layer::Indirect
+        } else {
+            Layer::Specular
+        };
+        let request = AmbientRequest {
+            pixel: counts.pixel,
+            layer,
+            specular_depth: state.specular_depth,
+            position: hit.position,
+            geometric_normal: hit.geometric_normal,
+            normal: hit.normal,
+            facing_normal: hit.facing_normal,
+            coefficient: state.throughput * surface.opacity * surface.diffuse * counts.sample_weight,
+            weight: state.weight,
+            direction: dir,
+            material: hit.material,
+            stream: (counts.pixel as u64) << 32 | (counts.sample as u64) << 16 | (counts.deferred & 0xffff),
+        };
+        counts.deferred += 1;
+        sink.lock().unwrap_or_else(|e| e.into_inner()).push(request);
+        Vec3::ZERO
+    }
+
+    /// Computes a PA's request: the indirect diffuse value (irradiance over pi) at the point,
+    /// through this process's cache, before the request's coefficient.
+    pub fn ambient_for_request(&self, request: &AmbientRequest, rng: &mut Rng, counts: &mut RayCounts) -> Vec3 {
+        let hit = SurfaceHit {
+            position: request.position,
+            distance: 0.0,
+            geometric_normal: request.geometric_normal,
+            normal: request.normal,
+            facing_normal: request.facing_normal,
+            uv: None,
+            material: request.material,
+            geom_id: 0,
+            prim_id: 0,
+        };
+        let state = PathState {
+            level: 0,
+            specular_depth: request.specular_depth,
+            weight: request.weight,
+            count_emission: false,
+            throughput: Vec3::ONE,
+        };
+        self.ambient_radiance(&hit, state, rng, counts)
     }
 
     /// Irradiance / pi arriving at a diffuse point from other surfaces (the part of L_a before
@@ -308,9 +405,8 @@ impl<'a> Integrator<'a> {
     fn brute_force_ambient(&self, hit: &SurfaceHit, state: PathState, rng: &mut Rng, counts: &mut RayCounts) -> Vec3 {
         let next = PathState {
             level: state.level + 1,
-            specular_depth: state.specular_depth,
-            weight: state.weight,
             count_emission: false,
+            ..state
         };
         let (side, count) = if state.level == 0 {
             let side = grid_side(self.options.ambient_divisions.max(1));
@@ -380,12 +476,16 @@ impl<'a> Integrator<'a> {
         let (tangent, bitangent) = basis(normal);
         let next = PathState {
             level: state.level + 1,
-            specular_depth: state.specular_depth,
-            weight: state.weight,
             count_emission: false,
+            ..state
         };
         let sample = |i: usize, j: usize, rng: &mut Rng, counts: &mut RayCounts| {
-            let wi = cell_direction(normal, tangent, bitangent, n, i, j, rng.next_f32(), rng.next_f32());
+            let frame = Frame {
+                normal,
+                tangent,
+                bitangent,
+            };
+            let wi = cell_direction(frame, n, (i, j), (rng.next_f32(), rng.next_f32()));
             if wi.dot(hit.facing_normal) <= 0.0 {
                 // Below the true surface (a bent shading normal): nothing arrives from there.
                 return CellSample {

@@ -1,0 +1,270 @@
+//! The component mode's master controller: tiles on demand to PRs (with the records each PR
+//! lacks), record relay for PAs at their syncs, load balancing, the termination check, and the
+//! sum of every rank's image.
+//!
+//! Termination is counted, not guessed. Every request a PR makes goes to exactly one PA queue;
+//! from there it is either computed by that PA or forwarded once to an idle PR, which computes
+//! it. PRs report how many they sent once they have no tile left (cumulative, after flushing),
+//! PAs report how many they computed whenever they sync or their queue runs dry, helping PRs
+//! report how many they computed. When every PR has flushed, no forward order is outstanding,
+//! and sent == computed by PAs + computed by helpers, every request has been computed exactly
+//! once and nothing is in flight: then, and only then, FINISH goes out.
+
+use super::*;
+use crate::image::framebuffer::FrameBuffer;
+use crate::irradiance::IrradianceCache;
+use crate::parallel::comm::Comm;
+use crate::parallel::protocol::{TAG_STATS, encode_work};
+use crate::render::Tile;
+use crate::stats::RankReport;
+use std::collections::HashMap;
+use std::time::{Duration, Instant};
+
+/// A PA queue shorter than this is not worth splitting.
+const MIN_SHARE: u64 = 2;
+
+pub struct ComponentResult {
+    pub frame: FrameBuffer,
+    pub ranks: Vec<RankReport>,
+    pub render_s: f64,
+}
+
+#[derive(Default)]
+struct PaState {
+    queue: u64,
+    done: u64,
+    samples: Vec<(f64, u32)>,
+}
+
+#[derive(Default)]
+struct PrState {
+    flushed: bool,
+    sent: u64,
+    helped: u64,
+    /// A forward order for this PR is on its way; the PR will report back.
+    awaiting_forward: bool,
+    waiting: bool,
+}
+
+#[allow(clippy::too_many_arguments)]
+pub fn run(
+    comm: &Comm<'_>,
+    roles: &Roles,
+    tiles: &[Tile],
+    width: u32,
+    height: u32,
+    cache: Option<&IrradianceCache>,
+    timeout: Duration,
+) -> Result<ComponentResult, String> {
+    let start = Instant::now();
+    let size = comm.size() as usize;
+    let mut next_tile = 0usize;
+    let mut tiles_given = 0usize;
+    let mut store: Vec<(usize, Record)> =
+        cache.map_or_else(Vec::new, |c| c.records().into_iter().map(|r| (0, r)).collect());
+    let mut seen = vec![0usize; size];
+    let mut pas: HashMap<i32, PaState> = roles.pas.iter().map(|&r| (r, PaState::default())).collect();
+    let mut prs: HashMap<i32, PrState> = roles.prs.iter().map(|&r| (r, PrState::default())).collect();
+    let mut records_received = 0u64;
+    let mut records_rejected = 0u64;
+    let mut forwarded_orders = 0u64;
+    // PAs start from the cache file's records; PRs get them with their first tile.
+    let initial = encode_batch(&store.iter().map(|(_, r)| r.clone()).collect::<Vec<_>>(), 0);
+    for &pa in &roles.pas {
+        comm.send(pa, crate::parallel::protocol::TAG_INITIAL_RECORDS, &initial);
+        seen[pa as usize] = store.len();
+    }
+
+    let persist = |records: &[Record]| {
+        if let Some(cache) = cache {
+            records.iter().for_each(|r| cache.insert(r.clone()));
+        }
+    };
+    // Records the rank lacks, from every other rank, since its last sync.
+    let catch_up = |store: &[(usize, Record)], seen: &mut [usize], rank: usize| -> Vec<u8> {
+        let missing: Vec<Record> = store[seen[rank]..]
+            .iter()
+            .filter(|(from, _)| *from != rank)
+            .map(|(_, r)| r.clone())
+            .collect();
+        seen[rank] = store.len();
+        encode_batch(&missing, 0)
+    };
+    // Gives an idle PR a share of the longest PA queue, if one is worth splitting.
+    let dispatch =
+        |comm: &Comm<'_>, pas: &mut HashMap<i32, PaState>, pr: i32, state: &mut PrState, orders: &mut u64| {
+            let Some((&pa, longest)) = pas.iter_mut().max_by_key(|(_, s)| s.queue) else {
+                return false;
+            };
+            if longest.queue < MIN_SHARE {
+                return false;
+            }
+            let share = longest.queue / 2;
+            longest.queue -= share;
+            let mut order = (pr as u32).to_le_bytes().to_vec();
+            order.extend_from_slice(&(share as u32).to_le_bytes());
+            comm.send(pa, TAG_FORWARD_ORDER, &order);
+            state.awaiting_forward = true;
+            state.waiting = false;
+            *orders += 1;
+            true
+        };
+
+    let finished = |prs: &HashMap<i32, PrState>, pas: &HashMap<i32, PaState>| {
+        let sent: u64 = prs.values().map(|p| p.sent).sum();
+        let computed: u64 = prs.values().map(|p| p.helped).sum::<u64>() + pas.values().map(|p| p.done).sum::<u64>();
+        prs.values().all(|p| p.flushed && !p.awaiting_forward) && sent == computed
+    };
+
+    while !finished(&prs, &pas) {
+        let Some(msg) = comm.receive(None, None, Some(timeout)) else {
+            let stuck: Vec<String> = prs
+                .iter()
+                .filter(|(_, p)| !p.flushed)
+                .map(|(r, _)| format!("PR {r}"))
+                .collect();
+            return Err(format!(
+                "no message from any rank for {:.0} s (unfinished: {}; requests sent {}, computed {})",
+                timeout.as_secs_f64(),
+                if stuck.is_empty() {
+                    "PA work".into()
+                } else {
+                    stuck.join(", ")
+                },
+                prs.values().map(|p| p.sent).sum::<u64>(),
+                prs.values().map(|p| p.helped).sum::<u64>() + pas.values().map(|p| p.done).sum::<u64>()
+            ));
+        };
+        let source = msg.source;
+        let malformed = |what: &str, e: ProtocolError| format!("rank {source} sent a malformed {what}: {}", e.0);
+        match msg.tag {
+            TAG_PR_WORK_REQUEST => {
+                let assignment = (next_tile < tiles.len()).then_some(next_tile as u32);
+                if assignment.is_some() {
+                    next_tile += 1;
+                    tiles_given += 1;
+                }
+                let work = encode_work(assignment);
+                let mut reply = (work.len() as u32).to_le_bytes().to_vec();
+                reply.extend(work);
+                reply.extend(catch_up(&store, &mut seen, source as usize));
+                comm.send(source, TAG_PR_WORK, &reply);
+            }
+            TAG_PR_IDLE => {
+                let (counts, batch) =
+                    decode_counts_and_records(&msg.data, 2).map_err(|e| malformed("idle report", e))?;
+                records_received += batch.records.len() as u64;
+                records_rejected += batch.rejected as u64;
+                persist(&batch.records);
+                store.extend(batch.records.into_iter().map(|r| (source as usize, r)));
+                let state = prs
+                    .get_mut(&source)
+                    .ok_or_else(|| format!("rank {source} is not a PR but reported as one"))?;
+                state.flushed = true;
+                state.sent = counts[0];
+                state.helped = counts[1];
+                state.awaiting_forward = false;
+                if !dispatch(comm, &mut pas, source, state, &mut forwarded_orders) {
+                    state.waiting = true;
+                }
+            }
+            TAG_PA_STATUS => {
+                let (counts, batch) = decode_counts_and_records(&msg.data, 2).map_err(|e| malformed("status", e))?;
+                records_received += batch.records.len() as u64;
+                records_rejected += batch.rejected as u64;
+                persist(&batch.records);
+                store.extend(batch.records.into_iter().map(|r| (source as usize, r)));
+                let reply = catch_up(&store, &mut seen, source as usize);
+                comm.send(source, TAG_PA_STATUS_REPLY, &reply);
+                let pa = pas
+                    .get_mut(&source)
+                    .ok_or_else(|| format!("rank {source} is not a PA but reported as one"))?;
+                pa.queue = counts[0];
+                pa.done = counts[1];
+                pa.samples.push((start.elapsed().as_secs_f64(), counts[0] as u32));
+                let waiting: Vec<i32> = prs.iter().filter(|(_, p)| p.waiting).map(|(&r, _)| r).collect();
+                for pr in waiting {
+                    let state = prs.get_mut(&pr).expect("listed");
+                    if !dispatch(comm, &mut pas, pr, state, &mut forwarded_orders) {
+                        break;
+                    }
+                }
+            }
+            other => return Err(format!("rank {source} sent an unexpected message (tag {other})")),
+        }
+    }
+    if tiles_given != tiles.len() {
+        return Err(format!("only {tiles_given} of {} tiles were rendered", tiles.len()));
+    }
+    let render_s = start.elapsed().as_secs_f64();
+
+    // Everything is computed: collect the images and statistics. A PA may still send a status
+    // (its last sync) after FINISH; it gets its answer so it can stop.
+    for rank in 1..size as i32 {
+        comm.send(rank, TAG_FINISH, &[]);
+    }
+    let mut frame = FrameBuffer::new(width, height);
+    let mut images = 0;
+    let mut reports: Vec<Option<RankReport>> = vec![None; size];
+    while images < size - 1 || reports[1..].iter().any(Option::is_none) {
+        let Some(msg) = comm.receive(None, None, Some(timeout)) else {
+            return Err(format!(
+                "ranks did not send their images within {:.0} s",
+                timeout.as_secs_f64()
+            ));
+        };
+        match msg.tag {
+            TAG_IMAGE => {
+                let floats: Vec<f32> = msg
+                    .data
+                    .chunks_exact(4)
+                    .map(|b| f32::from_le_bytes(b.try_into().expect("4 bytes")))
+                    .collect();
+                let part = FrameBuffer::from_floats(width, height, &floats)
+                    .filter(|_| floats.iter().all(|v| v.is_finite()))
+                    .ok_or_else(|| format!("rank {} sent a malformed image", msg.source))?;
+                frame.accumulate(&part);
+                images += 1;
+            }
+            TAG_STATS => {
+                let mut report: RankReport = serde_json::from_slice(&msg.data)
+                    .map_err(|e| format!("rank {} sent unreadable statistics: {e}", msg.source))?;
+                if let Some(pa) = pas.get(&msg.source)
+                    && report.queue_lengths.is_empty()
+                {
+                    report.queue_lengths = pa.samples.clone();
+                }
+                reports[msg.source as usize] = Some(report);
+            }
+            TAG_PA_STATUS => {
+                let (_, batch) = decode_counts_and_records(&msg.data, 2).map_err(|e| e.0)?;
+                persist(&batch.records);
+                comm.send(msg.source, TAG_PA_STATUS_REPLY, &encode_batch(&[], 0));
+            }
+            other => {
+                return Err(format!(
+                    "rank {} sent an unexpected message (tag {other}) at the end",
+                    msg.source
+                ));
+            }
+        }
+    }
+    let counters = comm.counters;
+    use std::sync::atomic::Ordering::Relaxed;
+    let mut ranks = vec![RankReport {
+        rank: 0,
+        role: "mc".into(),
+        idle_s: counters.idle_s(),
+        messages: counters.messages_sent.load(Relaxed),
+        bytes: counters.bytes_sent.load(Relaxed),
+        messages_received: counters.messages_received.load(Relaxed),
+        bytes_received: counters.bytes_received.load(Relaxed),
+        records_received,
+        records_rejected,
+        wall_s: start.elapsed().as_secs_f64(),
+        ..Default::default()
+    }];
+    ranks.extend(reports.into_iter().skip(1).flatten());
+    let _ = forwarded_orders;
+    Ok(ComponentResult { frame, ranks, render_s })
+}

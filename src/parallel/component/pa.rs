@@ -1,0 +1,187 @@
+//! A PA rank: owns indirect diffuse work. A communicating thread (the paper's communicator
+//! process) receives request buffers from PRs into a queue and carries out the master's
+//! forward orders; the computing thread takes requests in order, answers each from the PA's
+//! cache or computes a new record, multiplies by the request's coefficient and adds it to the
+//! PA's own image. Every --sync new records, and whenever its queue runs dry, it syncs with the
+//! master, reporting its queue length and how many requests it has computed.
+
+use super::*;
+use crate::image::framebuffer::FrameBuffer;
+use crate::parallel::comm::{Comm, Counters};
+use crate::parallel::protocol::{TAG_INITIAL_RECORDS, TAG_STATS};
+use crate::parallel::{WorkerSetup, rank_report};
+use crate::render::{ThreadClock, ThreadStats};
+use crate::sampling::Rng;
+use crate::shading::Integrator;
+use crate::shading::request::AmbientRequest;
+use std::collections::VecDeque;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Condvar, Mutex};
+use std::time::{Duration, Instant};
+
+#[derive(Default)]
+struct Queue {
+    requests: VecDeque<AmbientRequest>,
+    finish: bool,
+}
+
+/// The communicating thread: requests in, forward orders out, until FINISH.
+fn communicate(
+    counters: &Counters,
+    queue: &Mutex<Queue>,
+    ready: &Condvar,
+    pixels: u32,
+    forwarded: &AtomicU64,
+    rejected: &AtomicU64,
+) {
+    let comm = Comm::new(counters);
+    let filters = [
+        (Some(0), Some(TAG_FINISH)),
+        (Some(0), Some(TAG_FORWARD_ORDER)),
+        (None, Some(TAG_REQUESTS)),
+    ];
+    while let Some(msg) = comm.receive_one_of(&filters, None) {
+        match msg.tag {
+            TAG_REQUESTS => match requests::decode(&msg.data, pixels) {
+                Ok(decoded) => {
+                    rejected.fetch_add(decoded.rejected as u64, Ordering::Relaxed);
+                    // Refused requests still count as done, so the master's totals close.
+                    let mut q = queue.lock().unwrap_or_else(|e| e.into_inner());
+                    q.requests.extend(decoded.requests);
+                    drop(q);
+                    ready.notify_one();
+                }
+                Err(_) => {
+                    rejected.fetch_add(1, Ordering::Relaxed);
+                }
+            },
+            TAG_FORWARD_ORDER => {
+                let word = |o: usize| {
+                    msg.data
+                        .get(o..o + 4)
+                        .map(|b| u32::from_le_bytes(b.try_into().expect("4 bytes")))
+                };
+                let (Some(pr), Some(count)) = (word(0), word(4)) else {
+                    continue;
+                };
+                // The newest requests go: the PA keeps working through the oldest.
+                let share: Vec<AmbientRequest> = {
+                    let mut q = queue.lock().unwrap_or_else(|e| e.into_inner());
+                    let keep = q.requests.len().saturating_sub(count as usize);
+                    q.requests.split_off(keep).into()
+                };
+                forwarded.fetch_add(share.len() as u64, Ordering::Relaxed);
+                comm.send(pr as i32, TAG_FORWARDED, &requests::encode(&share));
+            }
+            _ => {
+                queue.lock().unwrap_or_else(|e| e.into_inner()).finish = true;
+                ready.notify_all();
+                break;
+            }
+        }
+    }
+}
+
+pub fn run(setup: &WorkerSetup<'_>, sync: usize, seed: u64) {
+    let counters = Counters::default();
+    let comm_counters = Counters::default();
+    let comm = Comm::new(&counters);
+    let start = Instant::now();
+    let (width, height) = (setup.camera.width, setup.camera.height);
+    let cache = setup.cache;
+    let queue = Mutex::new(Queue::default());
+    let ready = Condvar::new();
+    let forwarded = AtomicU64::new(0);
+    let rejected = AtomicU64::new(0);
+    let mut received = 0u64;
+
+    if let Some(initial) = comm.receive(Some(0), Some(TAG_INITIAL_RECORDS), None)
+        && let (Some(cache), Ok(batch)) = (cache, decode_batch(&initial.data))
+    {
+        batch.records.into_iter().for_each(|r| cache.insert_shared(r));
+    }
+
+    let mut frame = FrameBuffer::new(width, height);
+    let mut stats = ThreadStats::default();
+    let mut done = 0u64;
+    let mut queue_samples = Vec::new();
+    std::thread::scope(|scope| {
+        let comm_thread =
+            scope.spawn(|| communicate(&comm_counters, &queue, &ready, width * height, &forwarded, &rejected));
+        let integrator = Integrator::new(setup.scene, setup.tracer, setup.shading, cache);
+        let clock = ThreadClock::start();
+        let mut reported = u64::MAX;
+        // Syncs with the master: new records up, records it lacks down, and the queue length
+        // and the count of computed requests, which the master's termination check relies on.
+        let sync_with_master = |left: usize, done: u64, received: &mut u64, samples: &mut Vec<(f64, u32)>| {
+            let records = cache.map_or_else(Vec::new, |c| c.take_outbox());
+            // Refused requests count as done: the PR counted them as sent.
+            let finished = done + rejected.load(Ordering::Relaxed);
+            comm.send(0, TAG_PA_STATUS, &encode_counts_and_records(&[left as u64, finished], &records));
+            samples.push((start.elapsed().as_secs_f64(), left as u32));
+            if let Some(reply) = comm.receive(Some(0), Some(TAG_PA_STATUS_REPLY), None)
+                && let (Some(cache), Ok(batch)) = (cache, decode_batch(&reply.data))
+            {
+                *received += batch.records.len() as u64;
+                batch.records.into_iter().for_each(|r| cache.insert_shared(r));
+            }
+        };
+        loop {
+            let next = queue.lock().unwrap_or_else(|e| e.into_inner()).requests.pop_front();
+            let Some(request) = next else {
+                // Going idle: the master must know everything done so far first (the queue
+                // may also have been emptied by a forward order while a request was computed).
+                if done != reported {
+                    sync_with_master(0, done, &mut received, &mut queue_samples);
+                    reported = done;
+                    continue;
+                }
+                let mut q = queue.lock().unwrap_or_else(|e| e.into_inner());
+                let waited = Instant::now();
+                while q.requests.is_empty() && !q.finish {
+                    q = ready.wait_timeout(q, Duration::from_millis(20)).unwrap_or_else(|e| e.into_inner()).0;
+                }
+                counters.idle_ns.fetch_add(waited.elapsed().as_nanos() as u64, Ordering::Relaxed);
+                if q.requests.is_empty() && q.finish {
+                    break;
+                }
+                continue;
+            };
+            let mut rng = Rng::new(seed, request.stream);
+            let value = integrator.ambient_for_request(&request, &mut rng, &mut stats.rays);
+            frame.add(request.pixel as usize, request.layer, value * request.coefficient);
+            done += 1;
+            if cache.map_or(0, |c| c.outbox_len()) >= sync {
+                let left = queue.lock().unwrap_or_else(|e| e.into_inner()).requests.len();
+                sync_with_master(left, done, &mut received, &mut queue_samples);
+                reported = done;
+            }
+        }
+        clock.stop(&mut stats);
+        let _ = comm_thread.join();
+    });
+
+    comm.send(
+        0,
+        TAG_IMAGE,
+        &frame
+            .to_floats()
+            .iter()
+            .flat_map(|v| v.to_le_bytes())
+            .collect::<Vec<u8>>(),
+    );
+    let mut report = rank_report(
+        comm.rank(),
+        "pa",
+        &[stats],
+        &[&counters, &comm_counters],
+        counters.idle_s(),
+    );
+    report.records_received = received;
+    report.records_rejected = rejected.load(Ordering::Relaxed);
+    report.requests_computed = done;
+    report.requests_forwarded = forwarded.load(Ordering::Relaxed);
+    report.queue_lengths = queue_samples;
+    report.wall_s = start.elapsed().as_secs_f64();
+    comm.send(0, TAG_STATS, &serde_json::to_vec(&report).unwrap_or_default());
+}
