@@ -48,7 +48,7 @@ def main():
     os.makedirs(args.out, exist_ok=True)
     common.build()
     width, height = args.size.split("x")
-    base = ["-x", width, "-y", height, "-q", "--no-preview"] + args.options.split()
+    base = ["-x", width, "-y", height] + args.options.split()
     work = common.scratch()
     rows = []
     for scene_name in args.scenes.split(","):
@@ -66,7 +66,7 @@ def main():
                     continue  # needs an MC, a PR and a PA
                 stats_path = os.path.join(work, f"{scene_name}-{mode}-{np}.json")
                 try:
-                    mpirun(np, ["render", scene, "-o", os.path.join(work, "m.exr"), "--mode", mode,
+                    mpirun(np, ["render", scene, "-o", os.path.join(work, "m.exr"), "--mode", mode, "-q", "--no-preview",
                                 "--stats", stats_path] + base)
                 except RuntimeError as e:
                     print(f"{scene_name:>10} {mode:<12} {np} ranks: {str(e).splitlines()[-1]}")

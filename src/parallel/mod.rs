@@ -332,7 +332,13 @@ fn run_component(
         if roles.pas.contains(&rank) {
             component::pa::run(&setup, args.sync.unwrap_or(8).max(1) as usize, args.seed);
         } else {
-            component::pr::run(&setup, &roles, args.send.max(1) as usize, args.seed);
+            component::pr::run(
+                &setup,
+                &roles,
+                args.send.max(1) as usize,
+                args.sync.unwrap_or(8).max(1) as usize,
+                args.seed,
+            );
         }
         drop(universe);
         return Ok(());

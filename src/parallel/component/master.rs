@@ -168,6 +168,14 @@ pub fn run(
                     state.waiting = true;
                 }
             }
+            TAG_PR_SYNC => {
+                let batch = decode_batch(&msg.data).map_err(|e| malformed("record batch", e))?;
+                records_received += batch.records.len() as u64;
+                records_rejected += batch.rejected as u64;
+                persist(&batch.records);
+                store.extend(batch.records.into_iter().map(|r| (source as usize, r)));
+                comm.send(source, TAG_PR_CATCH_UP, &catch_up(&store, &mut seen, source as usize));
+            }
             TAG_PA_STATUS => {
                 let (counts, batch) = decode_counts_and_records(&msg.data, 2).map_err(|e| malformed("status", e))?;
                 records_received += batch.records.len() as u64;

@@ -32,6 +32,11 @@ pub const TAG_FORWARDED: Tag = 27;
 pub const TAG_FINISH: Tag = 28;
 /// Worker -> MC: the rank's image, every layer.
 pub const TAG_IMAGE: Tag = 29;
+/// MC -> PR, answering every idle report: the records the PR lacks, so that a helping PR
+/// works with a cache as fresh as the PAs' and does not repeat their records.
+pub const TAG_PR_CATCH_UP: Tag = 30;
+/// PR -> MC while helping: new records every --sync of them; answered by TAG_PR_CATCH_UP.
+pub const TAG_PR_SYNC: Tag = 31;
 
 /// The roles of the ranks: 0 is the master, then the PAs, then the PRs.
 #[derive(Clone, Debug, PartialEq, Eq)]

@@ -117,7 +117,11 @@ pub fn run(setup: &WorkerSetup<'_>, sync: usize, seed: u64) {
             let records = cache.map_or_else(Vec::new, |c| c.take_outbox());
             // Refused requests count as done: the PR counted them as sent.
             let finished = done + rejected.load(Ordering::Relaxed);
-            comm.send(0, TAG_PA_STATUS, &encode_counts_and_records(&[left as u64, finished], &records));
+            comm.send(
+                0,
+                TAG_PA_STATUS,
+                &encode_counts_and_records(&[left as u64, finished], &records),
+            );
             samples.push((start.elapsed().as_secs_f64(), left as u32));
             if let Some(reply) = comm.receive(Some(0), Some(TAG_PA_STATUS_REPLY), None)
                 && let (Some(cache), Ok(batch)) = (cache, decode_batch(&reply.data))
@@ -139,9 +143,14 @@ pub fn run(setup: &WorkerSetup<'_>, sync: usize, seed: u64) {
                 let mut q = queue.lock().unwrap_or_else(|e| e.into_inner());
                 let waited = Instant::now();
                 while q.requests.is_empty() && !q.finish {
-                    q = ready.wait_timeout(q, Duration::from_millis(20)).unwrap_or_else(|e| e.into_inner()).0;
+                    q = ready
+                        .wait_timeout(q, Duration::from_millis(20))
+                        .unwrap_or_else(|e| e.into_inner())
+                        .0;
                 }
-                counters.idle_ns.fetch_add(waited.elapsed().as_nanos() as u64, Ordering::Relaxed);
+                counters
+                    .idle_ns
+                    .fetch_add(waited.elapsed().as_nanos() as u64, Ordering::Relaxed);
                 if q.requests.is_empty() && q.finish {
                     break;
                 }

@@ -37,7 +37,25 @@ impl Sender<'_> {
     }
 }
 
-pub fn run(setup: &WorkerSetup<'_>, roles: &Roles, send_at: usize, seed: u64) {
+/// Sends the records made here and takes in those the master has from others.
+fn sync_records(
+    comm: &Comm<'_>,
+    cache: &crate::irradiance::IrradianceCache,
+    up: Vec<crate::irradiance::record::Record>,
+    received: &mut u64,
+    rejected: &mut u64,
+) {
+    comm.send(0, TAG_PR_SYNC, &encode_batch(&up, 0));
+    if let Some(reply) = comm.receive(Some(0), Some(TAG_PR_CATCH_UP), None)
+        && let Ok(batch) = decode_batch(&reply.data)
+    {
+        *received += batch.records.len() as u64;
+        *rejected += batch.rejected as u64;
+        batch.records.into_iter().for_each(|r| cache.insert_shared(r));
+    }
+}
+
+pub fn run(setup: &WorkerSetup<'_>, roles: &Roles, send_at: usize, sync: usize, seed: u64) {
     let counters = Counters::default();
     let comm = Comm::new(&counters);
     let start = Instant::now();
@@ -107,6 +125,12 @@ pub fn run(setup: &WorkerSetup<'_>, roles: &Roles, send_at: usize, seed: u64) {
                     let mut rng = Rng::new(seed, request.stream);
                     let value = integrator.ambient_for_request(request, &mut rng, &mut stats.rays);
                     frame.add(request.pixel as usize, request.layer, value * request.coefficient);
+                    // A helper shares its records as often as a PA does.
+                    if let Some(cache) = setup.cache
+                        && cache.outbox_len() >= sync
+                    {
+                        sync_records(&comm, cache, cache.take_outbox(), &mut received, &mut rejected);
+                    }
                 }
                 // Refused requests are counted as computed (with nothing added) so the totals
                 // still close; the refusal is reported in the statistics.
