@@ -1,0 +1,31 @@
+//! `icrender export`: the scene as Radiance input (`oconv scene.rad > scene.oct; rpict ...`),
+//! read with the same material options as `render`, so both renderers see the same scene.
+
+use super::{CommandError, CommandResult, warn};
+use crate::cli::ExportArgs;
+use crate::export::radiance;
+use crate::scene::{MaterialOptions, Scene};
+
+pub fn run(args: &ExportArgs) -> CommandResult {
+    let options = MaterialOptions {
+        lambertian: args.lambertian,
+        ..MaterialOptions::default()
+    };
+    let scene = Scene::load(&args.scene, &options)?;
+    for w in &scene.warnings {
+        warn(&format!("{}: {w}", args.scene.display()));
+    }
+    let summary =
+        radiance::export(&scene, &args.output).map_err(|e| CommandError(format!("{}: {e}", args.output.display())))?;
+    for note in &summary.notes {
+        warn(&format!("{}: {note}", args.scene.display()));
+    }
+    eprintln!(
+        "icrender: {} materials, {} polygons, {} punctual light sources -> {}",
+        summary.materials,
+        summary.polygons,
+        summary.light_sources,
+        args.output.display()
+    );
+    Ok(())
+}
