@@ -85,6 +85,7 @@ fn generate_abi_bindings(out: &Path) {
         .header("ffi/image_io.h")
         .allowlist_function("icr_.*")
         .allowlist_type("icr_.*")
+        .allowlist_var("ICR_.*")
         .default_enum_style(bindgen::EnumVariation::Consts)
         .layout_tests(false)
         .generate()

@@ -33,7 +33,7 @@ def ensure_module(name, package=None):
 def render(scene, out, options, reference=None):
     """Runs `icrender render`; returns (stats dict, {layer: (rmse, relmse)} against reference)."""
     stats_path = out + ".json"
-    cmd = [BINARY, "render", scene, "-o", out, "-q", "--no-preview", "--stats", stats_path] + options
+    cmd = [BINARY, "render", scene, "-o", out, "-q", "--no-preview", "--overwrite", "--stats", stats_path] + options
     if reference:
         cmd += ["--reference", reference]
     result = subprocess.run(cmd, capture_output=True, text=True)

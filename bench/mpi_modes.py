@@ -66,7 +66,7 @@ def main():
                     continue  # needs an MC, a PR and a PA
                 stats_path = os.path.join(work, f"{scene_name}-{mode}-{np}.json")
                 try:
-                    mpirun(np, ["render", scene, "-o", os.path.join(work, "m.exr"), "--mode", mode, "-q", "--no-preview",
+                    mpirun(np, ["render", scene, "-o", os.path.join(work, "m.exr"), "--mode", mode, "-q", "--no-preview", "--overwrite",
                                 "--stats", stats_path] + base)
                 except RuntimeError as e:
                     print(f"{scene_name:>10} {mode:<12} {np} ranks: {str(e).splitlines()[-1]}")

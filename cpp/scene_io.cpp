@@ -984,7 +984,8 @@ std::string unsupported_required(const tinygltf::Model &model) {
            join(bad, ", ");
 }
 
-icr_scene *load_scene(const std::string &path) {
+icr_scene *load_scene(const std::string &path, uint32_t flags) {
+    (void)flags;
     std::vector<unsigned char> data = read_file(path);
     if (data.empty()) fail("file is empty");
     if (data.size() > std::numeric_limits<uint32_t>::max()) fail("file is larger than 4 GiB");
@@ -1060,14 +1061,14 @@ icr_scene *load_scene(const std::string &path) {
 
 }  // namespace
 
-extern "C" icr_scene *icr_scene_load(const char *path, char *err, size_t err_len) {
+extern "C" icr_scene *icr_scene_load(const char *path, uint32_t flags, char *err, size_t err_len) {
     if (err && err_len) err[0] = '\0';
     try {
         if (!path || !*path) {
             write_error(err, err_len, "empty path");
             return nullptr;
         }
-        return load_scene(path);
+        return load_scene(path, flags);
     } catch (const LoadError &e) {
         write_error(err, err_len, e.what());
     } catch (const std::bad_alloc &) {

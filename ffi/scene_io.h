@@ -101,11 +101,14 @@ typedef struct icr_scene_view {
 
 typedef struct icr_scene icr_scene;
 
+/* Flags of icr_scene_load. */
+#define ICR_LOAD_ALLOW_OUTSIDE_REFS 1u /* buffers and images may lie outside the file's folder */
+
 /*
  * Loads a .gltf or .glb file. On failure returns NULL and writes a one-line, NUL-terminated
  * message (without the path; the caller names the file) into err[0..err_len).
  */
-icr_scene *icr_scene_load(const char *path, char *err, size_t err_len);
+icr_scene *icr_scene_load(const char *path, uint32_t flags, char *err, size_t err_len);
 /* The arrays of a loaded scene; valid until icr_scene_free. */
 icr_scene_view icr_scene_get_view(const icr_scene *scene);
 void icr_scene_free(icr_scene *scene);

@@ -72,6 +72,9 @@ pub struct ExportArgs {
     /// Every material becomes a Lambertian of its base colour, as `render --lambertian`.
     #[arg(long = "lambertian")]
     pub lambertian: bool,
+    /// Let the scene read buffers and images outside its own folder (refused by default).
+    #[arg(long = "allow-outside-refs")]
+    pub allow_outside_refs: bool,
 }
 
 #[derive(Args, Debug, Clone)]
@@ -157,6 +160,9 @@ pub struct RenderArgs {
     /// Every material becomes a two-sided Lambertian of its base colour (emitters unchanged).
     #[arg(long = "lambertian")]
     pub lambertian: bool,
+    /// Let the scene read buffers and images outside its own folder (refused by default).
+    #[arg(long = "allow-outside-refs")]
+    pub allow_outside_refs: bool,
     /// Write statistics as JSON to this file.
     #[arg(long = "stats")]
     pub stats: Option<PathBuf>,
@@ -166,6 +172,9 @@ pub struct RenderArgs {
     /// Do not write the PNG preview.
     #[arg(long = "no-preview")]
     pub no_preview: bool,
+    /// Replace output files that already exist (by default an existing file is never touched).
+    #[arg(long = "overwrite")]
+    pub overwrite: bool,
     /// Store half floats in the EXR (default: full floats).
     #[arg(long = "half")]
     pub half: bool,
@@ -225,6 +234,9 @@ pub struct ViewArgs {
 #[derive(Args, Debug)]
 pub struct InfoArgs {
     pub scene: PathBuf,
+    /// Let the scene read buffers and images outside its own folder (refused by default).
+    #[arg(long = "allow-outside-refs")]
+    pub allow_outside_refs: bool,
     /// Print the description as JSON.
     #[arg(long = "json")]
     pub json: bool,

@@ -8,7 +8,7 @@ use crate::irradiance::record::Metric;
 use crate::irradiance::{CacheSettings, IrradianceCache};
 use crate::render::RenderSettings;
 use crate::scene::view::{Camera, View};
-use crate::scene::{MaterialOptions, Scene};
+use crate::scene::{LoadOptions, Scene};
 use crate::shading::ShadingOptions;
 use crate::tracer::Tracer;
 use glam::Vec3;
@@ -110,9 +110,10 @@ pub fn cache_settings_line(args: &RenderArgs, scene: &Scene) -> String {
 impl Job {
     pub fn prepare(args: &RenderArgs) -> Result<Job, CommandError> {
         let load_start = Instant::now();
-        let material_options = MaterialOptions {
+        let material_options = LoadOptions {
             specular_threshold: args.specular_threshold,
             lambertian: args.lambertian,
+            allow_outside_refs: args.allow_outside_refs,
         };
         let scene = Scene::load(&args.scene, &material_options)?;
         let load_s = load_start.elapsed().as_secs_f64();

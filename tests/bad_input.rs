@@ -23,11 +23,14 @@ const VIEW: [&str; 12] = ["-vp", "0", "2", "0", "-vd", "0", "-1", "0", "-vu", "0
 
 /// Renders `scene` expecting failure; checks the message and that `out` was left alone.
 fn expect_failure(scene: &Path, extra: &[&str], out: &Path, must_mention: &[&str]) -> String {
+    // --overwrite: the checks below are about the scene; an existing output must still be
+    // left untouched when the render fails.
     let mut args = vec![
         "render",
         scene.to_str().unwrap(),
         "-o",
         out.to_str().unwrap(),
+        "--overwrite",
         "-x",
         "8",
         "-y",
@@ -289,4 +292,23 @@ fn degenerate_and_nan_triangles_are_dropped_with_a_warning() {
     assert!(err.contains("dropped 3 triangle(s)"), "{err}");
     let image = read_exr(&out);
     assert!(rgb(&image, "").iter().flatten().all(|v| v.is_finite()));
+}
+
+#[test]
+fn existing_outputs_are_never_replaced_without_overwrite() {
+    let c = Case::new();
+    let mut b = GltfBuilder::new();
+    valid_scene(&mut b);
+    let scene = b.write(c.dir.path(), "ok");
+    let out = c.out();
+    std::fs::write(&out, b"old").unwrap();
+    let mut args = vec!["render", scene.to_str().unwrap(), "-o", out.to_str().unwrap(), "-x", "8", "-y", "8"];
+    args.extend_from_slice(&VIEW);
+    let refused = run(&args);
+    assert!(!refused.status.success());
+    assert!(stderr(&refused).contains("already exists (give --overwrite"), "{}", stderr(&refused));
+    assert_eq!(std::fs::read(&out).unwrap(), b"old");
+    args.push("--overwrite");
+    run_ok(&args);
+    assert!(read_exr(&out).width == 8);
 }

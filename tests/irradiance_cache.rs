@@ -27,6 +27,7 @@ fn render_to(dir: &Path, scene: &Path, name: &str, extra: &[&str]) -> (ImageData
         out.to_str().unwrap(),
         "-q",
         "--no-preview",
+        "--overwrite",
     ];
     args.extend_from_slice(&["--stats", stats.to_str().unwrap()]);
     args.extend_from_slice(extra);

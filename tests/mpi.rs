@@ -44,6 +44,10 @@ fn render(dir: &Path, scene: &Path, name: &str, np: Option<usize>, extra: &[&str
         out.to_str().unwrap(),
         "-q",
         "--no-preview",
+        "--overwrite",
+        // A hang must fail the test in bounded time, not after the default 10 minutes.
+        "--timeout",
+        "60",
     ];
     args.extend_from_slice(&["--stats", stats.to_str().unwrap(), "-x", "48", "-y", "48"]);
     if !extra.contains(&"-ad") {

@@ -4,7 +4,7 @@
 use super::CommandResult;
 use crate::cli::{BenchArgs, BenchCommand};
 use crate::sampling::Rng;
-use crate::scene::{MaterialOptions, Scene};
+use crate::scene::{LoadOptions, Scene};
 use crate::sys::embree::Coherence;
 use crate::tracer::Tracer;
 use glam::Vec3;
@@ -52,7 +52,7 @@ pub fn run(args: &BenchArgs) -> CommandResult {
         threads,
     } = &args.which;
     let load_start = Instant::now();
-    let scene = Scene::load(path, &MaterialOptions::default())?;
+    let scene = Scene::load(path, &LoadOptions::default())?;
     let load_s = load_start.elapsed().as_secs_f64();
     let build_start = Instant::now();
     let tracer = Tracer::new(&scene)?;

@@ -4,12 +4,13 @@
 use super::{CommandError, CommandResult, warn};
 use crate::cli::ExportArgs;
 use crate::export::radiance;
-use crate::scene::{MaterialOptions, Scene};
+use crate::scene::{LoadOptions, Scene};
 
 pub fn run(args: &ExportArgs) -> CommandResult {
-    let options = MaterialOptions {
+    let options = LoadOptions {
         lambertian: args.lambertian,
-        ..MaterialOptions::default()
+        allow_outside_refs: args.allow_outside_refs,
+        ..LoadOptions::default()
     };
     let scene = Scene::load(&args.scene, &options)?;
     for w in &scene.warnings {

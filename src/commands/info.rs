@@ -2,12 +2,13 @@
 
 use super::{CommandResult, warn};
 use crate::cli::InfoArgs;
-use crate::scene::{MaterialOptions, Scene};
+use crate::scene::{LoadOptions, Scene};
 use crate::sys::scene_io::LightType;
 use serde_json::json;
 
 pub fn run(args: &InfoArgs) -> CommandResult {
-    let scene = Scene::load(&args.scene, &MaterialOptions::default())?;
+    let options = LoadOptions { allow_outside_refs: args.allow_outside_refs, ..LoadOptions::default() };
+    let scene = Scene::load(&args.scene, &options)?;
     for w in &scene.warnings {
         warn(&format!("{}: {w}", args.scene.display()));
     }

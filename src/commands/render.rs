@@ -85,6 +85,12 @@ impl Outputs {
             .chain(outputs.png.iter())
             .chain(outputs.stats.iter())
         {
+            if path.exists() && !args.overwrite {
+                return Err(CommandError(format!(
+                    "{}: already exists (give --overwrite to replace it)",
+                    path.display()
+                )));
+            }
             output::check_writable(path).map_err(|e| CommandError(format!("{}: {e}", path.display())))?;
         }
         Ok(outputs)

@@ -25,20 +25,24 @@ pub struct SceneError {
     pub message: String,
 }
 
-/// How materials are read.
+/// How a scene is read.
 #[derive(Clone, Debug)]
-pub struct MaterialOptions {
+pub struct LoadOptions {
     /// Radiance's -st: specular reflectance below which no specular ray is traced.
     pub specular_threshold: f32,
     /// Every material becomes a two-sided Lambertian of its base colour.
     pub lambertian: bool,
+    /// Let the file refer to buffers and images outside its own folder (refused by default:
+    /// a scene from anywhere must not read files anywhere).
+    pub allow_outside_refs: bool,
 }
 
-impl Default for MaterialOptions {
+impl Default for LoadOptions {
     fn default() -> Self {
-        MaterialOptions {
+        LoadOptions {
             specular_threshold: material::DEFAULT_SPECULAR_THRESHOLD,
             lambertian: false,
+            allow_outside_refs: false,
         }
     }
 }
@@ -78,7 +82,7 @@ pub struct SceneNeeds {
 }
 
 impl Scene {
-    pub fn load(path: &Path, options: &MaterialOptions) -> Result<Scene, SceneError> {
+    pub fn load(path: &Path, options: &LoadOptions) -> Result<Scene, SceneError> {
         let fail = |message: String| SceneError {
             path: path.to_path_buf(),
             message,
@@ -89,11 +93,11 @@ impl Scene {
         if path.is_dir() {
             return Err(fail("is a directory, not a glTF file".into()));
         }
-        let gltf = scene_io::load_gltf(path).map_err(fail)?;
+        let gltf = scene_io::load_gltf(path, options.allow_outside_refs).map_err(fail)?;
         Scene::from_gltf(path, gltf, options).map_err(fail)
     }
 
-    fn from_gltf(path: &Path, gltf: GltfScene, options: &MaterialOptions) -> Result<Scene, String> {
+    fn from_gltf(path: &Path, gltf: GltfScene, options: &LoadOptions) -> Result<Scene, String> {
         let mut materials: Vec<Material> = gltf
             .materials
             .iter()
