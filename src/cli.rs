@@ -75,6 +75,9 @@ pub struct ExportArgs {
     /// Let the scene read buffers and images outside its own folder (refused by default).
     #[arg(long = "allow-outside-refs")]
     pub allow_outside_refs: bool,
+    /// Replace the output if it exists.
+    #[arg(long = "overwrite")]
+    pub overwrite: bool,
 }
 
 #[derive(Args, Debug, Clone)]
@@ -103,7 +106,8 @@ pub struct RenderArgs {
     /// -as: extra hemisphere samples where the first ones vary most.
     #[arg(long = "as", default_value_t = 128)]
     pub ambient_supersamples: u32,
-    /// -ar: ambient resolution; the smallest record radius is scene size / ar (0: no limit).
+    /// -ar: ambient resolution; the smallest record radius is the scene's cube size / ar (0: no
+    /// limit), as in Radiance.
     #[arg(long = "ar", default_value_t = 64)]
     pub ambient_resolution: u32,
     /// -af FILE: persistent irradiance cache, loaded at start and appended to while rendering.
@@ -142,8 +146,9 @@ pub struct RenderArgs {
     /// -lw: minimum path weight before a specular path is cut.
     #[arg(long = "lw", default_value_t = 1e-3)]
     pub min_weight: f32,
-    /// Shadow rays to area emitters per shading point on the eye path.
-    #[arg(long = "light-samples", default_value_t = 1)]
+    /// Shadow rays to area emitters per shading point on the eye path (stratified). Shadow rays
+    /// are cheap next to the noise one ray leaves in penumbrae and with many emitters.
+    #[arg(long = "light-samples", default_value_t = 16)]
     pub light_samples: u32,
     /// Samples per pixel (stratified over the pixel's area).
     #[arg(long = "spp", default_value_t = 1)]

@@ -144,6 +144,7 @@ impl Job {
             tile_width,
             tile_height,
             threads,
+            jitter: false,
         };
         let needs_ambient = shading.ambient_bounces > 0 && scene.needs().diffuse;
         let cache = if args.ambient_accuracy > 0.0 && needs_ambient {
@@ -157,7 +158,7 @@ impl Job {
                 args.ambient_supersamples,
                 args.ambient_resolution,
                 metric,
-                scene.size(),
+                scene.cube_size(),
             );
             let cache = IrradianceCache::new(settings);
             Some(match &args.ambient_file {

@@ -19,6 +19,9 @@ pub struct RenderSettings {
     pub tile_width: u32,
     pub tile_height: u32,
     pub threads: usize,
+    /// Jitter even a single sample over the pixel (a reference's passes then integrate the
+    /// pixel's area); otherwise one sample is the pixel's centre, as rpict -pj 0 takes it.
+    pub jitter: bool,
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -93,7 +96,7 @@ pub fn render_pixel(
     for s in 0..samples {
         let mut rng = Rng::for_sample(settings.seed, pixel_index, s as u64);
         // One sample: the pixel centre. Several: one jittered point per stratum of a grid.
-        let (jx, jy) = if samples == 1 {
+        let (jx, jy) = if samples == 1 && !settings.jitter {
             (0.5, 0.5)
         } else {
             let (i, j) = (s % side, (s / side) % side);

@@ -302,11 +302,24 @@ fn existing_outputs_are_never_replaced_without_overwrite() {
     let scene = b.write(c.dir.path(), "ok");
     let out = c.out();
     std::fs::write(&out, b"old").unwrap();
-    let mut args = vec!["render", scene.to_str().unwrap(), "-o", out.to_str().unwrap(), "-x", "8", "-y", "8"];
+    let mut args = vec![
+        "render",
+        scene.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "-x",
+        "8",
+        "-y",
+        "8",
+    ];
     args.extend_from_slice(&VIEW);
     let refused = run(&args);
     assert!(!refused.status.success());
-    assert!(stderr(&refused).contains("already exists (give --overwrite"), "{}", stderr(&refused));
+    assert!(
+        stderr(&refused).contains("already exists (give --overwrite"),
+        "{}",
+        stderr(&refused)
+    );
     assert_eq!(std::fs::read(&out).unwrap(), b"old");
     args.push("--overwrite");
     run_ok(&args);

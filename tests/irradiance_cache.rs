@@ -55,33 +55,33 @@ fn relmse(a: &ImageData, b: &ImageData, layer: &str) -> f64 {
 fn furnace_through_the_cache_at_every_level() {
     let dir = tempfile::tempdir().unwrap();
     let scene = furnace(dir.path(), 0.5, 1.0, 1.0);
-    let view = [
-        "-vp", "0.5", "0.5", "0.5", "-vd", "0", "0", "-1", "-vh", "60", "-vv", "60",
-    ];
-    let mut args = vec![
-        "-x",
-        "32",
-        "-y",
-        "32",
-        "-ab",
-        "8",
-        "-aa",
-        "0.2",
-        "-ad",
-        "256",
-        "--light-samples",
-        "64",
-    ];
-    args.extend_from_slice(&view);
-    let (image, stats) = render_to(dir.path(), &scene, "cached", &args);
-    let total = mean(&rgb(&image, "").concat());
-    assert!((total - 2.0).abs() / 2.0 < 0.01, "furnace through the cache: {total}");
-    // Records were made at every level and reused: far fewer records than lookups.
-    let records = stats["records_computed"].as_u64().unwrap();
-    let lookups = stats["lookups"].as_u64().unwrap();
+    // A cached image rests on a few hundred records, so one render's mean scatters by about
+    // 2 % around the truth (the samples of deep records are heavy-tailed); the mean of
+    // several independent renders must still find E / (1 - rho) within 1 %.
+    let options = "-x 32 -y 32 -ab 8 -aa 0.2 -ad 256 --light-samples 64 -vp 0.5 0.5 0.5 -vd 0 0 -1 -vh 60 -vv 60";
+    let mut totals = Vec::new();
+    for seed in ["1", "2", "3", "4", "5", "6"] {
+        let mut args: Vec<&str> = options.split_whitespace().collect();
+        args.extend_from_slice(&["--seed", seed]);
+        let (image, stats) = render_to(dir.path(), &scene, "cached", &args);
+        let total = mean(&rgb(&image, "").concat());
+        assert!(
+            (total - 2.0).abs() / 2.0 < 0.05,
+            "seed {seed}: furnace through the cache: {total}"
+        );
+        totals.push(total);
+        // Records were made at every level and reused: far fewer records than lookups.
+        let records = stats["records_computed"].as_u64().unwrap();
+        let lookups = stats["lookups"].as_u64().unwrap();
+        assert!(
+            records > 8 && records * 5 < lookups,
+            "{records} records for {lookups} lookups"
+        );
+    }
+    let average = totals.iter().sum::<f64>() / totals.len() as f64;
     assert!(
-        records > 8 && records * 5 < lookups,
-        "{records} records for {lookups} lookups"
+        (average - 2.0).abs() / 2.0 < 0.01,
+        "furnace through the cache: {average} ({totals:?})"
     );
 }
 

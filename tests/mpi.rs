@@ -221,6 +221,38 @@ fn impossible_layouts_are_refused_on_rank_zero() {
 }
 
 #[test]
+fn a_failure_on_rank_zero_alone_ends_the_whole_job() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = project_dir().join("scenes/cornell.gltf");
+    let out = dir.path().join("exists.exr");
+    std::fs::write(&out, b"old").unwrap();
+    // Only rank 0 writes the output, so only rank 0 finds it taken: the workers must not be
+    // left waiting for a master that has given up.
+    let start = Instant::now();
+    let output = mpirun(
+        3,
+        &[
+            "render",
+            scene.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+            "-x",
+            "16",
+            "-y",
+            "16",
+            "--tile",
+            "8x8",
+            "--mode",
+            "centralised",
+        ],
+    );
+    assert!(start.elapsed() < Duration::from_secs(60), "the job hung");
+    assert!(!output.status.success());
+    assert!(stderr(&output).contains("already exists"), "{}", stderr(&output));
+    assert_eq!(std::fs::read(&out).unwrap(), b"old");
+}
+
+#[test]
 fn cache_file_keeps_synced_records_for_a_rerun() {
     let dir = tempfile::tempdir().unwrap();
     let scene = project_dir().join("scenes/cornell.gltf");
@@ -415,6 +447,7 @@ fn component_layouts() {
         "4x4",
         "--mode",
         "component",
+        "--overwrite",
     ];
     let refused = |np: usize, extra: &[&str], expect: &str| {
         let mut args = base.to_vec();

@@ -7,6 +7,12 @@ use crate::export::radiance;
 use crate::scene::{LoadOptions, Scene};
 
 pub fn run(args: &ExportArgs) -> CommandResult {
+    if args.output.exists() && !args.overwrite {
+        return Err(CommandError(format!(
+            "{}: already exists (give --overwrite to replace it)",
+            args.output.display()
+        )));
+    }
     let options = LoadOptions {
         lambertian: args.lambertian,
         allow_outside_refs: args.allow_outside_refs,

@@ -7,7 +7,10 @@ use crate::sys::scene_io::LightType;
 use serde_json::json;
 
 pub fn run(args: &InfoArgs) -> CommandResult {
-    let options = LoadOptions { allow_outside_refs: args.allow_outside_refs, ..LoadOptions::default() };
+    let options = LoadOptions {
+        allow_outside_refs: args.allow_outside_refs,
+        ..LoadOptions::default()
+    };
     let scene = Scene::load(&args.scene, &options)?;
     for w in &scene.warnings {
         warn(&format!("{}: {w}", args.scene.display()));

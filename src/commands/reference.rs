@@ -42,6 +42,9 @@ pub fn run(args: &ReferenceArgs) -> CommandResult {
     }
     let outputs = Outputs::check(&render_args)?;
     let mut job = Job::prepare(&render_args)?;
+    // Every pass places its samples anew over each pixel: the reference integrates the pixel's
+    // area, as a box-filtered render converges to.
+    job.settings.jitter = true;
     let base_seed = job.settings.seed;
     let (w, h) = (render_args.width, render_args.height);
     let mut halves = [FrameBuffer::new(w, h), FrameBuffer::new(w, h)];

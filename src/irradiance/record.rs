@@ -42,9 +42,15 @@ pub enum Metric {
 }
 
 /// The extrapolation factor of a record's gradients is held within these bounds, so a noisy
-/// gradient cannot turn a value negative or blow it up.
+/// gradient cannot turn a value negative or blow it up. Symmetric about 1: a clamp that cut
+/// one side more than the other would bias the cache.
 const MIN_EXTRAPOLATION: f32 = 0.5;
-const MAX_EXTRAPOLATION: f32 = 2.0;
+const MAX_EXTRAPOLATION: f32 = 1.5;
+
+/// Largest angle between a record's normal and a query's under the Hessian metric.
+pub fn max_normal_deviation(accuracy: f32) -> f32 {
+    (std::f32::consts::SQRT_2 * accuracy).min(std::f32::consts::FRAC_PI_4)
+}
 
 impl Record {
     pub fn v_axis(&self) -> Vec3 {
@@ -97,7 +103,7 @@ impl Record {
         }
         match metric {
             Metric::Hessian => {
-                let max_angle = (std::f32::consts::SQRT_2 * accuracy).min(std::f32::consts::FRAC_PI_4);
+                let max_angle = max_normal_deviation(accuracy);
                 let angle = cos_normals.acos();
                 if angle >= max_angle {
                     return None;
@@ -194,7 +200,7 @@ pub(crate) mod tests {
         let mut r = flat_record(1.0, 1.0);
         r.translation_gradient = Vec3::new(0.5, 0.0, 0.0);
         assert!((r.extrapolate(Vec3::new(0.2, 0.0, 0.0), Vec3::Z).x - 1.1).abs() < 1e-6);
-        assert_eq!(r.extrapolate(Vec3::new(100.0, 0.0, 0.0), Vec3::Z).x, 2.0);
+        assert_eq!(r.extrapolate(Vec3::new(100.0, 0.0, 0.0), Vec3::Z).x, 1.5);
         assert_eq!(r.extrapolate(Vec3::new(-100.0, 0.0, 0.0), Vec3::Z).x, 0.5);
     }
 

@@ -173,7 +173,13 @@ pub fn run(args: &RenderArgs, mode: Mode) -> CommandResult {
     if let Err(e) = check_layout(args, mode, size, all_tiles.len(), threads) {
         return fail(e);
     }
-    let outputs = if rank == 0 { Some(Outputs::check(args)?) } else { None };
+    // From here on a failure may hit one rank only (its files, its file system): that rank says
+    // why and ends the whole job, or the others would wait for it for ever.
+    let outputs = if rank == 0 {
+        Some(Outputs::check(args).unwrap_or_else(|e| fatal(&comm, &e.0)))
+    } else {
+        None
+    };
 
     // Every rank loads the scene; only the master opens the cache file.
     let mut rank_args = args.clone();
@@ -181,11 +187,7 @@ pub fn run(args: &RenderArgs, mode: Mode) -> CommandResult {
     if rank != 0 {
         rank_args.ambient_file = None;
     }
-    let mut job = match Job::prepare(&rank_args) {
-        Ok(job) => job,
-        Err(e) if rank == 0 => return Err(e),
-        Err(_) => return Err(CommandError(String::new())),
-    };
+    let mut job = Job::prepare(&rank_args).unwrap_or_else(|e| fatal(&comm, &e.0));
     if mode == Mode::Component {
         return run_component(args, &comm, job, &all_tiles, outputs, wall, universe);
     }
@@ -311,6 +313,7 @@ fn run_component(
 ) -> CommandResult {
     let rank = comm.rank();
     let needed = job.cache.is_some() || (job.shading.ambient_bounces > 0 && job.scene.needs().diffuse);
+    // Every rank reaches the same verdict from the same scene and options.
     let roles = match component::Roles::choose(comm.size(), args.pa, needed) {
         Ok(roles) => roles,
         Err(e) if rank == 0 => return Err(CommandError(e)),
@@ -385,6 +388,16 @@ fn run_component(
     )?;
     drop(universe);
     Ok(())
+}
+
+/// Says why this rank cannot go on and ends every rank of the job.
+fn fatal(comm: &Comm<'_>, message: &str) -> ! {
+    if comm.rank() == 0 {
+        eprintln!("icrender: error: {message}");
+    } else {
+        eprintln!("icrender: error: rank {}: {message}", comm.rank());
+    }
+    comm.abort(1)
 }
 
 /// The per-rank statistics as a table on stderr.

@@ -184,6 +184,12 @@ impl Scene {
         (self.bounds_max - self.bounds_min).length().max(f32::MIN_POSITIVE)
     }
 
+    /// Side of the bounding cube (the largest extent), the scene size Radiance's -ar divides:
+    /// Radiance takes its octree's cube, which encloses the scene the same way.
+    pub fn cube_size(&self) -> f32 {
+        (self.bounds_max - self.bounds_min).max_element().max(f32::MIN_POSITIVE)
+    }
+
     pub fn has_lights(&self) -> bool {
         !self.emitters.is_empty() || !self.punctual_lights.is_empty()
     }

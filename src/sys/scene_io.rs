@@ -117,7 +117,11 @@ pub fn load_gltf(path: &Path, allow_outside_refs: bool) -> Result<GltfScene, Str
     let c_path =
         CString::new(path.as_os_str().as_encoded_bytes()).map_err(|_| "path contains a NUL byte".to_string())?;
     let mut err = vec![0 as std::os::raw::c_char; ERR_LEN];
-    let flags = if allow_outside_refs { abi::ICR_LOAD_ALLOW_OUTSIDE_REFS } else { 0 };
+    let flags = if allow_outside_refs {
+        abi::ICR_LOAD_ALLOW_OUTSIDE_REFS
+    } else {
+        0
+    };
     // SAFETY: valid C string and error buffer of the stated length.
     let raw = unsafe { abi::icr_scene_load(c_path.as_ptr(), flags, err.as_mut_ptr(), err.len()) };
     if raw.is_null() {
