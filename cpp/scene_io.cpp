@@ -8,6 +8,7 @@
 #include "../ffi/scene_io.h"
 
 #include <sys/stat.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <array>
@@ -15,6 +16,7 @@
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <deque>
 #include <exception>
@@ -48,12 +50,24 @@ struct LoadError : std::runtime_error {
     using std::runtime_error::runtime_error;
 };
 
-[[noreturn]] void fail(const std::string &msg) { throw LoadError(msg); }
+// A NUL byte (from a name or URI in the file) would silently cut the message short.
+[[noreturn]] void fail(std::string msg) {
+    for (size_t i = msg.find('\0'); i != std::string::npos; i = msg.find('\0', i + 2)) msg.replace(i, 1, "\\0");
+    throw LoadError(msg);
+}
 
 constexpr size_t kMaxNodeDepth = 1024;
-// A node graph that reuses subtrees (invalid glTF, but loadable) can expand exponentially;
-// this bounds the walk so such a file fails instead of hanging.
-constexpr uint64_t kMaxNodeVisits = uint64_t(1) << 22;
+// Decoded texture images: wider than any GPU texture is refused before decoding (and so before
+// allocating), as is a total that would need more than 1 GiB of RGBA.
+constexpr uint64_t kMaxImageSide = 32768;
+constexpr uint64_t kMaxImagePixels = uint64_t(1) << 28;
+// Names and URIs quoted in messages are cut to this many bytes.
+constexpr size_t kMaxQuoted = 96;
+// Warnings beyond this many are summarised in one line.
+constexpr size_t kMaxWarnings = 100;
+// Nodes reused by several parents (which could expand exponentially) are refused before the
+// walk, so the walk visits each node once; this bound is a second line of defence.
+constexpr uint64_t kMaxNodeVisits = uint64_t(1) << 26;
 // tinygltf converts "extensions" objects to its Value type recursively; deep nesting there would
 // overflow the stack, so the JSON is screened before tinygltf sees it.
 constexpr size_t kMaxJsonDepth = 256;
@@ -131,17 +145,68 @@ bool is_regular_file(const std::string &path) {
     return ::stat(path.c_str(), &st) == 0 && S_ISREG(st.st_mode);
 }
 
+bool starts_with_ci(const std::string &s, const char *prefix) {
+    size_t n = std::strlen(prefix);
+    if (s.size() < n) return false;
+    for (size_t i = 0; i < n; ++i) {
+        char a = s[i];
+        if (a >= 'A' && a <= 'Z') a = char(a - 'A' + 'a');
+        if (a != prefix[i]) return false;
+    }
+    return true;
+}
+
+// A name or URI from the file, made fit for quoting in a one-line message: control characters
+// escaped (a name must not start a line of its own, or move the terminal's cursor), and cut (a
+// data URI can be megabytes long) at a UTF-8 sequence boundary.
+std::string shorten(const std::string &text, size_t max = kMaxQuoted) {
+    size_t n = text.size();
+    if (n > max) {
+        n = max;
+        while (n > 0 && (static_cast<unsigned char>(text[n]) & 0xC0) == 0x80) --n;
+    }
+    std::string out;
+    out.reserve(n + 8);
+    for (size_t i = 0; i < n; ++i) {
+        const unsigned char c = static_cast<unsigned char>(text[i]);
+        if (c >= 0x20 && c != 0x7F) {
+            out.push_back(char(c));
+        } else if (c == '\n') {
+            out += "\\n";
+        } else if (c == '\r') {
+            out += "\\r";
+        } else if (c == '\t') {
+            out += "\\t";
+        } else if (c == 0) {
+            out += "\\0";
+        } else {
+            char buf[8];
+            std::snprintf(buf, sizeof buf, "\\x%02x", c);
+            out += buf;
+        }
+    }
+    if (n < text.size()) out += "...";
+    return out;
+}
+
 std::vector<unsigned char> read_file(const std::string &path) {
     struct stat st;
     if (::stat(path.c_str(), &st) != 0) fail(std::string("cannot open file: ") + std::strerror(errno));
     if (!S_ISREG(st.st_mode)) fail("not a regular file");
+    // The size is known before reading: refuse what the loader cannot take before allocating.
+    if (uint64_t(st.st_size) > std::numeric_limits<uint32_t>::max()) fail("file is larger than 4 GiB");
     FILE *f = std::fopen(path.c_str(), "rb");
     if (!f) fail(std::string("cannot open file: ") + std::strerror(errno));
     std::vector<unsigned char> data;
     unsigned char chunk[1 << 16];
     size_t n;
     try {
-        while ((n = std::fread(chunk, 1, sizeof chunk, f)) > 0) data.insert(data.end(), chunk, chunk + n);
+        data.reserve(size_t(st.st_size));
+        while ((n = std::fread(chunk, 1, sizeof chunk, f)) > 0) {
+            data.insert(data.end(), chunk, chunk + n);
+            // The file grew while being read: never past the 4 GiB the ABI can take.
+            if (data.size() > std::numeric_limits<uint32_t>::max()) fail("file is larger than 4 GiB");
+        }
     } catch (...) {
         std::fclose(f);
         throw;
@@ -173,19 +238,51 @@ void check_json_depth(const unsigned char *p, size_t n) {
     }
 }
 
-// tinygltf 2.7 forms &buffer.data[bufferView.byteOffset] for an image stored in a bufferView
-// before anything checks that range; under _GLIBCXX_ASSERTIONS (hardened toolchains) that alone
-// aborts the process. Such files are refused from the JSON first. Once tinygltf accepts a buffer
-// its data size equals the declared byteLength, so the declared values are what matters.
-void check_image_buffer_views(const unsigned char *text, size_t n) {
+// The media types tinygltf 2.7 decodes as base64 data URIs; any other "data:" URI it would take
+// for a file name.
+const char *const kDataUriHeaders[] = {
+    "data:application/octet-stream;base64,", "data:application/gltf-buffer;base64,", "data:image/jpeg;base64,",
+    "data:image/png;base64,",                "data:image/bmp;base64,",               "data:image/gif;base64,",
+    "data:text/plain;base64,",
+};
+
+// Bytes tinygltf's base64 decoder produces from a data URI: it stops at the first '=' or
+// non-base64 character and drops an incomplete last group's partial byte.
+bool data_uri_payload_size(const std::string &uri, uint64_t *size) {
+    for (const char *h : kDataUriHeaders) {
+        size_t n = std::strlen(h);
+        if (uri.compare(0, n, h) != 0) continue;
+        uint64_t chars = 0;
+        for (size_t i = n; i < uri.size(); ++i) {
+            unsigned char c = static_cast<unsigned char>(uri[i]);
+            bool b64 = (c >= 'A' && c <= 'Z') || (c >= 'a' && c <= 'z') || (c >= '0' && c <= '9') || c == '+' || c == '/';
+            if (!b64) break;
+            ++chars;
+        }
+        *size = chars / 4 * 3 + (chars % 4 ? chars % 4 - 1 : 0);
+        return true;
+    }
+    return false;
+}
+
+// Checks made on the JSON before tinygltf sees it, where tinygltf itself would misbehave or give
+// an unreadable message:
+// - tinygltf 2.7 forms &buffer.data[bufferView.byteOffset] for an image stored in a bufferView
+//   before anything checks that range; under _GLIBCXX_ASSERTIONS (hardened toolchains) that
+//   alone aborts the process. Such files are refused first. Once tinygltf accepts a buffer its
+//   data size equals the declared byteLength, so the declared values are what matters.
+// - A buffer's data URI must hold exactly byteLength bytes; tinygltf refuses it otherwise but
+//   quotes the whole URI (megabytes) in its message. A "data:" URI of a media type tinygltf
+//   does not decode would be looked up as a file name.
+void screen_json(const unsigned char *text, size_t n) {
     using nlohmann::json;
-    // Only the few members involved are kept (not, say, a buffer's base64 uri); everything else
-    // is discarded while parsing.
+    // Only the few members involved are kept; everything else is discarded while parsing.
     json::parser_callback_t keep_needed = [](int depth, json::parse_event_t event, json &parsed) {
         if (event != json::parse_event_t::key || !parsed.is_string()) return true;
         const std::string &k = parsed.get_ref<const std::string &>();
         if (depth == 1) return k == "images" || k == "bufferViews" || k == "buffers";
-        if (depth == 3) return k == "bufferView" || k == "buffer" || k == "byteOffset" || k == "byteLength";
+        if (depth == 3)
+            return k == "bufferView" || k == "buffer" || k == "byteOffset" || k == "byteLength" || k == "uri";
         return true;
     };
     json doc = json::parse(text, text + n, keep_needed, /*allow_exceptions=*/false);
@@ -195,11 +292,31 @@ void check_image_buffer_views(const unsigned char *text, size_t n) {
         return it != doc.end() && it->is_array() ? &*it : nullptr;
     };
     const json *images = array("images"), *views = array("bufferViews"), *buffers = array("buffers");
-    if (!images || !views || !buffers) return;
     auto unsigned_member = [](const json &o, const char *key, uint64_t dflt) -> uint64_t {
         auto it = o.find(key);
         return it != o.end() && it->is_number_unsigned() ? it->get<uint64_t>() : dflt;
     };
+    if (buffers) {
+        for (size_t i = 0; i < buffers->size(); ++i) {
+            const json &buf = (*buffers)[i];
+            if (!buf.is_object()) continue;
+            auto uri_it = buf.find("uri");
+            if (uri_it == buf.end() || !uri_it->is_string()) continue;
+            const std::string &uri = uri_it->get_ref<const std::string &>();
+            if (!starts_with_ci(uri, "data:")) continue;
+            const std::string what = "buffer " + std::to_string(i) + ": data URI '" + shorten(uri, 48) + "'";
+            uint64_t holds;
+            if (!data_uri_payload_size(uri, &holds))
+                fail(what + " is not base64 data of a supported media type (application/octet-stream)");
+            auto len_it = buf.find("byteLength");
+            if (len_it == buf.end() || !len_it->is_number_unsigned()) continue;  // tinygltf's error
+            uint64_t declared = len_it->get<uint64_t>();
+            if (holds != declared)
+                fail(what + " holds " + std::to_string(holds) + " bytes, but the buffer's byteLength is " +
+                     std::to_string(declared));
+        }
+    }
+    if (!images || !views || !buffers) return;
     for (size_t i = 0; i < images->size(); ++i) {
         const json &img = (*images)[i];
         if (!img.is_object()) continue;
@@ -228,13 +345,271 @@ std::string base_dir_of(const std::string &path) {
     return path.substr(0, slash);
 }
 
-// tinygltf looks for external files first next to the asset and then in the process's current
-// directory; the second lookup would let a missing texture be silently replaced by an unrelated
-// file, so only paths under the asset's directory are admitted (and only regular files).
-bool file_exists_in_asset_dir(const std::string &abs_filename, void *user) {
-    const std::string &prefix = *static_cast<const std::string *>(user);
-    if (abs_filename.compare(0, prefix.size(), prefix) != 0) return false;
-    return is_regular_file(abs_filename);
+// ---------------------------------------------------------------------------------------------
+// Limits on what a file may make the loader allocate
+
+std::string human_bytes(uint64_t bytes) {
+    char buf[64];
+    if (bytes == UINT64_MAX) return "more than 16 EiB";
+    const char *units[] = {"bytes", "KiB", "MiB", "GiB", "TiB", "PiB", "EiB"};
+    double v = double(bytes);
+    size_t u = 0;
+    while (v >= 1024.0 && u + 1 < sizeof units / sizeof *units) {
+        v /= 1024.0;
+        ++u;
+    }
+    if (u == 0)
+        std::snprintf(buf, sizeof buf, "%llu bytes", static_cast<unsigned long long>(bytes));
+    else
+        std::snprintf(buf, sizeof buf, "%.1f %s", v, units[u]);
+    return buf;
+}
+
+// How much memory a loaded scene may take: ICRENDER_MAX_SCENE_MEMORY_MB (MiB) when set, for
+// tests and fuzzing; else the machine's physical memory, or the cgroup's limit when lower.
+uint64_t scene_memory_limit(std::string *what) {
+    if (const char *env = std::getenv("ICRENDER_MAX_SCENE_MEMORY_MB")) {
+        char *end = nullptr;
+        errno = 0;
+        unsigned long long mb = std::strtoull(env, &end, 10);
+        if (end != env && *end == '\0' && errno == 0 && mb > 0 && mb < (1ull << 40)) {
+            *what = "the limit set by ICRENDER_MAX_SCENE_MEMORY_MB";
+            return uint64_t(mb) << 20;
+        }
+    }
+    uint64_t limit = UINT64_MAX;
+    *what = "this machine's memory";
+    const long pages = ::sysconf(_SC_PHYS_PAGES), page = ::sysconf(_SC_PAGESIZE);
+    if (pages > 0 && page > 0) limit = uint64_t(pages) * uint64_t(page);
+    if (FILE *f = std::fopen("/sys/fs/cgroup/memory.max", "r")) {
+        unsigned long long v = 0;
+        if (std::fscanf(f, "%llu", &v) == 1 && v > 0 && v < limit) {
+            limit = v;
+            *what = "the memory limit of this process's cgroup";
+        }
+        std::fclose(f);
+    }
+    return limit;
+}
+
+// The width and height in a PNG (IHDR) or JPEG (first SOFn) header; false for other formats
+// or a header too short to say.
+bool header_extent(const unsigned char *p, uint64_t size, uint32_t *w, uint32_t *h) {
+    auto be16 = [&](uint64_t o) { return uint32_t(p[o]) << 8 | p[o + 1]; };
+    auto be32 = [&](uint64_t o) { return be16(o) << 16 | be16(o + 2); };
+    static const unsigned char png_sig[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};
+    if (size >= 24 && std::memcmp(p, png_sig, 8) == 0 && std::memcmp(p + 12, "IHDR", 4) == 0) {
+        *w = be32(16);
+        *h = be32(20);
+        return true;
+    }
+    if (size < 4 || p[0] != 0xFF || p[1] != 0xD8) return false;
+    uint64_t o = 2;
+    while (o + 4 <= size) {
+        if (p[o] != 0xFF) return false;
+        const unsigned m = p[o + 1];
+        if (m == 0xFF) {  // fill byte
+            ++o;
+            continue;
+        }
+        if (m == 0xD9 || m == 0xDA) return false;  // EOI or SOS before any frame header
+        if (m == 0x01 || (m >= 0xD0 && m <= 0xD7)) {  // markers without a length
+            o += 2;
+            continue;
+        }
+        const uint64_t len = be16(o + 2);
+        if (m >= 0xC0 && m <= 0xCF && m != 0xC4 && m != 0xC8 && m != 0xCC) {
+            if (o + 9 > size) return false;
+            *h = be16(o + 5);
+            *w = be16(o + 7);
+            return true;
+        }
+        if (len < 2) return false;
+        o += 2 + len;
+    }
+    return false;
+}
+
+// Checks the width and height an image header declares, before decoding: against fixed limits,
+// and against what the encoded bytes can possibly hold (a header is cheap to forge, pixels are
+// not). The bounds are the formats' best compression ratios: deflate (PNG) cannot expand one
+// byte into more than 1032, baseline and progressive Huffman JPEG (stb has no arithmetic
+// coding) spend at least one bit per 8x8 block and component; the other formats stb reads get
+// PNG's bound for one-bit pixels.
+void check_declared_extent(const std::string &what, const unsigned char *bytes, uint64_t size, int64_t w, int64_t h) {
+    if (w <= 0 || h <= 0) fail(what + " has no pixels");
+    const uint64_t uw = uint64_t(w), uh = uint64_t(h), pixels = uw * uh;
+    if (uw > kMaxImageSide || uh > kMaxImageSide || pixels > kMaxImagePixels)
+        fail(what + " declares " + std::to_string(uw) + " x " + std::to_string(uh) +
+             " pixels, more than the limit of " + std::to_string(kMaxImageSide) + " per side and " +
+             std::to_string(kMaxImagePixels) + " in all");
+    static const unsigned char png_sig[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};
+    const char *format = "image";
+    uint64_t need = 0, can = 0;
+    if (size >= 26 && std::memcmp(bytes, png_sig, 8) == 0 && std::memcmp(bytes + 12, "IHDR", 4) == 0) {
+        // Raw scanlines: a filter byte and the packed samples per row.
+        const unsigned depth = bytes[24], type = bytes[25];
+        const unsigned channels = type == 0 ? 1 : type == 2 ? 3 : type == 3 ? 1 : type == 4 ? 2 : type == 6 ? 4 : 0;
+        if (channels && depth && depth <= 16) {
+            format = "PNG";
+            need = uh * (1 + (uw * channels * depth + 7) / 8);
+            can = 1032 * size;
+        }
+    } else if (size >= 2 && bytes[0] == 0xFF && bytes[1] == 0xD8) {
+        format = "JPEG";
+        need = pixels;
+        can = 512 * size + 4096;
+    }
+    if (can == 0) {
+        need = pixels;
+        can = 8 * 1032 * size;
+    }
+    if (need > can)
+        fail(what + " declares " + std::to_string(uw) + " x " + std::to_string(uh) + " pixels, more than its " +
+             std::to_string(size) + " bytes of " + format + " data can hold");
+}
+
+// ---------------------------------------------------------------------------------------------
+// External files (buffers and images named by URI)
+//
+// tinygltf joins the asset's directory and the URL-decoded URI, asks ExpandFilePath for the
+// path to use, FileExists whether it is there, and ReadWholeFile for its bytes; it looks next to
+// the asset first and then in the process's current directory. The policy lives in the first
+// two callbacks:
+// - the current-directory lookup is never admitted (a missing texture must not be silently
+//   replaced by an unrelated file);
+// - unless ICR_LOAD_ALLOW_OUTSIDE_REFS is given, a URI that leaves the scene's folder is refused:
+//   absolute paths, file: URIs, '..' segments climbing out of it (refused whether or not the
+//   target exists, so errors do not reveal what exists outside), and files whose real path
+//   (symbolic links resolved) lies outside the folder's real path;
+// - with the flag, absolute paths and file: URIs (empty or localhost authority) are read as
+//   the paths they name;
+// - only regular files are read, and what is read is the resolved real path that was checked.
+// The first refusal is kept and becomes the load's error message.
+
+struct FileAccess {
+    std::string prefix;    // the asset directory as tinygltf writes it, ending in '/'
+    std::string real_dir;  // realpath of the asset directory, ending in '/'
+    bool allow_outside = false;
+    std::string refused;
+    // Every buffer and image entry is read on its own, even when many name the same file, so a
+    // small file naming a big neighbour many times could ask for any amount of memory: the
+    // total is checked against the memory limit before each read.
+    uint64_t bytes_read = 0;
+    uint64_t read_limit = UINT64_MAX;
+    std::string limited_by;
+};
+
+// Whether a relative path's '..' segments climb above its starting directory (lexically; symbolic
+// links are judged by their real path afterwards).
+bool climbs_out(const std::string &rel) {
+    int64_t depth = 0;
+    size_t i = 0;
+    while (i <= rel.size()) {
+        size_t j = rel.find('/', i);
+        if (j == std::string::npos) j = rel.size();
+        const size_t len = j - i;
+        if (len == 2 && rel.compare(i, 2, "..") == 0) {
+            if (--depth < 0) return true;
+        } else if (len > 0 && !(len == 1 && rel[i] == '.')) {
+            ++depth;
+        }
+        i = j + 1;
+    }
+    return false;
+}
+
+// The local path a file: URI names (already URL-decoded by tinygltf), or "" if it names a host.
+std::string file_uri_path(const std::string &uri) {
+    std::string rest = uri.substr(5);  // after "file:"
+    if (rest.compare(0, 2, "//") != 0) return rest;  // file:/path
+    rest = rest.substr(2);
+    size_t slash = rest.find('/');
+    std::string host = slash == std::string::npos ? rest : rest.substr(0, slash);
+    if (!host.empty() && !(host.size() == std::strlen("localhost") && starts_with_ci(host, "localhost"))) return {};
+    return slash == std::string::npos ? std::string() : rest.substr(slash);
+}
+
+std::string real_path(const std::string &path) {
+    char *rp = ::realpath(path.c_str(), nullptr);
+    if (!rp) return {};
+    std::string out(rp);
+    std::free(rp);
+    return out;
+}
+
+std::string expand_file_path(const std::string &joined, void *user) {
+    FileAccess &fa = *static_cast<FileAccess *>(user);
+    if (joined.compare(0, fa.prefix.size(), fa.prefix) != 0) return {};  // the current-directory lookup
+    const std::string uri = joined.substr(fa.prefix.size());
+    auto refuse = [&](const std::string &why) {
+        if (fa.refused.empty())
+            fa.refused = "'" + shorten(uri) + "' " + why +
+                         ": refused (--allow-outside-refs allows files outside the scene's folder)";
+        return std::string();
+    };
+    if (uri.find('\0') != std::string::npos) {
+        if (fa.refused.empty()) fa.refused = "URI '" + shorten(uri) + "' contains a NUL byte";
+        return {};
+    }
+    std::string target = joined;
+    if (starts_with_ci(uri, "file:")) {
+        if (!fa.allow_outside) return refuse("is a file: URI");
+        target = file_uri_path(uri);
+        if (target.empty() || target[0] != '/') {
+            if (fa.refused.empty()) fa.refused = "file URI '" + shorten(uri) + "' does not name a local absolute path";
+            return {};
+        }
+    } else if (!uri.empty() && uri[0] == '/') {
+        if (!fa.allow_outside) return refuse("is an absolute path");
+        target = uri;
+    } else if (!fa.allow_outside && climbs_out(uri)) {
+        return refuse("climbs out of the scene's folder");
+    }
+    std::string real = real_path(target);
+    if (real.empty()) return target;  // missing: tinygltf reports it as not found
+    if (real + "/" == fa.real_dir) return real;  // the folder itself ("", "."): not a file
+    if (!fa.allow_outside && real.compare(0, fa.real_dir.size(), fa.real_dir) != 0)
+        return refuse("resolves (through a symbolic link) to a file outside the scene's folder");
+    return real;
+}
+
+bool file_exists(const std::string &path, void *) { return !path.empty() && is_regular_file(path); }
+
+// tinygltf's ReadWholeFile, with the size taken before reading and counted against the limit.
+bool read_whole_file(std::vector<unsigned char> *out, std::string *err, const std::string &path, void *user) {
+    FileAccess &fa = *static_cast<FileAccess *>(user);
+    struct stat st;
+    if (::stat(path.c_str(), &st) != 0 || !S_ISREG(st.st_mode)) {
+        if (err) *err += "File open error : " + shorten(path) + "\n";
+        return false;
+    }
+    const uint64_t size = uint64_t(st.st_size);
+    if (size == 0) {
+        if (err) *err += "File is empty : " + shorten(path) + "\n";
+        return false;
+    }
+    if (size > fa.read_limit || fa.bytes_read > fa.read_limit - size) {
+        if (fa.refused.empty())
+            fa.refused = "the files the scene refers to add up to more than " + fa.limited_by + " (" +
+                         human_bytes(fa.read_limit) + ") at '" + shorten(path) + "'";
+        return false;
+    }
+    fa.bytes_read += size;
+    FILE *f = std::fopen(path.c_str(), "rb");
+    if (!f) {
+        if (err) *err += "File open error : " + shorten(path) + "\n";
+        return false;
+    }
+    out->resize(size_t(size));
+    const size_t got = std::fread(out->data(), 1, out->size(), f);
+    std::fclose(f);
+    if (got != out->size()) {
+        out->clear();
+        if (err) *err += "File read error : " + shorten(path) + "\n";
+        return false;
+    }
+    return true;
 }
 
 // Image "loader" that decodes nothing. tinygltf 2.7 hands image bytes from a bufferView without
@@ -414,6 +789,7 @@ class Converter {
     Converter(const tinygltf::Model &model, icr_scene &scene) : m_(model), s_(scene) {}
 
     void run() {
+        check_graph_and_memory();
         convert_textures_and_materials();
         walk_scene();
         finish();
@@ -428,29 +804,27 @@ class Converter {
     std::vector<bool> mesh_done_;
     std::vector<int> image_pixels_;  // glTF image -> index into s_.pixels (-1: not decoded)
     std::vector<uint32_t> image_w_, image_h_;
+    std::vector<uint32_t> extent_w_, extent_h_;  // declared (header) sizes, 0 until checked
     std::vector<char> on_path_;
     uint64_t visits_ = 0;
     bool warned_skin_ = false;
 
     static std::string quoted_or_index(const std::string &name, const char *kind, size_t index) {
-        if (!name.empty()) return std::string(kind) + " '" + name + "'";
+        if (!name.empty()) return std::string(kind) + " '" + shorten(name) + "'";
         return std::string(kind) + " " + std::to_string(index);
     }
 
     std::string image_label(size_t index) const {
         const tinygltf::Image &img = m_.images[index];
-        if (!img.uri.empty()) return "'" + img.uri + "'";
-        if (!img.name.empty()) return "image[" + std::to_string(index) + "] '" + img.name + "'";
+        if (!img.uri.empty()) return "'" + shorten(img.uri) + "'";
+        if (!img.name.empty()) return "image[" + std::to_string(index) + "] '" + shorten(img.name) + "'";
         return "image[" + std::to_string(index) + "]";
     }
 
-    // Returns the index into s_.pixels for a glTF image, decoding it on first use so that
-    // textures sharing an image share its pixels.
-    int decoded_image(size_t index) {
-        if (image_pixels_[index] >= 0) return image_pixels_[index];
+    // The encoded bytes of a glTF image (from its bufferView, a data URI or a file), with the
+    // bufferView's range checked against its buffer.
+    void image_bytes(size_t index, const unsigned char **bytes, uint64_t *size) const {
         const tinygltf::Image &img = m_.images[index];
-        const unsigned char *bytes = nullptr;
-        uint64_t size = 0;
         if (img.bufferView >= 0) {
             std::string what = "image " + image_label(index);
             if (size_t(img.bufferView) >= m_.bufferViews.size()) fail(what + ": bufferView out of range");
@@ -459,18 +833,55 @@ class Converter {
             const tinygltf::Buffer &buf = m_.buffers[size_t(bv.buffer)];
             if (add_checked(bv.byteOffset, bv.byteLength, what) > buf.data.size())
                 fail(what + ": bufferView exceeds its buffer");
-            bytes = buf.data.data() + bv.byteOffset;
-            size = bv.byteLength;
+            *bytes = buf.data.data() + bv.byteOffset;
+            *size = bv.byteLength;
         } else {
-            bytes = img.image.data();
-            size = img.image.size();
+            *bytes = img.image.data();
+            *size = img.image.size();
         }
-        if (size == 0) {
-            if (!img.uri.empty()) fail("missing texture image '" + img.uri + "'");
+        if (*size == 0) {
+            if (!img.uri.empty()) fail("missing texture image '" + shorten(img.uri) + "'");
             fail("texture image " + image_label(index) + " has no data");
         }
-        if (size > uint64_t(std::numeric_limits<int>::max()))
+        if (*size > uint64_t(std::numeric_limits<int>::max()))
             fail("texture image " + image_label(index) + " is too large");
+    }
+
+    // Width and height an image's header declares, read without decoding and checked against
+    // the limits and against what its encoded bytes can hold, so that no allocation is ever
+    // made for pixels the file cannot contain.
+    void image_extent(size_t index, uint32_t *width, uint32_t *height) {
+        if (extent_w_[index] == 0) {
+            const unsigned char *bytes = nullptr;
+            uint64_t size = 0;
+            image_bytes(index, &bytes, &size);
+            int w = 0, h = 0, comp = 0;
+            // stb_image refuses some huge sizes itself but then says only "corrupt": read the
+            // PNG and JPEG headers here so that the message says what the file claims.
+            uint32_t hw = 0, hh = 0;
+            if (header_extent(bytes, size, &hw, &hh))
+                check_declared_extent("texture image " + image_label(index), bytes, size, int64_t(hw), int64_t(hh));
+            if (!stbi_info_from_memory(bytes, int(size), &w, &h, &comp)) {
+                const char *why = stbi_failure_reason();
+                fail("cannot decode texture image " + image_label(index) + ": " + (why ? why : "unknown format"));
+            }
+            check_declared_extent("texture image " + image_label(index), bytes, size, w, h);
+            extent_w_[index] = uint32_t(w);
+            extent_h_[index] = uint32_t(h);
+        }
+        *width = extent_w_[index];
+        *height = extent_h_[index];
+    }
+
+    // Returns the index into s_.pixels for a glTF image, decoding it on first use so that
+    // textures sharing an image share its pixels.
+    int decoded_image(size_t index) {
+        if (image_pixels_[index] >= 0) return image_pixels_[index];
+        uint32_t ew, eh;
+        image_extent(index, &ew, &eh);
+        const unsigned char *bytes = nullptr;
+        uint64_t size = 0;
+        image_bytes(index, &bytes, &size);
         int w = 0, h = 0, comp = 0;
         // Asking stb for 4 channels expands grey/grey+alpha/RGB to RGBA, and stbi_load (not _16)
         // reduces 16-bit PNGs to 8 bits, which is exactly the icr_texture format.
@@ -482,6 +893,8 @@ class Converter {
         std::vector<uint8_t> rgba;
         try {
             if (w <= 0 || h <= 0) fail("texture image " + image_label(index) + " has no pixels");
+            if (uint32_t(w) != ew || uint32_t(h) != eh)
+                fail("texture image " + image_label(index) + " decodes to another size than its header says");
             rgba.assign(px, px + size_t(w) * size_t(h) * 4);
         } catch (...) {
             stbi_image_free(px);
@@ -493,6 +906,149 @@ class Converter {
         image_w_[index] = uint32_t(w);
         image_h_[index] = uint32_t(h);
         return image_pixels_[index];
+    }
+
+    // ----- the scene's size, before any of it is allocated
+
+    struct MeshCost {
+        bool done = false;
+        uint64_t bytes = 0;      // icr_mesh arrays of its triangle primitives
+        uint64_t triangles = 0;
+    };
+    std::vector<MeshCost> mesh_cost_;
+
+    // What a mesh's triangle primitives take as icr_mesh arrays, from accessor counts checked
+    // against their buffers (view_accessor). A primitive that the conversion will skip or
+    // refuse counts nothing here; the conversion says why.
+    const MeshCost &mesh_cost(size_t mi) {
+        MeshCost &c = mesh_cost_[mi];
+        if (c.done) return c;
+        c.done = true;
+        for (const tinygltf::Primitive &prim : m_.meshes[mi].primitives) {
+            if (prim.mode != TINYGLTF_MODE_TRIANGLES) continue;
+            auto pos = prim.attributes.find("POSITION");
+            if (pos == prim.attributes.end()) continue;
+            try {
+                const uint64_t nv = view_accessor(m_, pos->second, "POSITION").count;
+                uint64_t per_vertex = 12;
+                if (prim.attributes.count("NORMAL")) per_vertex += 12;
+                if (prim.attributes.count("TEXCOORD_0")) per_vertex += 8;
+                const uint64_t ni = prim.indices >= 0 ? view_accessor(m_, prim.indices, "indices").count : nv;
+                c.bytes = sat_add(c.bytes, sat_add(sat_mul(nv, per_vertex), sat_mul(ni, 4)));
+                c.triangles = sat_add(c.triangles, ni / 3);
+            } catch (const LoadError &) {
+                // reported by the conversion, with its context
+            }
+        }
+        return c;
+    }
+
+    static uint64_t sat_add(uint64_t a, uint64_t b) {
+        uint64_t r;
+        return __builtin_add_overflow(a, b, &r) ? UINT64_MAX : r;
+    }
+    static uint64_t sat_mul(uint64_t a, uint64_t b) {
+        uint64_t r;
+        return __builtin_mul_overflow(a, b, &r) ? UINT64_MAX : r;
+    }
+
+    std::vector<int> scene_roots() const {
+        std::vector<int> roots;
+        if (!m_.scenes.empty()) {
+            int si = m_.defaultScene >= 0 ? m_.defaultScene : 0;
+            if (size_t(si) >= m_.scenes.size()) fail("default scene " + std::to_string(si) + " out of range");
+            roots = m_.scenes[size_t(si)].nodes;
+        } else {
+            std::vector<char> is_child(m_.nodes.size(), 0);
+            for (const tinygltf::Node &n : m_.nodes)
+                for (int c : n.children)
+                    if (c >= 0 && size_t(c) < m_.nodes.size()) is_child[size_t(c)] = 1;
+            for (size_t i = 0; i < m_.nodes.size(); ++i)
+                if (!is_child[i]) roots.push_back(int(i));
+            if (roots.empty() && !m_.nodes.empty()) fail("node graph has a cycle (no root nodes)");
+        }
+        return roots;
+    }
+
+    // One walk over the scene's node trees before anything is converted: refuses cycles, nodes
+    // used more than once (glTF nodes form disjoint trees; a node reused by several parents
+    // would let a small file expand exponentially) and nesting deeper than kMaxNodeDepth, then
+    // works out the memory the loaded scene will take and refuses the scene if that is more
+    // than the machine has: the arrays made here, the renderer's copy of them, its world-space
+    // copy of every placed mesh, and the decoded textures (RGBA here and in the renderer, and
+    // the renderer's linear float copy).
+    void check_graph_and_memory() {
+        mesh_cost_.assign(m_.meshes.size(), MeshCost{});
+        extent_w_.assign(m_.images.size(), 0);
+        extent_h_.assign(m_.images.size(), 0);
+        std::vector<char> reached(m_.nodes.size(), 0), on_path(m_.nodes.size(), 0), mesh_seen(m_.meshes.size(), 0);
+        uint64_t distinct = 0, placed = 0, triangles = 0, placements = 0;
+        std::vector<std::pair<size_t, size_t>> path;  // node, next child
+        auto enter = [&](int index, int64_t parent) {
+            if (index < 0 || size_t(index) >= m_.nodes.size()) {
+                if (parent < 0) fail("scene root node " + std::to_string(index) + " out of range");
+                fail(quoted_or_index(m_.nodes[size_t(parent)].name, "node", size_t(parent)) + ": child " +
+                     std::to_string(index) + " out of range");
+            }
+            const size_t ni = size_t(index);
+            if (on_path[ni]) fail("node graph has a cycle at node " + std::to_string(index));
+            if (reached[ni])
+                fail(quoted_or_index(m_.nodes[ni].name, "node", ni) +
+                     " is used more than once (glTF nodes form trees: one parent each, and a scene lists each "
+                     "root once)");
+            if (path.size() > kMaxNodeDepth)
+                fail("node graph deeper than " + std::to_string(kMaxNodeDepth) + " levels");
+            reached[ni] = on_path[ni] = 1;
+            const int mesh = m_.nodes[ni].mesh;
+            if (mesh >= 0 && size_t(mesh) < m_.meshes.size()) {
+                const MeshCost &c = mesh_cost(size_t(mesh));
+                if (!mesh_seen[size_t(mesh)]) distinct = sat_add(distinct, c.bytes);
+                mesh_seen[size_t(mesh)] = 1;
+                placed = sat_add(placed, c.bytes);
+                triangles = sat_add(triangles, c.triangles);
+                ++placements;
+            }
+            path.emplace_back(ni, 0);
+        };
+        for (int root : scene_roots()) {
+            enter(root, -1);
+            while (!path.empty()) {
+                auto &top = path.back();
+                const tinygltf::Node &node = m_.nodes[top.first];
+                if (top.second < node.children.size()) {
+                    int child = node.children[top.second++];
+                    enter(child, int64_t(path.back().first));
+                } else {
+                    on_path[top.first] = 0;
+                    path.pop_back();
+                }
+            }
+        }
+
+        // Images are decoded only for textures used as base colour.
+        uint64_t texels = 0;
+        std::vector<char> image_seen(m_.images.size(), 0);
+        for (const tinygltf::Material &mat : m_.materials) {
+            int t = mat.pbrMetallicRoughness.baseColorTexture.index;
+            if (t < 0 || size_t(t) >= m_.textures.size()) continue;
+            int src = m_.textures[size_t(t)].source;
+            if (src < 0 || size_t(src) >= m_.images.size() || image_seen[size_t(src)]) continue;
+            image_seen[size_t(src)] = 1;
+            uint32_t w, h;
+            image_extent(size_t(src), &w, &h);
+            texels = sat_add(texels, uint64_t(w) * uint64_t(h));
+        }
+
+        // Per placement the renderer also keeps a few small allocations (vectors, instance).
+        const uint64_t need = sat_add(sat_add(sat_mul(distinct, 2), placed),
+                                      sat_add(sat_mul(placements, 256), sat_mul(texels, 24)));
+        std::string limited_by;
+        const uint64_t limit = scene_memory_limit(&limited_by);
+        if (need > limit)
+            fail("the scene would take about " + human_bytes(need) + " of memory once loaded (" +
+                 std::to_string(triangles) + " triangles in " + std::to_string(placements) + " mesh placements, " +
+                 std::to_string(texels) + " texture pixels), more than " + limited_by + " (" + human_bytes(limit) +
+                 ")");
     }
 
     void convert_textures_and_materials() {
@@ -600,7 +1156,7 @@ class Converter {
             } else if (mat.alphaMode == "BLEND") {
                 out.alpha_mode = ICR_ALPHA_BLEND;
             } else {
-                warnings.push_back(label + ": unknown alphaMode '" + mat.alphaMode + "', using OPAQUE");
+                warnings.push_back(label + ": unknown alphaMode '" + shorten(mat.alphaMode) + "', using OPAQUE");
                 out.alpha_mode = ICR_ALPHA_OPAQUE;
             }
             out.alpha_cutoff = float(mat.alphaCutoff);
@@ -843,25 +1399,29 @@ class Converter {
     // what the cycle check needs.
     void walk_from(int root) {
         std::vector<PathEntry> path;
-        auto enter = [&](int index, const Mat4 &parent, const std::string &from) {
-            if (index < 0 || size_t(index) >= m_.nodes.size())
-                fail(from + std::to_string(index) + " out of range");
+        // `parent` is -1 for the root; messages are only built when they are needed.
+        auto enter = [&](int index, const Mat4 &parent_world, int64_t parent) {
+            if (index < 0 || size_t(index) >= m_.nodes.size()) {
+                if (parent < 0) fail("scene root node " + std::to_string(index) + " out of range");
+                fail(quoted_or_index(m_.nodes[size_t(parent)].name, "node", size_t(parent)) + ": child " +
+                     std::to_string(index) + " out of range");
+            }
             const size_t ni = size_t(index);
             if (on_path_[ni]) fail("node graph has a cycle at node " + std::to_string(index));
             if (path.size() > kMaxNodeDepth)
                 fail("node graph deeper than " + std::to_string(kMaxNodeDepth) + " levels");
-            Mat4 world = place_node(ni, parent);
+            Mat4 world = place_node(ni, parent_world);
             on_path_[ni] = 1;
             path.push_back(PathEntry{ni, world, 0});
         };
-        enter(root, identity(), "scene root node ");
+        enter(root, identity(), -1);
         while (!path.empty()) {
             PathEntry &top = path.back();
             const tinygltf::Node &node = m_.nodes[top.node];
             if (top.next_child < node.children.size()) {
                 int child = node.children[top.next_child++];
                 const Mat4 parent = top.world;  // `top` dies if `path` reallocates
-                enter(child, parent, quoted_or_index(node.name, "node", top.node) + ": child ");
+                enter(child, parent, int64_t(top.node));
             } else {
                 on_path_[top.node] = 0;
                 path.pop_back();
@@ -884,7 +1444,7 @@ class Converter {
             out.xmag = float(cam.orthographic.xmag);
             out.ymag = float(cam.orthographic.ymag);
         } else {
-            fail(label + ": camera type '" + cam.type + "' is neither perspective nor orthographic");
+            fail(label + ": camera type '" + shorten(cam.type) + "' is neither perspective nor orthographic");
         }
         for (int i = 0; i < 3; ++i) out.position[i] = float(world[size_t(12 + i)]);
         transform_dir(world, 0, 0, -1, out.forward);
@@ -912,7 +1472,7 @@ class Converter {
         } else if (light.type == "directional") {
             out.type = ICR_LIGHT_DIRECTIONAL;
         } else {
-            fail(label + ": light type '" + light.type + "' is not point, spot or directional");
+            fail(label + ": light type '" + shorten(light.type) + "' is not point, spot or directional");
         }
         if (!light.color.empty() && light.color.size() != 3) fail(label + ": light color must have 3 elements");
         for (int c = 0; c < 3; ++c) out.color[c] = light.color.empty() ? 1.0f : float(light.color[size_t(c)]);
@@ -931,22 +1491,7 @@ class Converter {
         mesh_prims_.assign(m_.meshes.size(), {});
         mesh_done_.assign(m_.meshes.size(), false);
         on_path_.assign(m_.nodes.size(), 0);
-
-        std::vector<int> roots;
-        if (!m_.scenes.empty()) {
-            int si = m_.defaultScene >= 0 ? m_.defaultScene : 0;
-            if (size_t(si) >= m_.scenes.size()) fail("default scene " + std::to_string(si) + " out of range");
-            roots = m_.scenes[size_t(si)].nodes;
-        } else {
-            std::vector<char> is_child(m_.nodes.size(), 0);
-            for (const tinygltf::Node &n : m_.nodes)
-                for (int c : n.children)
-                    if (c >= 0 && size_t(c) < m_.nodes.size()) is_child[size_t(c)] = 1;
-            for (size_t i = 0; i < m_.nodes.size(); ++i)
-                if (!is_child[i]) roots.push_back(int(i));
-            if (roots.empty() && !m_.nodes.empty()) fail("node graph has a cycle (no root nodes)");
-        }
-        for (int r : roots) walk_from(r);
+        for (int r : scene_roots()) walk_from(r);
     }
 
     void finish() {
@@ -985,7 +1530,6 @@ std::string unsupported_required(const tinygltf::Model &model) {
 }
 
 icr_scene *load_scene(const std::string &path, uint32_t flags) {
-    (void)flags;
     std::vector<unsigned char> data = read_file(path);
     if (data.empty()) fail("file is empty");
     if (data.size() > std::numeric_limits<uint32_t>::max()) fail("file is larger than 4 GiB");
@@ -1015,18 +1559,24 @@ icr_scene *load_scene(const std::string &path, uint32_t flags) {
         }
     }
     check_json_depth(json_text, json_len);
-    check_image_buffer_views(json_text, json_len);
+    screen_json(json_text, json_len);
 
     std::string base_dir = base_dir_of(path);
-    std::string prefix = base_dir.back() == '/' ? base_dir : base_dir + "/";
+    FileAccess access;
+    access.prefix = base_dir.back() == '/' ? base_dir : base_dir + "/";
+    access.real_dir = real_path(base_dir);
+    if (access.real_dir.empty()) fail("cannot resolve the scene's folder: " + std::string(std::strerror(errno)));
+    if (access.real_dir.back() != '/') access.real_dir += '/';
+    access.allow_outside = (flags & ICR_LOAD_ALLOW_OUTSIDE_REFS) != 0;
+    access.read_limit = scene_memory_limit(&access.limited_by);
 
     tinygltf::TinyGLTF loader;
     tinygltf::FsCallbacks fs{};
-    fs.FileExists = &file_exists_in_asset_dir;
-    fs.ExpandFilePath = &tinygltf::ExpandFilePath;
-    fs.ReadWholeFile = &tinygltf::ReadWholeFile;
+    fs.FileExists = &file_exists;
+    fs.ExpandFilePath = &expand_file_path;
+    fs.ReadWholeFile = &read_whole_file;
     fs.WriteWholeFile = &tinygltf::WriteWholeFile;
-    fs.user_data = &prefix;
+    fs.user_data = &access;
     loader.SetFsCallbacks(fs);
     loader.SetImageLoader(&defer_image_decode, nullptr);
 
@@ -1035,6 +1585,8 @@ icr_scene *load_scene(const std::string &path, uint32_t flags) {
     bool ok = binary ? loader.LoadBinaryFromMemory(&model, &terr, &twarn, data.data(), unsigned(size), base_dir)
                      : loader.LoadASCIIFromString(&model, &terr, &twarn, reinterpret_cast<const char *>(data.data()),
                                                   unsigned(size), base_dir);
+    // A refused reference is the real reason for whatever tinygltf made of the missing file.
+    if (!access.refused.empty()) fail(access.refused);
     // extensionsRequired is parsed before meshes and accessors, so even when tinygltf gives up
     // (e.g. on Draco accessors without bufferViews) the real reason can be reported.
     std::string unsupported = unsupported_required(model);
@@ -1055,6 +1607,13 @@ icr_scene *load_scene(const std::string &path, uint32_t flags) {
     for (std::string &l : split_lines(terr)) warnings.push_back(std::move(l));
     for (const std::string &w : conv.warnings)
         for (std::string &l : split_lines(w)) warnings.push_back(std::move(l));
+    // A file can ask for a warning per primitive or image: keep the output readable.
+    if (warnings.size() > kMaxWarnings) {
+        const size_t more = warnings.size() - (kMaxWarnings - 1);
+        warnings.resize(kMaxWarnings - 1);
+        warnings.push_back("... and " + std::to_string(more) + " more warnings");
+    }
+    for (std::string &w : warnings) w = shorten(w, 4 * kMaxQuoted);
     scene->warnings = join(warnings, "\n");
     return scene.release();
 }

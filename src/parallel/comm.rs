@@ -128,6 +128,21 @@ impl<'c> Comm<'c> {
         result
     }
 
+    /// Every rank's host (MPI processor) name, by rank. A collective: every rank calls it.
+    pub fn host_names(&self) -> Vec<String> {
+        use mpi::collective::CommunicatorCollectives;
+        const LEN: usize = 64;
+        let name = mpi::environment::processor_name().unwrap_or_else(|_| "?".into());
+        let mut mine = [0u8; LEN];
+        let bytes = name.as_bytes();
+        mine[..bytes.len().min(LEN)].copy_from_slice(&bytes[..bytes.len().min(LEN)]);
+        let mut all = vec![0u8; LEN * self.size() as usize];
+        self.world.all_gather_into(&mine[..], &mut all[..]);
+        all.chunks_exact(LEN)
+            .map(|c| String::from_utf8_lossy(&c[..c.iter().position(|&b| b == 0).unwrap_or(LEN)]).into_owned())
+            .collect()
+    }
+
     /// Ends the whole job (every rank) with an error code.
     pub fn abort(&self, code: i32) -> ! {
         self.world.abort(code)

@@ -33,6 +33,8 @@ pub struct Plan<'a> {
     pub cache: Option<&'a IrradianceCache>,
     /// How long to wait for any message before giving up on the job.
     pub timeout: Duration,
+    /// Each rank's host, for messages that name a rank.
+    pub hosts: &'a [String],
 }
 
 pub fn run(comm: &Comm<'_>, plan: &Plan<'_>) -> Result<MasterResult, MasterError> {
@@ -44,6 +46,7 @@ pub fn run(comm: &Comm<'_>, plan: &Plan<'_>) -> Result<MasterResult, MasterError
         threads_per_worker,
         cache,
         timeout,
+        hosts,
     } = *plan;
     let start = Instant::now();
     let size = comm.size() as usize;
@@ -83,7 +86,7 @@ pub fn run(comm: &Comm<'_>, plan: &Plan<'_>) -> Result<MasterResult, MasterError
         let Some(msg) = comm.receive(None, None, Some(timeout)) else {
             let silent: Vec<String> = (1..size)
                 .filter(|&r| reports[r].is_none())
-                .map(|r| r.to_string())
+                .map(|r| format!("{r} (host {})", hosts.get(r).map_or("?", String::as_str)))
                 .collect();
             return Err(MasterError(format!(
                 "no message from any worker for {:.0} s; still waiting for rank(s) {}",

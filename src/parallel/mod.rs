@@ -173,6 +173,7 @@ pub fn run(args: &RenderArgs, mode: Mode) -> CommandResult {
     if let Err(e) = check_layout(args, mode, size, all_tiles.len(), threads) {
         return fail(e);
     }
+    let hosts = comm.host_names();
     // From here on a failure may hit one rank only (its files, its file system): that rank says
     // why and ends the whole job, or the others would wait for it for ever.
     let outputs = if rank == 0 {
@@ -189,7 +190,7 @@ pub fn run(args: &RenderArgs, mode: Mode) -> CommandResult {
     }
     let mut job = Job::prepare(&rank_args).unwrap_or_else(|e| fatal(&comm, &e.0));
     if mode == Mode::Component {
-        return run_component(args, &comm, job, &all_tiles, outputs, wall, universe);
+        return run_component(args, &comm, job, &all_tiles, &hosts, outputs, wall, universe);
     }
     let sync = args.sync.unwrap_or(50).max(1) as usize;
     let persist_local = args.ambient_file.is_some();
@@ -222,6 +223,7 @@ pub fn run(args: &RenderArgs, mode: Mode) -> CommandResult {
         threads_per_worker: threads as u32,
         cache: job.cache.as_ref(),
         timeout,
+        hosts: &hosts,
     };
     let result = master::run(&comm, &plan);
     let result = match result {
@@ -302,11 +304,13 @@ fn finish_master(
 }
 
 /// The component mode on every rank: the master, the PAs and the PRs.
+#[allow(clippy::too_many_arguments)]
 fn run_component(
     args: &RenderArgs,
     comm: &Comm<'_>,
     mut job: Job,
     all_tiles: &[Tile],
+    hosts: &[String],
     outputs: Option<Outputs>,
     wall: Instant,
     universe: mpi::environment::Universe,
@@ -363,6 +367,7 @@ fn run_component(
         args.height,
         job.cache.as_ref(),
         timeout,
+        hosts,
     );
     let result = match result {
         Ok(r) => r,

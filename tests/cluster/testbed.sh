@@ -4,7 +4,8 @@
 # addresses in a private test subnet, optional per-link rate caps (tc tbf), and an rsh agent
 # with which mpirun, started on host 0, launches its daemons on the other hosts.
 #
-#   testbed.sh up N [--rate R] [--slots S]   create hosts ID-h0 .. ID-h(N-1) (removes leftovers first)
+#   testbed.sh up N [--rate R] [--slots S] [--tcp-retries T]
+#                                            create hosts ID-h0 .. ID-h(N-1) (removes leftovers first)
 #   testbed.sh run CMD...                    run CMD on host 0 (where mpirun starts)
 #   testbed.sh on K CMD...                   run CMD on host K
 #   testbed.sh mpirun ARGS...                mpirun on host 0 across the hosts (TCP only)
@@ -12,7 +13,7 @@
 #   testbed.sh counters                      "K IF TX_BYTES RX_BYTES" per host (kernel counters)
 #   testbed.sh env                           ICR_* variables describing the test bed
 #   testbed.sh down                          remove everything (processes, links, namespaces, state)
-#   testbed.sh with N [--rate R] [--slots S] -- CMD...
+#   testbed.sh with N [up options] -- CMD...
 #                                            up, run CMD (in the root namespace, with the ICR_*
 #                                            variables set), and always down, also when CMD fails
 #                                            or this script is interrupted or terminated
@@ -33,7 +34,7 @@ set -o pipefail
 SKIP=77
 ID=${ICR_TESTBED_ID:-icr}
 NET=${ICR_TESTBED_NET:-10.231.0}
-SELF=$(readlink -f "$0")
+SELF=$(readlink -f "$0" 2>/dev/null || echo "$0")
 if [ -w /run ]; then STATE_ROOT=/run/icrender-testbed; else STATE_ROOT=${TMPDIR:-/tmp}/icrender-testbed; fi
 STATE=$STATE_ROOT/$ID
 BR=$ID-br
@@ -54,8 +55,8 @@ check_id() {
 }
 
 require() {
-    [ "$(id -u)" = 0 ] || skip "needs root (network namespaces, veth links, tc)"
     command -v ip >/dev/null 2>&1 || skip "no 'ip' command (iproute2)"
+    [ "$(id -u)" = 0 ] || skip "needs root (network namespaces, veth links, tc)"
 }
 
 host() { echo "$ID-h$1"; }
@@ -124,17 +125,19 @@ sweep() {
 }
 
 up() {
-    local n=$1 rate="" slots=1 k h ip burst
+    local n=$1 rate="" slots=1 retries=5 k h ip burst
     shift
     while [ $# -gt 0 ]; do
         case $1 in
             --rate) rate=${2:?--rate needs a value}; shift 2 ;;
             --slots) slots=${2:?--slots needs a value}; shift 2 ;;
+            --tcp-retries) retries=${2:?--tcp-retries needs a value}; shift 2 ;;
             *) die "up: unknown option $1" ;;
         esac
     done
     [[ $n =~ ^[0-9]+$ ]] && [ "$n" -ge 1 ] && [ "$n" -le 200 ] || die "up: N must be 1..200"
     [[ $slots =~ ^[0-9]+$ ]] && [ "$slots" -ge 1 ] || die "up: --slots must be a positive number"
+    [[ $retries =~ ^[0-9]+$ ]] && [ "$retries" -ge 1 ] && [ "$retries" -le 15 ] || die "up: --tcp-retries must be 1..15"
     if [ -n "$rate" ]; then
         command -v tc >/dev/null 2>&1 || skip "no 'tc' command (iproute2) for --rate"
         burst=$(burst_for "$rate") || die "up: --rate '$rate': use e.g. 1gbit, 100mbit, 500kbit"
@@ -158,6 +161,10 @@ up() {
         step ip netns add "$h"
         step ipv6_off "$h"
         step ip -n "$h" link set lo up
+        # How long TCP keeps retransmitting to a peer that has vanished: Linux's default (15)
+        # is about 15 minutes, during which an mpirun that must abort a job cannot reach the
+        # lost host's daemon and waits. 5 gives up after about 15 s.
+        step ip netns exec "$h" sh -c "echo $retries >/proc/sys/net/ipv4/tcp_retries2"
         step ip -n "$BR" link add "h$k" type veth peer name eth0 netns "$h"
         step ip -n "$BR" link set "h$k" master br0
         step ip -n "$BR" link set "h$k" up

@@ -34,6 +34,8 @@ struct PaState {
     queue: u64,
     done: u64,
     samples: Vec<(f64, u32)>,
+    /// When it last reported (seconds since the start).
+    last_report: f64,
 }
 
 #[derive(Default)]
@@ -55,7 +57,9 @@ pub fn run(
     height: u32,
     cache: Option<&IrradianceCache>,
     timeout: Duration,
+    hosts: &[String],
 ) -> Result<ComponentResult, String> {
+    let host = |rank: i32| hosts.get(rank as usize).map_or("?", String::as_str).to_string();
     let start = Instant::now();
     let size = comm.size() as usize;
     let mut next_tile = 0usize;
@@ -118,21 +122,44 @@ pub fn run(
 
     while !finished(&prs, &pas) {
         let Some(msg) = comm.receive(None, None, Some(timeout)) else {
-            let stuck: Vec<String> = prs
+            // Say who went quiet and what is missing: a lost PA takes its queue with it, a PR
+            // that never finished leaves its tiles' pixels undelivered.
+            let now = start.elapsed().as_secs_f64();
+            let mut quiet: Vec<(&i32, &PaState)> = pas
                 .iter()
-                .filter(|(_, p)| !p.flushed)
-                .map(|(r, _)| format!("PR {r}"))
+                .filter(|(_, p)| now - p.last_report >= timeout.as_secs_f64() * 0.9)
                 .collect();
+            quiet.sort_by_key(|(r, _)| **r);
+            let pa_text: Vec<String> = quiet
+                .iter()
+                .map(|(r, p)| {
+                    format!(
+                        "PA {r} (rank {r}, host {}, last queue {}, computed {})",
+                        host(**r),
+                        p.queue,
+                        p.done
+                    )
+                })
+                .collect();
+            let mut stuck: Vec<i32> = prs.iter().filter(|(_, p)| !p.flushed).map(|(r, _)| *r).collect();
+            stuck.sort();
+            let pr_text: Vec<String> = stuck.iter().map(|r| format!("PR {r} (host {})", host(*r))).collect();
+            let sent: u64 = prs.values().map(|p| p.sent).sum();
+            let computed: u64 = prs.values().map(|p| p.helped).sum::<u64>() + pas.values().map(|p| p.done).sum::<u64>();
             return Err(format!(
-                "no message from any rank for {:.0} s (unfinished: {}; requests sent {}, computed {})",
+                "no message from any rank for {:.0} s; {}{}missing: the indirect light of every pixel whose \
+                 requests those ranks held, and the pixels of unfinished PRs (requests reported sent {sent}, computed {computed})",
                 timeout.as_secs_f64(),
-                if stuck.is_empty() {
-                    "PA work".into()
+                if pa_text.is_empty() {
+                    String::new()
                 } else {
-                    stuck.join(", ")
+                    format!("silent: {}; ", pa_text.join(", "))
                 },
-                prs.values().map(|p| p.sent).sum::<u64>(),
-                prs.values().map(|p| p.helped).sum::<u64>() + pas.values().map(|p| p.done).sum::<u64>()
+                if pr_text.is_empty() {
+                    String::new()
+                } else {
+                    format!("unfinished: {}; ", pr_text.join(", "))
+                },
             ));
         };
         let source = msg.source;
@@ -189,6 +216,7 @@ pub fn run(
                     .ok_or_else(|| format!("rank {source} is not a PA but reported as one"))?;
                 pa.queue = counts[0];
                 pa.done = counts[1];
+                pa.last_report = start.elapsed().as_secs_f64();
                 pa.samples.push((start.elapsed().as_secs_f64(), counts[0] as u32));
                 let waiting: Vec<i32> = prs.iter().filter(|(_, p)| p.waiting).map(|(&r, _)| r).collect();
                 for pr in waiting {
