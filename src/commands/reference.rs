@@ -3,7 +3,7 @@
 //! The noise is estimated from two independent halves of the passes: their difference has
 //! twice the variance of each half, so the combined image's standard error is RMS(A - B) / 2.
 
-use super::render::{Outputs, producible_layers};
+use super::render::{Outputs, job_stats};
 use super::{CommandError, CommandResult};
 use crate::cli::ReferenceArgs;
 use crate::image::framebuffer::FrameBuffer;
@@ -84,26 +84,10 @@ pub fn run(args: &ReferenceArgs) -> CommandResult {
     frame.scale(1.0 / pass as f32);
 
     let mut stats = RenderStats {
-        version: env!("CARGO_PKG_VERSION"),
-        scene: render_args.scene.display().to_string(),
-        mode: "reference",
-        ranks: 1,
-        width: w,
-        height: h,
         spp: render_args.spp * pass as u32,
-        threads: job.settings.threads,
-        triangles: job.scene.triangle_count(),
-        dropped_triangles: job.scene.dropped_triangles,
-        load_s: job.load_s,
-        build_s: job.build_s,
-        render_s,
-        layers: producible_layers(job.scene.needs(), &job.shading)
-            .iter()
-            .map(|l| l.name())
-            .collect(),
         reference_noise: Some(noise),
         reference_passes: Some(pass),
-        ..Default::default()
+        ..job_stats(&render_args, &job, "reference", 1, render_s)
     };
     stats.add_threads(&thread_stats);
     stats.wall_s = wall.elapsed().as_secs_f64();

@@ -65,6 +65,35 @@ pub fn options_line(args: &RenderArgs) -> String {
     )
 }
 
+/// The statistics every way of rendering reports about the job itself; the caller adds what
+/// its threads or ranks did.
+pub fn job_stats(args: &RenderArgs, job: &Job, mode: &'static str, ranks: usize, render_s: f64) -> RenderStats {
+    let cache = job.cache.as_ref();
+    RenderStats {
+        version: env!("CARGO_PKG_VERSION"),
+        scene: args.scene.display().to_string(),
+        mode,
+        ranks,
+        width: args.width,
+        height: args.height,
+        spp: args.spp,
+        threads: job.settings.threads,
+        triangles: job.scene.triangle_count(),
+        dropped_triangles: job.scene.dropped_triangles,
+        load_s: job.load_s,
+        build_s: job.build_s,
+        render_s,
+        layers: producible_layers(job.scene.needs(), &job.shading)
+            .iter()
+            .map(|l| l.name())
+            .collect(),
+        records_loaded: cache.map_or(0, |c| c.load_report.loaded as u64),
+        cache_records: cache.map_or(0, |c| c.len() as u64),
+        lock_contention: cache.map_or(0, |c| c.contention()),
+        ..Default::default()
+    }
+}
+
 /// Where the results go, checked writable before any work is done.
 pub struct Outputs {
     pub exr: PathBuf,
@@ -191,29 +220,7 @@ pub fn run(args: &RenderArgs) -> CommandResult {
         ));
     }
 
-    let mut stats = RenderStats {
-        version: env!("CARGO_PKG_VERSION"),
-        scene: args.scene.display().to_string(),
-        mode: "serial",
-        ranks: 1,
-        width: args.width,
-        height: args.height,
-        spp: args.spp,
-        threads: s.threads,
-        triangles: job.scene.triangle_count(),
-        dropped_triangles: job.scene.dropped_triangles,
-        load_s: job.load_s,
-        build_s: job.build_s,
-        render_s,
-        layers: producible_layers(job.scene.needs(), &job.shading)
-            .iter()
-            .map(|l| l.name())
-            .collect(),
-        records_loaded: job.cache.as_ref().map_or(0, |c| c.load_report.loaded as u64),
-        cache_records: job.cache.as_ref().map_or(0, |c| c.len() as u64),
-        lock_contention: job.cache.as_ref().map_or(0, |c| c.contention()),
-        ..Default::default()
-    };
+    let mut stats = job_stats(args, &job, "serial", 1, render_s);
     stats.add_threads(&thread_stats);
     if stats.nonfinite_dropped > 0 {
         warn(&format!(

@@ -10,7 +10,7 @@ pub mod protocol;
 pub mod worker;
 
 use crate::cli::{ModeArg, RenderArgs};
-use crate::commands::render::{Outputs, producible_layers};
+use crate::commands::render::{Outputs, job_stats};
 use crate::commands::{CommandError, CommandResult, warn};
 use crate::irradiance::IrradianceCache;
 use crate::job::{Job, validate};
@@ -273,25 +273,8 @@ fn finish_master(
         warn(&format!("cache file not fully written: {e}"));
     }
     let mut stats = RenderStats {
-        version: env!("CARGO_PKG_VERSION"),
-        scene: args.scene.display().to_string(),
-        mode: mode.name(),
-        ranks: size as usize,
-        width: args.width,
-        height: args.height,
-        spp: args.spp,
         threads,
-        triangles: job.scene.triangle_count(),
-        dropped_triangles: job.scene.dropped_triangles,
-        load_s: job.load_s,
-        build_s: job.build_s,
-        render_s,
-        layers: producible_layers(job.scene.needs(), &job.shading)
-            .iter()
-            .map(|l| l.name())
-            .collect(),
-        records_loaded: job.cache.as_ref().map_or(0, |c| c.load_report.loaded as u64),
-        ..Default::default()
+        ..job_stats(args, job, mode.name(), size as usize, render_s)
     };
     stats.add_ranks(ranks);
     stats.wall_s = wall.elapsed().as_secs_f64();
