@@ -103,6 +103,20 @@ pub struct WorkerSetup<'a> {
     pub cache: Option<&'a IrradianceCache>,
 }
 
+impl<'a> WorkerSetup<'a> {
+    pub fn new(job: &'a Job, tiles: &'a [Tile]) -> Self {
+        WorkerSetup {
+            scene: &job.scene,
+            tracer: &job.tracer,
+            shading: &job.shading,
+            camera: &job.camera,
+            settings: &job.settings,
+            tiles,
+            cache: job.cache.as_ref(),
+        }
+    }
+}
+
 fn threading_name(t: Threading) -> &'static str {
     match t {
         Threading::Single => "MPI_THREAD_SINGLE",
@@ -200,15 +214,7 @@ pub fn run(args: &RenderArgs, mode: Mode) -> CommandResult {
         {
             cache.keep_outbox();
         }
-        let setup = WorkerSetup {
-            scene: &job.scene,
-            tracer: &job.tracer,
-            shading: &job.shading,
-            camera: &job.camera,
-            settings: &job.settings,
-            tiles: &all_tiles,
-            cache: job.cache.as_ref(),
-        };
+        let setup = WorkerSetup::new(&job, &all_tiles);
         worker::run(&setup, mode, sync, persist_local);
         drop(universe);
         return Ok(());
@@ -310,15 +316,7 @@ fn run_component(
         if let Some(cache) = job.cache.as_mut() {
             cache.keep_outbox();
         }
-        let setup = WorkerSetup {
-            scene: &job.scene,
-            tracer: &job.tracer,
-            shading: &job.shading,
-            camera: &job.camera,
-            settings: &job.settings,
-            tiles: all_tiles,
-            cache: job.cache.as_ref(),
-        };
+        let setup = WorkerSetup::new(&job, all_tiles);
         if roles.pas.contains(&rank) {
             component::pa::run(&setup, args.sync.unwrap_or(8).max(1) as usize, args.seed);
         } else {
