@@ -180,6 +180,10 @@ pub struct RenderArgs {
     /// Replace output files that already exist (by default an existing file is never touched).
     #[arg(long = "overwrite")]
     pub overwrite: bool,
+    /// Journal finished tiles and the irradiance cache in DIR, so that a render killed at any
+    /// moment and started again with the same command resumes instead of starting over.
+    #[arg(long = "checkpoint", value_name = "DIR")]
+    pub checkpoint: Option<PathBuf>,
     /// Store half floats in the EXR (default: full floats).
     #[arg(long = "half")]
     pub half: bool,

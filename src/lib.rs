@@ -1,6 +1,7 @@
 //! icrender: a renderer for global illumination with Ward's irradiance cache, split into
 //! Radiance's components (emission, direct, specular, indirect diffuse).
 
+pub mod checkpoint;
 pub mod cli;
 pub mod commands;
 pub mod export;

@@ -2,6 +2,7 @@
 //! counter until none are left, and each pixel averages `spp` stratified (jittered) samples over
 //! its area, which is the box filter a converged reference integrates.
 
+use crate::checkpoint::{Checkpoint, Restored};
 use crate::image::framebuffer::FrameBuffer;
 use crate::progress::Progress;
 use crate::sampling::{Rng, grid_side};
@@ -166,20 +167,44 @@ pub fn render(
     settings: &RenderSettings,
     progress: &Progress,
 ) -> (FrameBuffer, Vec<ThreadStats>) {
+    render_resumable(integrator, camera, settings, progress, None)
+}
+
+/// As [`render`], but with a checkpoint: the tiles an earlier run finished are taken from it
+/// and every tile finished now is journalled.
+pub fn render_resumable(
+    integrator: &Integrator<'_>,
+    camera: &Camera,
+    settings: &RenderSettings,
+    progress: &Progress,
+    checkpoint: Option<(&Checkpoint, Restored)>,
+) -> (FrameBuffer, Vec<ThreadStats>) {
     let all = tiles(camera.width, camera.height, settings.tile_width, settings.tile_height);
+    let (journal, start, done) = match checkpoint {
+        Some((journal, restored)) => (Some(journal), restored.frame, restored.done),
+        None => (
+            None,
+            FrameBuffer::new(camera.width, camera.height),
+            vec![false; all.len()],
+        ),
+    };
+    let todo: Vec<usize> = (0..all.len()).filter(|&i| !done[i]).collect();
+    progress.advance(all.len() - todo.len());
     let next = AtomicUsize::new(0);
-    let frame = Mutex::new(FrameBuffer::new(camera.width, camera.height));
-    let threads = settings.threads.max(1).min(all.len().max(1));
+    let frame = Mutex::new(start);
+    let threads = settings.threads.max(1).min(todo.len().max(1));
     let stats: Vec<ThreadStats> = std::thread::scope(|scope| {
         let workers: Vec<_> = (0..threads)
             .map(|_| {
                 scope.spawn(|| {
                     let mut stats = ThreadStats::default();
                     let clock = ThreadClock::start();
-                    loop {
-                        let index = next.fetch_add(1, Ordering::Relaxed);
-                        let Some(tile) = all.get(index) else { break };
+                    while let Some(&index) = todo.get(next.fetch_add(1, Ordering::Relaxed)) {
+                        let tile = &all[index];
                         let values = render_tile(integrator, camera, settings, tile, &mut stats.rays, |_| {});
+                        if let Some(journal) = journal {
+                            journal.tile(index as u32, 0, &values);
+                        }
                         store_tile(&mut frame.lock().unwrap_or_else(|e| e.into_inner()), tile, &values);
                         stats.tiles += 1;
                         progress.advance(1);

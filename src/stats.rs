@@ -132,6 +132,8 @@ pub struct RenderStats {
     pub records_loaded: u64,
     /// Records in the cache at the end.
     pub cache_records: u64,
+    /// Tiles taken from the --checkpoint journal of an earlier run instead of rendered.
+    pub tiles_restored: u64,
     pub lookups: u64,
     pub hits: u64,
     /// Records computed while another thread's new record already covered the point.

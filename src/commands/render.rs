@@ -2,13 +2,14 @@
 //! statistics, and report the error against a reference if one is given.
 
 use super::{CommandError, CommandResult, warn};
+use crate::checkpoint::{self, Checkpoint, Restored};
 use crate::cli::RenderArgs;
 use crate::image::framebuffer::{FrameBuffer, Layer};
 use crate::image::{metrics, output};
 use crate::job::{Job, validate};
 use crate::parallel::{Mode, under_mpirun};
 use crate::progress::Progress;
-use crate::render::{render, tiles};
+use crate::render::{Tile, render_resumable, tiles};
 use crate::scene::SceneNeeds;
 use crate::shading::{Integrator, ShadingOptions};
 use crate::stats::RenderStats;
@@ -164,6 +165,63 @@ impl Outputs {
     }
 }
 
+/// With --checkpoint, the cache goes to the checkpoint directory unless -af names a file, so a
+/// resumed render starts with the records the killed one wrote.
+pub fn with_checkpoint_cache(args: &RenderArgs) -> Result<RenderArgs, CommandError> {
+    let mut args = args.clone();
+    if let Some(dir) = &args.checkpoint {
+        std::fs::create_dir_all(dir).map_err(|e| {
+            CommandError(format!(
+                "{}: cannot create the checkpoint directory: {e}",
+                dir.display()
+            ))
+        })?;
+        if args.ambient_file.is_none() {
+            args.ambient_file = Some(checkpoint::cache_file(dir));
+        }
+    }
+    Ok(args)
+}
+
+/// What identifies a job to its checkpoint: everything that changes the image or the tiles.
+/// (The mode, ranks, threads and output names do not: a render may resume in another mode.)
+pub fn checkpoint_key(args: &RenderArgs) -> String {
+    let scene = std::fs::canonicalize(&args.scene).unwrap_or_else(|_| args.scene.clone());
+    format!(
+        "scene {}; {}; tile {}; view {:?}",
+        scene.display(),
+        options_line(args),
+        args.tile,
+        args.view
+    )
+}
+
+/// Opens the --checkpoint journal (if asked for) and says what an earlier run left.
+/// Opened before the scene is loaded, so another job's checkpoint is refused at once.
+pub fn open_checkpoint(args: &RenderArgs, all_tiles: &[Tile]) -> Result<Option<(Checkpoint, Restored)>, CommandError> {
+    let Some(dir) = &args.checkpoint else {
+        return Ok(None);
+    };
+    let (journal, restored) =
+        Checkpoint::open(dir, &checkpoint_key(args), all_tiles, args.width, args.height).map_err(CommandError)?;
+    if restored.torn_bytes > 0 {
+        warn(&format!(
+            "{}: dropped {} bytes of a torn last journal entry",
+            dir.display(),
+            restored.torn_bytes
+        ));
+    }
+    if !args.quiet && restored.count() > 0 {
+        eprintln!(
+            "icrender: resuming from {}: {} of {} tiles are already finished",
+            dir.display(),
+            restored.count(),
+            all_tiles.len()
+        );
+    }
+    Ok(Some((journal, restored)))
+}
+
 /// Prints the error of the written image against the reference, next to the run time.
 pub fn report_error(
     exr: &Path,
@@ -201,15 +259,17 @@ pub fn run(args: &RenderArgs) -> CommandResult {
         }
         None => None,
     };
-    let job = Job::prepare(args)?;
+    let (tile_width, tile_height) = crate::cli::parse_tile(&args.tile).map_err(CommandError)?;
+    let all_tiles = tiles(args.width, args.height, tile_width, tile_height);
+    let (journal, restored) = open_checkpoint(args, &all_tiles)?.map_or((None, None), |(j, r)| (Some(j), Some(r)));
+    let job = Job::prepare(&with_checkpoint_cache(args)?)?;
     let integrator = Integrator::new(&job.scene, &job.tracer, &job.shading, job.cache.as_ref());
     let s = &job.settings;
-    let progress = Progress::new(
-        tiles(args.width, args.height, s.tile_width, s.tile_height).len(),
-        args.quiet,
-    );
+    let tiles_restored = restored.as_ref().map_or(0, Restored::count);
+    let progress = Progress::new(all_tiles.len(), args.quiet);
     let render_start = Instant::now();
-    let (frame, thread_stats) = render(&integrator, &job.camera, s, &progress);
+    let (frame, thread_stats) =
+        render_resumable(&integrator, &job.camera, s, &progress, journal.as_ref().zip(restored));
     let render_s = render_start.elapsed().as_secs_f64();
     if let Some(cache) = &job.cache
         && let Err(e) = cache.finish()
@@ -221,6 +281,7 @@ pub fn run(args: &RenderArgs) -> CommandResult {
     }
 
     let mut stats = job_stats(args, &job, "serial", 1, render_s);
+    stats.tiles_restored = tiles_restored as u64;
     stats.add_threads(&thread_stats);
     if stats.nonfinite_dropped > 0 {
         warn(&format!(

@@ -91,14 +91,20 @@ impl CacheFile {
             }
             let body = &bytes[start..];
             let whole = body.len() / RECORD_BYTES;
-            for i in 0..whole {
-                match codec::decode(&body[i * RECORD_BYTES..]) {
+            let record = |i: usize| codec::decode(&body[i * RECORD_BYTES..]);
+            // A run of bad records at the end is a torn write (a batch is flushed as one write,
+            // so a crash can tear several records); a bad record inside the file is damage.
+            // Cutting the whole run at once means a second open finds nothing more to cut.
+            let mut intact = whole;
+            while intact > 0 && matches!(record(intact - 1), Err(DecodeError::Checksum)) {
+                intact -= 1;
+            }
+            let torn = (whole - intact) * RECORD_BYTES;
+            report.torn_bytes += torn;
+            keep -= torn;
+            for i in 0..intact {
+                match record(i) {
                     Ok(r) => records.push(r),
-                    // A bad last record is a torn write; one inside the file is damage.
-                    Err(DecodeError::Checksum) if i + 1 == whole => {
-                        report.torn_bytes += RECORD_BYTES;
-                        keep -= RECORD_BYTES;
-                    }
                     Err(_) => report.corrupt += 1,
                 }
             }
@@ -221,6 +227,33 @@ mod tests {
         assert_eq!(records.len(), 3);
         assert_eq!(records[2].value.x, 9.0);
         assert_eq!(report.torn_bytes, 0);
+    }
+
+    #[test]
+    fn damage_inside_is_counted_and_a_torn_run_at_the_end_is_cut_in_one_open() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("c.icc");
+        let (file, _, _) = CacheFile::open(&path, "s").unwrap();
+        for i in 0..5 {
+            file.append(&flat_record(i as f32 + 1.0, 1.0));
+        }
+        file.finish().unwrap();
+        drop(file);
+        let mut bytes = std::fs::read(&path).unwrap();
+        let body = bytes.len() - 5 * RECORD_BYTES;
+        // Record 1 damaged inside the file; records 3 and 4 torn (a batch cut mid-write).
+        for i in [1usize, 3, 4] {
+            bytes[body + i * RECORD_BYTES + 7] ^= 0x5a;
+        }
+        std::fs::write(&path, &bytes).unwrap();
+        let (file, records, report) = CacheFile::open(&path, "s").unwrap();
+        drop(file);
+        assert_eq!(records.len(), 2);
+        assert_eq!(report.corrupt, 1);
+        assert_eq!(report.torn_bytes, 2 * RECORD_BYTES);
+        let (_, again, report) = CacheFile::open(&path, "s").unwrap();
+        assert_eq!(again, records);
+        assert_eq!((report.corrupt, report.torn_bytes), (1, 0));
     }
 
     #[test]

@@ -5,6 +5,7 @@
 use super::Mode;
 use super::comm::{Comm, Counters};
 use super::protocol::*;
+use crate::checkpoint::{Checkpoint, Restored};
 use crate::image::framebuffer::FrameBuffer;
 use crate::irradiance::IrradianceCache;
 use crate::irradiance::record::Record;
@@ -35,6 +36,8 @@ pub struct Plan<'a> {
     pub timeout: Duration,
     /// Each rank's host, for messages that name a rank.
     pub hosts: &'a [String],
+    /// The --checkpoint journal and what an earlier run finished (those tiles are not handed out).
+    pub resume: Option<(&'a Checkpoint, &'a Restored)>,
 }
 
 pub fn run(comm: &Comm<'_>, plan: &Plan<'_>) -> Result<MasterResult, MasterError> {
@@ -47,11 +50,16 @@ pub fn run(comm: &Comm<'_>, plan: &Plan<'_>) -> Result<MasterResult, MasterError
         cache,
         timeout,
         hosts,
+        resume,
     } = *plan;
     let start = Instant::now();
     let size = comm.size() as usize;
     let workers = size - 1;
-    let mut frame = FrameBuffer::new(width, height);
+    let (mut frame, mut tiles_done) = match resume {
+        Some((_, restored)) => (restored.frame.clone(), restored.done.clone()),
+        None => (FrameBuffer::new(width, height), vec![false; tiles.len()]),
+    };
+    let todo: Vec<usize> = (0..tiles.len()).filter(|&i| !tiles_done[i]).collect();
 
     // Every worker starts from the records of the cache file (possibly none).
     let initial: Vec<Record> = cache.map_or_else(Vec::new, |c| c.records());
@@ -61,7 +69,6 @@ pub fn run(comm: &Comm<'_>, plan: &Plan<'_>) -> Result<MasterResult, MasterError
     }
 
     let mut next_tile = 0usize;
-    let mut tiles_done = vec![false; tiles.len()];
     let mut finished_requesters = 0usize;
     let requesters = workers * threads_per_worker as usize;
     // Centralised sharing: every record with the rank it came from, and per rank how far
@@ -111,10 +118,13 @@ pub fn run(comm: &Comm<'_>, plan: &Plan<'_>) -> Result<MasterResult, MasterError
                             "rank {source} returned tile {index} with the wrong size"
                         )));
                     }
+                    if let Some((journal, _)) = resume {
+                        journal.tile(index, 0, &pixels);
+                    }
                     store_tile(&mut frame, tile, &pixels);
                     tiles_done[index as usize] = true;
                 }
-                let assignment = (next_tile < tiles.len()).then_some(next_tile as u32);
+                let assignment = todo.get(next_tile).map(|&i| i as u32);
                 if assignment.is_some() {
                     next_tile += 1;
                 } else {

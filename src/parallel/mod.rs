@@ -9,8 +9,9 @@ pub mod master;
 pub mod protocol;
 pub mod worker;
 
+use crate::checkpoint::{Checkpoint, Restored};
 use crate::cli::{ModeArg, RenderArgs};
-use crate::commands::render::{Outputs, job_stats};
+use crate::commands::render::{Outputs, job_stats, open_checkpoint, with_checkpoint_cache};
 use crate::commands::{CommandError, CommandResult, warn};
 use crate::irradiance::IrradianceCache;
 use crate::job::{Job, validate};
@@ -92,6 +93,20 @@ pub fn under_mpirun() -> bool {
         .any(|v| std::env::var_os(v).is_some())
 }
 
+/// The pid of the process that started this rank (mpirun, or Open MPI's daemon on a remote
+/// host), from the session directory Open MPI names after it: `.../pid.NNN/...`.
+fn launcher_pid() -> Option<u32> {
+    let dir = std::env::var("PMIX_SERVER_TMPDIR")
+        .or_else(|_| std::env::var("OMPI_FILE_LOCATION"))
+        .ok()?;
+    pid_in_session_dir(&dir)
+}
+
+fn pid_in_session_dir(dir: &str) -> Option<u32> {
+    dir.split('/')
+        .find_map(|part| part.strip_prefix("pid.").and_then(|p| p.parse().ok()))
+}
+
 /// What a worker renders with.
 pub struct WorkerSetup<'a> {
     pub scene: &'a Scene,
@@ -151,6 +166,8 @@ fn check_layout(args: &RenderArgs, mode: Mode, size: i32, tile_count: usize, thr
 
 pub fn run(args: &RenderArgs, mode: Mode) -> CommandResult {
     let wall = Instant::now();
+    // A rank never outlives its launcher (see sys::process).
+    crate::sys::process::die_with_parent(launcher_pid()).map_err(CommandError)?;
     let Some((universe, granted)) = mpi::initialize_with_threading(Threading::Multiple) else {
         return Err(CommandError("MPI could not be initialised".into()));
     };
@@ -197,14 +214,25 @@ pub fn run(args: &RenderArgs, mode: Mode) -> CommandResult {
     };
 
     // Every rank loads the scene; only the master opens the cache file.
-    let mut rank_args = args.clone();
+    // With --checkpoint the master also journals finished work and keeps the cache beside it.
+    let checkpoint = if rank == 0 {
+        open_checkpoint(args, &all_tiles).unwrap_or_else(|e| fatal(&comm, &e.0))
+    } else {
+        None
+    };
+    let mut rank_args = if rank == 0 {
+        with_checkpoint_cache(args).unwrap_or_else(|e| fatal(&comm, &e.0))
+    } else {
+        args.clone()
+    };
     rank_args.threads = Some(threads);
     if rank != 0 {
         rank_args.ambient_file = None;
     }
     let mut job = Job::prepare(&rank_args).unwrap_or_else(|e| fatal(&comm, &e.0));
+    let resume = checkpoint.as_ref().map(|(journal, restored)| (journal, restored));
     if mode == Mode::Component {
-        return run_component(args, &comm, job, &all_tiles, &hosts, outputs, wall, universe);
+        return run_component(args, &comm, job, &all_tiles, &hosts, outputs, wall, universe, resume);
     }
     let sync = args.sync.unwrap_or(50).max(1) as usize;
     let persist_local = args.ambient_file.is_some();
@@ -230,6 +258,7 @@ pub fn run(args: &RenderArgs, mode: Mode) -> CommandResult {
         cache: job.cache.as_ref(),
         timeout,
         hosts: &hosts,
+        resume,
     };
     let result = master::run(&comm, &plan);
     let result = match result {
@@ -254,6 +283,7 @@ pub fn run(args: &RenderArgs, mode: Mode) -> CommandResult {
         result.render_s,
         outputs,
         wall,
+        resume.map_or(0, |(_, r)| r.count()),
     )?;
     drop(universe);
     Ok(())
@@ -272,6 +302,7 @@ fn finish_master(
     render_s: f64,
     outputs: Option<Outputs>,
     wall: Instant,
+    tiles_restored: usize,
 ) -> CommandResult {
     if let Some(cache) = &job.cache
         && let Err(e) = cache.finish()
@@ -282,6 +313,7 @@ fn finish_master(
         threads,
         ..job_stats(args, job, mode.name(), size as usize, render_s)
     };
+    stats.tiles_restored = tiles_restored as u64;
     stats.add_ranks(ranks);
     stats.wall_s = wall.elapsed().as_secs_f64();
     let outputs = outputs.expect("rank 0 checked its outputs");
@@ -303,6 +335,7 @@ fn run_component(
     outputs: Option<Outputs>,
     wall: Instant,
     universe: mpi::environment::Universe,
+    resume: Option<(&Checkpoint, &Restored)>,
 ) -> CommandResult {
     let rank = comm.rank();
     let needed = job.cache.is_some() || (job.shading.ambient_bounces > 0 && job.scene.needs().diffuse);
@@ -318,7 +351,12 @@ fn run_component(
         }
         let setup = WorkerSetup::new(&job, all_tiles);
         if roles.pas.contains(&rank) {
-            component::pa::run(&setup, args.sync.unwrap_or(8).max(1) as usize, args.seed);
+            component::pa::run(
+                &setup,
+                args.sync.unwrap_or(8).max(1) as usize,
+                args.seed,
+                args.checkpoint.is_some(),
+            );
         } else {
             component::pr::run(
                 &setup,
@@ -326,6 +364,7 @@ fn run_component(
                 args.send.max(1) as usize,
                 args.sync.unwrap_or(8).max(1) as usize,
                 args.seed,
+                args.checkpoint.is_some(),
             );
         }
         drop(universe);
@@ -349,6 +388,7 @@ fn run_component(
         job.cache.as_ref(),
         timeout,
         hosts,
+        resume,
     );
     let result = match result {
         Ok(r) => r,
@@ -371,6 +411,7 @@ fn run_component(
         result.render_s,
         outputs,
         wall,
+        resume.map_or(0, |(_, r)| r.count()),
     )?;
     drop(universe);
     Ok(())
@@ -424,4 +465,15 @@ fn print_table(stats: &RenderStats) {
         stats.messages,
         stats.bytes
     );
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn the_launcher_is_found_in_open_mpis_session_directory() {
+        assert_eq!(super::pid_in_session_dir("/tmp/ompi.vm.0/pid.12368/0/0"), Some(12368));
+        assert_eq!(super::pid_in_session_dir("/tmp/ompi.vm.0/pid.77"), Some(77));
+        assert_eq!(super::pid_in_session_dir("/tmp/elsewhere"), None);
+        assert_eq!(super::pid_in_session_dir("/tmp/pid.x/1"), None);
+    }
 }

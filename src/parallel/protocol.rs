@@ -171,7 +171,7 @@ pub fn encode_work(tile: Option<u32>) -> Vec<u8> {
 pub fn decode_work(bytes: &[u8]) -> Result<Option<u32>, ProtocolError> {
     match bytes.first() {
         Some(0) if bytes.len() == 1 => Ok(None),
-        Some(1) => Ok(Some(u32_at(bytes, 1)?)),
+        Some(1) if bytes.len() == 5 => Ok(Some(u32_at(bytes, 1)?)),
         _ => Err(ProtocolError("malformed work message".into())),
     }
 }
@@ -180,6 +180,15 @@ pub fn decode_work(bytes: &[u8]) -> Result<Option<u32>, ProtocolError> {
 mod tests {
     use super::*;
     use crate::irradiance::record::tests::flat_record;
+
+    #[test]
+    fn work_messages_must_have_their_exact_length() {
+        assert_eq!(decode_work(&[0]).unwrap(), None);
+        assert_eq!(decode_work(&[1, 7, 0, 0, 0]).unwrap(), Some(7));
+        assert!(decode_work(&[1, 7, 0, 0, 0, 9]).is_err());
+        assert!(decode_work(&[1, 7, 0]).is_err());
+        assert!(decode_work(&[0, 0]).is_err());
+    }
 
     #[test]
     fn batches_round_trip_and_bad_records_are_dropped_and_counted() {

@@ -20,6 +20,7 @@ mod abi_bindings {
 
 pub mod embree;
 pub mod image_io;
+pub mod process;
 pub mod scene_io;
 
 use std::ffi::CStr;

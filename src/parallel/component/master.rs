@@ -11,6 +11,7 @@
 //! once and nothing is in flight: then, and only then, FINISH goes out.
 
 use super::*;
+use crate::checkpoint::{Checkpoint, Restored, decode_results};
 use crate::image::framebuffer::FrameBuffer;
 use crate::irradiance::IrradianceCache;
 use crate::parallel::comm::Comm;
@@ -58,10 +59,17 @@ pub fn run(
     cache: Option<&IrradianceCache>,
     timeout: Duration,
     hosts: &[String],
+    resume: Option<(&Checkpoint, &Restored)>,
 ) -> Result<ComponentResult, String> {
     let host = |rank: i32| hosts.get(rank as usize).map_or("?", String::as_str).to_string();
     let start = Instant::now();
     let size = comm.size() as usize;
+    // Tiles an earlier run finished (--checkpoint) are not handed out again.
+    let todo: Vec<usize> = match resume {
+        Some((_, restored)) => (0..tiles.len()).filter(|&i| !restored.done[i]).collect(),
+        None => (0..tiles.len()).collect(),
+    };
+    let journal = resume.map(|(journal, _)| journal);
     let mut next_tile = 0usize;
     let mut tiles_given = 0usize;
     let mut store: Vec<(usize, Record)> =
@@ -166,7 +174,20 @@ pub fn run(
         let malformed = |what: &str, e: ProtocolError| format!("rank {source} sent a malformed {what}: {}", e.0);
         match msg.tag {
             TAG_PR_WORK_REQUEST => {
-                let assignment = (next_tile < tiles.len()).then_some(next_tile as u32);
+                if let Some((tile, requests, pixels)) =
+                    decode_tile_report(&msg.data).map_err(|e| malformed("tile report", e))?
+                {
+                    let fits = tiles
+                        .get(tile as usize)
+                        .is_some_and(|t| ((t.x1 - t.x0) * (t.y1 - t.y0)) as usize == pixels.len());
+                    if !fits {
+                        return Err(format!("rank {source} reported tile {tile} with the wrong size"));
+                    }
+                    if let Some(journal) = journal {
+                        journal.tile(tile, requests, &pixels);
+                    }
+                }
+                let assignment = todo.get(next_tile).map(|&i| i as u32);
                 if assignment.is_some() {
                     next_tile += 1;
                     tiles_given += 1;
@@ -193,6 +214,13 @@ pub fn run(
                 state.awaiting_forward = false;
                 if !dispatch(comm, &mut pas, source, state, &mut forwarded_orders) {
                     state.waiting = true;
+                }
+            }
+            TAG_RESULTS => {
+                let results =
+                    decode_results(&msg.data).ok_or_else(|| format!("rank {source} sent malformed results"))?;
+                if let Some(journal) = journal {
+                    journal.results(&results);
                 }
             }
             TAG_PR_SYNC => {
@@ -229,8 +257,8 @@ pub fn run(
             other => return Err(format!("rank {source} sent an unexpected message (tag {other})")),
         }
     }
-    if tiles_given != tiles.len() {
-        return Err(format!("only {tiles_given} of {} tiles were rendered", tiles.len()));
+    if tiles_given != todo.len() {
+        return Err(format!("only {tiles_given} of {} tiles were rendered", todo.len()));
     }
     let render_s = start.elapsed().as_secs_f64();
 
@@ -239,7 +267,10 @@ pub fn run(
     for rank in 1..size as i32 {
         comm.send(rank, TAG_FINISH, &[]);
     }
-    let mut frame = FrameBuffer::new(width, height);
+    let mut frame = match resume {
+        Some((_, restored)) => restored.frame.clone(),
+        None => FrameBuffer::new(width, height),
+    };
     let mut images = 0;
     let mut reports: Vec<Option<RankReport>> = vec![None; size];
     while images < size - 1 || reports[1..].iter().any(Option::is_none) {
@@ -271,6 +302,13 @@ pub fn run(
                     report.queue_lengths = pa.samples.clone();
                 }
                 reports[msg.source as usize] = Some(report);
+            }
+            TAG_RESULTS => {
+                let results =
+                    decode_results(&msg.data).ok_or_else(|| format!("rank {} sent malformed results", msg.source))?;
+                if let Some(journal) = journal {
+                    journal.results(&results);
+                }
             }
             TAG_PA_STATUS => {
                 let (_, batch) = decode_counts_and_records(&msg.data, 2).map_err(|e| e.0)?;

@@ -10,7 +10,10 @@ pub mod pr;
 pub mod requests;
 
 use crate::irradiance::record::Record;
-use crate::parallel::protocol::{Batch, ProtocolError, decode_batch, encode_batch};
+use crate::parallel::protocol::{
+    Batch, ProtocolError, decode_batch, decode_work_request, encode_batch, encode_work_request,
+};
+use crate::render::PixelValue;
 use mpi::Tag;
 
 /// PR -> MC: give me a tile.
@@ -37,6 +40,29 @@ pub const TAG_IMAGE: Tag = 29;
 pub const TAG_PR_CATCH_UP: Tag = 30;
 /// PR -> MC while helping: new records every --sync of them; answered by TAG_PR_CATCH_UP.
 pub const TAG_PR_SYNC: Tag = 31;
+
+/// With --checkpoint only: PA (or helping PR) -> MC, the indirect light computed for requests
+/// since the last such message, sent before the sync that counts them, so the master's journal
+/// holds every result of a finished render.
+pub const TAG_RESULTS: Tag = 32;
+
+/// With --checkpoint only, the PR's work request carries the tile it just finished: its pixels
+/// (everything but the indirect light sent away) and how many requests it sent for it.
+pub fn encode_tile_report(tile: u32, requests: u32, pixels: &[PixelValue]) -> Vec<u8> {
+    // The general work request's layout, with the request count where a thread index goes.
+    encode_work_request(requests, Some((tile, pixels)))
+}
+
+/// The finished tile of a work request, if it carries one: (tile, requests, pixels).
+pub fn decode_tile_report(bytes: &[u8]) -> Result<Option<(u32, u32, Vec<PixelValue>)>, ProtocolError> {
+    if bytes.is_empty() {
+        return Ok(None);
+    }
+    match decode_work_request(bytes)? {
+        (requests, Some((tile, pixels))) => Ok(Some((tile, requests, pixels))),
+        (_, None) => Err(ProtocolError("a tile report without a tile".into())),
+    }
+}
 
 /// The roles of the ranks: 0 is the master, then the PAs, then the PRs.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -155,6 +181,18 @@ mod tests {
                 prs: vec![1, 2, 3]
             }
         );
+    }
+
+    #[test]
+    fn tile_reports_round_trip() {
+        assert!(decode_tile_report(&[]).unwrap().is_none());
+        let pixels = vec![PixelValue::default(); 3];
+        let (tile, requests, back) = decode_tile_report(&encode_tile_report(7, 11, &pixels))
+            .unwrap()
+            .unwrap();
+        assert_eq!((tile, requests, back.len()), (7, 11, 3));
+        assert!(decode_tile_report(&[1, 2, 3]).is_err());
+        assert!(decode_tile_report(&11u32.to_le_bytes()).is_err());
     }
 
     #[test]

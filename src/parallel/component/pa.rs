@@ -6,6 +6,7 @@
 //! master, reporting its queue length and how many requests it has computed.
 
 use super::*;
+use crate::checkpoint::{RequestResult, encode_results};
 use crate::image::framebuffer::FrameBuffer;
 use crate::parallel::comm::{Comm, Counters};
 use crate::parallel::protocol::{TAG_INITIAL_RECORDS, TAG_STATS};
@@ -82,7 +83,8 @@ fn communicate(
     }
 }
 
-pub fn run(setup: &WorkerSetup<'_>, sync: usize, seed: u64) {
+/// `journal`: --checkpoint is on, so computed requests are reported to the master.
+pub fn run(setup: &WorkerSetup<'_>, sync: usize, seed: u64, journal: bool) {
     let counters = Counters::default();
     let comm_counters = Counters::default();
     let comm = Comm::new(&counters);
@@ -105,6 +107,7 @@ pub fn run(setup: &WorkerSetup<'_>, sync: usize, seed: u64) {
     let mut stats = ThreadStats::default();
     let mut done = 0u64;
     let mut queue_samples = Vec::new();
+    let mut results: Vec<RequestResult> = Vec::new();
     std::thread::scope(|scope| {
         let comm_thread =
             scope.spawn(|| communicate(&comm_counters, &queue, &ready, width * height, &forwarded, &rejected));
@@ -113,7 +116,15 @@ pub fn run(setup: &WorkerSetup<'_>, sync: usize, seed: u64) {
         let mut reported = u64::MAX;
         // Syncs with the master: new records up, records it lacks down, and the queue length
         // and the count of computed requests, which the master's termination check relies on.
-        let sync_with_master = |left: usize, done: u64, received: &mut u64, samples: &mut Vec<(f64, u32)>| {
+        let sync_with_master = |left: usize,
+                                done: u64,
+                                received: &mut u64,
+                                samples: &mut Vec<(f64, u32)>,
+                                results: &mut Vec<RequestResult>| {
+            // The results first: the status counts them as done.
+            if journal && !results.is_empty() {
+                comm.send(0, TAG_RESULTS, &encode_results(&std::mem::take(results)));
+            }
             let records = cache.map_or_else(Vec::new, |c| c.take_outbox());
             // Refused requests count as done: the PR counted them as sent.
             let finished = done + rejected.load(Ordering::Relaxed);
@@ -136,7 +147,7 @@ pub fn run(setup: &WorkerSetup<'_>, sync: usize, seed: u64) {
                 // Going idle: the master must know everything done so far first (the queue
                 // may also have been emptied by a forward order while a request was computed).
                 if done != reported {
-                    sync_with_master(0, done, &mut received, &mut queue_samples);
+                    sync_with_master(0, done, &mut received, &mut queue_samples, &mut results);
                     reported = done;
                     continue;
                 }
@@ -158,11 +169,19 @@ pub fn run(setup: &WorkerSetup<'_>, sync: usize, seed: u64) {
             };
             let mut rng = Rng::new(seed, request.stream);
             let value = integrator.ambient_for_request(&request, &mut rng, &mut stats.rays);
-            frame.add(request.pixel as usize, request.layer, value * request.coefficient);
+            let light = value * request.coefficient;
+            frame.add(request.pixel as usize, request.layer, light);
+            if journal {
+                results.push(RequestResult {
+                    pixel: request.pixel,
+                    layer: request.layer,
+                    value: light,
+                });
+            }
             done += 1;
             if cache.map_or(0, |c| c.outbox_len()) >= sync {
                 let left = queue.lock().unwrap_or_else(|e| e.into_inner()).requests.len();
-                sync_with_master(left, done, &mut received, &mut queue_samples);
+                sync_with_master(left, done, &mut received, &mut queue_samples, &mut results);
                 reported = done;
             }
         }

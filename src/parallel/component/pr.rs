@@ -5,6 +5,7 @@
 //! forwarded from a loaded PA. Its image goes to the master only at the end.
 
 use super::*;
+use crate::checkpoint::{RequestResult, encode_results};
 use crate::image::framebuffer::FrameBuffer;
 use crate::parallel::comm::{Comm, Counters};
 use crate::parallel::protocol::{TAG_STATS, decode_work};
@@ -55,7 +56,9 @@ fn sync_records(
     }
 }
 
-pub fn run(setup: &WorkerSetup<'_>, roles: &Roles, send_at: usize, sync: usize, seed: u64) {
+/// `journal`: --checkpoint is on, so finished tiles and computed requests are reported to the
+/// master as they finish.
+pub fn run(setup: &WorkerSetup<'_>, roles: &Roles, send_at: usize, sync: usize, seed: u64, journal: bool) {
     let counters = Counters::default();
     let comm = Comm::new(&counters);
     let start = Instant::now();
@@ -77,8 +80,9 @@ pub fn run(setup: &WorkerSetup<'_>, roles: &Roles, send_at: usize, sync: usize, 
     let (mut received, mut rejected) = (0u64, 0u64);
 
     // Tiles until the master has none left.
+    let mut finished_tile: Vec<u8> = Vec::new();
     loop {
-        comm.send(0, TAG_PR_WORK_REQUEST, &[]);
+        comm.send(0, TAG_PR_WORK_REQUEST, &std::mem::take(&mut finished_tile));
         let Some(reply) = comm.receive(Some(0), Some(TAG_PR_WORK), None) else {
             break;
         };
@@ -94,20 +98,33 @@ pub fn run(setup: &WorkerSetup<'_>, roles: &Roles, send_at: usize, sync: usize, 
         }
         let Some(Ok(Some(index))) = work else { break };
         let tile = &setup.tiles[index as usize];
+        let pending = |sender: &Sender<'_>| sender.sent + sink.lock().map_or(0, |s| s.len() as u64);
+        let requests_before = pending(&sender);
         let pixels = render_tile(&integrator, setup.camera, setup.settings, tile, &mut stats.rays, |_| {
             if sink.lock().map_or(0, |s| s.len()) >= send_at {
                 sender.send(&sink);
             }
         });
+        if journal {
+            let requests = (pending(&sender) - requests_before) as u32;
+            finished_tile = encode_tile_report(index, requests, &pixels);
+        }
         store_tile(&mut frame, tile, &pixels);
         stats.tiles += 1;
     }
     sender.send(&sink);
+    let mut results: Vec<RequestResult> = Vec::new();
+    let report_results = |results: &mut Vec<RequestResult>| {
+        if journal && !results.is_empty() {
+            comm.send(0, TAG_RESULTS, &encode_results(&std::mem::take(results)));
+        }
+    };
 
     // Helping: compute what the master has a PA forward, until it says everything is done.
     let mut helped = 0u64;
     loop {
         let records = setup.cache.map_or_else(Vec::new, |c| c.take_outbox());
+        report_results(&mut results);
         comm.send(
             0,
             TAG_PR_IDLE,
@@ -124,11 +141,20 @@ pub fn run(setup: &WorkerSetup<'_>, roles: &Roles, send_at: usize, sync: usize, 
                 for request in &decoded.requests {
                     let mut rng = Rng::new(seed, request.stream);
                     let value = integrator.ambient_for_request(request, &mut rng, &mut stats.rays);
-                    frame.add(request.pixel as usize, request.layer, value * request.coefficient);
+                    let light = value * request.coefficient;
+                    frame.add(request.pixel as usize, request.layer, light);
+                    if journal {
+                        results.push(RequestResult {
+                            pixel: request.pixel,
+                            layer: request.layer,
+                            value: light,
+                        });
+                    }
                     // A helper shares its records as often as a PA does.
                     if let Some(cache) = setup.cache
                         && cache.outbox_len() >= sync
                     {
+                        report_results(&mut results);
                         sync_records(&comm, cache, cache.take_outbox(), &mut received, &mut rejected);
                     }
                 }

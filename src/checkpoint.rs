@@ -1,0 +1,546 @@
+//! `--checkpoint DIR`: a journal of finished work, so that a render killed at any moment and
+//! started again with the same command picks up where it stopped.
+//!
+//! `DIR/tiles.journal` is a header naming the job, then entries appended as work finishes:
+//!
+//! - `Start`: one per run of the command (an "attempt"); entries after it belong to it.
+//! - `Tile`: a tile's pixels as its renderer made them, and how many indirect-diffuse requests
+//!   it sent elsewhere (component mode; 0 everywhere else).
+//! - `Results`: indirect light computed for such requests (pixel, layer, value).
+//!
+//! A tile counts as finished when one attempt journalled its pixels and as many results for
+//! its pixels as it sent requests: then it is restored and not rendered again. Anything else
+//! from an earlier attempt (a tile whose requests were still queued when the job died) is
+//! dropped and the tile rendered again. Each entry is written with one `write` and carries a
+//! checksum; the first entry that is cut short or fails its checksum ends the journal (a torn
+//! last write) and is cut off, so entries appended later stay readable.
+//!
+//! The irradiance cache goes to `DIR/cache.icc` (unless `-af` names another file), so a resumed
+//! render also starts with every record the killed one had written.
+
+use crate::image::framebuffer::{FrameBuffer, Layer};
+use crate::irradiance::codec::checksum;
+use crate::render::{PixelValue, Tile};
+use crate::shading::components::Components;
+use glam::Vec3;
+use std::fs::{File, OpenOptions};
+use std::io::{Read, Write};
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+
+const MAGIC: &[u8; 8] = b"ICRJRNL1";
+const KIND_START: u8 = 0;
+const KIND_TILE: u8 = 1;
+const KIND_RESULTS: u8 = 2;
+/// Floats of one journalled pixel: four layers of RGB and the records count.
+const PIXEL_FLOATS: usize = 13;
+/// One result: pixel, layer, RGB.
+const RESULT_BYTES: usize = 20;
+/// No entry is larger than a 16k x 16k tile's pixels; a longer length is damage.
+const MAX_ENTRY: usize = 16384 * 16384 * PIXEL_FLOATS * 4;
+
+/// Light computed for one request made elsewhere: added to `layer` at `pixel`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RequestResult {
+    pub pixel: u32,
+    pub layer: Layer,
+    pub value: Vec3,
+}
+
+/// What an earlier run finished: the frame with the finished tiles' pixels, and which they are.
+pub struct Restored {
+    pub frame: FrameBuffer,
+    pub done: Vec<bool>,
+    /// Torn or damaged bytes cut off the end of the journal.
+    pub torn_bytes: usize,
+}
+
+impl Restored {
+    pub fn count(&self) -> usize {
+        self.done.iter().filter(|d| **d).count()
+    }
+}
+
+/// The journal of this run, appended to from any thread.
+pub struct Checkpoint {
+    path: PathBuf,
+    file: Mutex<File>,
+    attempt: u32,
+    /// The first write error, reported once: a render goes on without its journal.
+    failed: Mutex<Option<String>>,
+}
+
+/// The cache file a checkpointed render uses when `-af` names none.
+pub fn cache_file(dir: &Path) -> PathBuf {
+    dir.join("cache.icc")
+}
+
+fn header(key: &str) -> Vec<u8> {
+    let mut out = MAGIC.to_vec();
+    out.extend_from_slice(&(key.len() as u32).to_le_bytes());
+    out.extend_from_slice(key.as_bytes());
+    out
+}
+
+fn entry(kind: u8, payload: &[u8]) -> Vec<u8> {
+    let mut out = Vec::with_capacity(payload.len() + 9);
+    out.push(kind);
+    out.extend_from_slice(&(payload.len() as u32).to_le_bytes());
+    out.extend_from_slice(payload);
+    let sum = checksum(&out);
+    out.extend_from_slice(&sum.to_le_bytes());
+    out
+}
+
+fn u32_at(bytes: &[u8], offset: usize) -> Option<u32> {
+    bytes
+        .get(offset..offset + 4)
+        .map(|b| u32::from_le_bytes(b.try_into().expect("4 bytes")))
+}
+
+fn f32_at(bytes: &[u8], offset: usize) -> Option<f32> {
+    u32_at(bytes, offset).map(f32::from_bits)
+}
+
+/// One decoded entry.
+enum Entry {
+    Start(u32),
+    Tile {
+        attempt: u32,
+        tile: u32,
+        requests: u32,
+        pixels: Vec<PixelValue>,
+    },
+    Results {
+        attempt: u32,
+        results: Vec<RequestResult>,
+    },
+}
+
+fn decode_entry(kind: u8, p: &[u8]) -> Option<Entry> {
+    match kind {
+        KIND_START if p.len() == 4 => Some(Entry::Start(u32_at(p, 0)?)),
+        KIND_TILE => {
+            let (attempt, tile, requests, count) = (u32_at(p, 0)?, u32_at(p, 4)?, u32_at(p, 8)?, u32_at(p, 12)?);
+            let body = p.get(16..)?;
+            if body.len() != (count as usize).checked_mul(PIXEL_FLOATS * 4)? {
+                return None;
+            }
+            let pixels = body
+                .chunks_exact(PIXEL_FLOATS * 4)
+                .map(|c| {
+                    let f = |i: usize| f32_at(c, 4 * i).expect("in range");
+                    let v = |i: usize| Vec3::new(f(i), f(i + 1), f(i + 2));
+                    PixelValue {
+                        components: Components {
+                            emission: v(0),
+                            direct: v(3),
+                            specular: v(6),
+                            indirect: v(9),
+                        },
+                        records: f(12),
+                    }
+                })
+                .collect();
+            Some(Entry::Tile {
+                attempt,
+                tile,
+                requests,
+                pixels,
+            })
+        }
+        KIND_RESULTS => {
+            let (attempt, count) = (u32_at(p, 0)?, u32_at(p, 4)?);
+            let body = p.get(8..)?;
+            if body.len() != (count as usize).checked_mul(RESULT_BYTES)? {
+                return None;
+            }
+            let results = body
+                .chunks_exact(RESULT_BYTES)
+                .map(|c| {
+                    let layer = Layer::ALL.get(u32_at(c, 4)? as usize).copied()?;
+                    Some(RequestResult {
+                        pixel: u32_at(c, 0)?,
+                        layer,
+                        value: Vec3::new(f32_at(c, 8)?, f32_at(c, 12)?, f32_at(c, 16)?),
+                    })
+                })
+                .collect::<Option<Vec<_>>>()?;
+            Some(Entry::Results { attempt, results })
+        }
+        _ => None,
+    }
+}
+
+/// Reads the entries after the header; returns them and where the intact part ends.
+fn read_entries(bytes: &[u8], mut at: usize) -> (Vec<Entry>, usize) {
+    let mut entries = Vec::new();
+    while let Some(len) = u32_at(bytes, at + 1).map(|l| l as usize).filter(|&l| l <= MAX_ENTRY) {
+        let end = at + 5 + len;
+        let (Some(body), Some(sum)) = (bytes.get(at..end), u32_at(bytes, end)) else {
+            break;
+        };
+        if checksum(body) != sum {
+            break;
+        }
+        let Some(entry) = decode_entry(body[0], &body[5..]) else {
+            break;
+        };
+        entries.push(entry);
+        at = end + 4;
+    }
+    (entries, at)
+}
+
+/// The tile each pixel belongs to.
+fn tile_of_pixel(tiles: &[Tile], width: u32, height: u32) -> Vec<u32> {
+    let mut owner = vec![u32::MAX; width as usize * height as usize];
+    for (index, t) in tiles.iter().enumerate() {
+        for y in t.y0..t.y1 {
+            for x in t.x0..t.x1 {
+                owner[y as usize * width as usize + x as usize] = index as u32;
+            }
+        }
+    }
+    owner
+}
+
+/// Rebuilds the finished tiles from the entries.
+fn restore(entries: Vec<Entry>, tiles: &[Tile], width: u32, height: u32) -> (FrameBuffer, Vec<bool>) {
+    use std::collections::HashMap;
+    let owner = tile_of_pixel(tiles, width, height);
+    // Per (attempt, tile): the tile's pixels and request count, and the results for it.
+    type Part = (u32, Vec<PixelValue>);
+    let mut parts: HashMap<(u32, u32), Part> = HashMap::new();
+    let mut results: HashMap<(u32, u32), Vec<RequestResult>> = HashMap::new();
+    for e in entries {
+        match e {
+            Entry::Start(_) => {}
+            Entry::Tile {
+                attempt,
+                tile,
+                requests,
+                pixels,
+            } => {
+                let fits = tiles
+                    .get(tile as usize)
+                    .is_some_and(|t| ((t.x1 - t.x0) * (t.y1 - t.y0)) as usize == pixels.len());
+                if fits {
+                    parts.insert((attempt, tile), (requests, pixels));
+                }
+            }
+            Entry::Results { attempt, results: r } => {
+                for result in r {
+                    if let Some(&tile) = owner.get(result.pixel as usize) {
+                        results.entry((attempt, tile)).or_default().push(result);
+                    }
+                }
+            }
+        }
+    }
+    let mut frame = FrameBuffer::new(width, height);
+    let mut done = vec![false; tiles.len()];
+    let mut finished: Vec<(&(u32, u32), &Part)> = parts.iter().collect();
+    finished.sort_by_key(|(key, _)| **key);
+    for (key, (requests, pixels)) in finished {
+        let found = results.get(key).map_or(&[][..], Vec::as_slice);
+        let tile = key.1 as usize;
+        if done[tile] || found.len() != *requests as usize {
+            continue;
+        }
+        let all_finite = pixels
+            .iter()
+            .all(|p| p.records.is_finite() && p.components.as_array().iter().all(|v| v.is_finite()))
+            && found.iter().all(|r| r.value.is_finite());
+        if !all_finite {
+            continue;
+        }
+        crate::render::store_tile(&mut frame, &tiles[tile], pixels);
+        for r in found {
+            frame.add(r.pixel as usize, r.layer, r.value);
+        }
+        done[tile] = true;
+    }
+    (frame, done)
+}
+
+impl Checkpoint {
+    /// Opens (or starts) the journal in `dir` for the job `key` and returns what earlier runs
+    /// finished. A journal of another job is refused, not overwritten.
+    pub fn open(
+        dir: &Path,
+        key: &str,
+        tiles: &[Tile],
+        width: u32,
+        height: u32,
+    ) -> Result<(Checkpoint, Restored), String> {
+        std::fs::create_dir_all(dir).map_err(|e| format!("{}: cannot create the directory: {e}", dir.display()))?;
+        let path = dir.join("tiles.journal");
+        let context = |e: std::io::Error| format!("{}: {e}", path.display());
+        let mut bytes = Vec::new();
+        if path.exists() {
+            File::open(&path)
+                .and_then(|mut f| f.read_to_end(&mut bytes))
+                .map_err(context)?;
+        }
+        let ours = header(key);
+        let (entries, intact) = if bytes.len() < ours.len() && ours.starts_with(&bytes) {
+            // Empty, or the header itself was torn: nothing was journalled yet.
+            std::fs::write(&path, &ours).map_err(context)?;
+            bytes = ours.clone();
+            (Vec::new(), ours.len())
+        } else if !bytes.starts_with(MAGIC) {
+            return Err(format!("{}: not an icrender checkpoint journal", path.display()));
+        } else if !bytes.starts_with(&ours) {
+            let theirs_len = u32_at(&bytes, 8).unwrap_or(0) as usize;
+            let theirs = bytes
+                .get(12..12 + theirs_len)
+                .map(String::from_utf8_lossy)
+                .unwrap_or_default();
+            return Err(format!(
+                "{}: this checkpoint belongs to another job ({theirs}); this one is ({key}); \
+                 give another --checkpoint directory or delete this one",
+                path.display()
+            ));
+        } else {
+            read_entries(&bytes, ours.len())
+        };
+        let torn_bytes = bytes.len() - intact;
+        let attempt = entries
+            .iter()
+            .filter_map(|e| match e {
+                Entry::Start(a) => Some(*a + 1),
+                _ => None,
+            })
+            .max()
+            .unwrap_or(0);
+        let (frame, done) = restore(entries, tiles, width, height);
+        let file = OpenOptions::new().write(true).open(&path).map_err(context)?;
+        // Cut a torn tail so that appended entries follow the last intact one.
+        file.set_len(intact as u64).map_err(context)?;
+        let mut file = OpenOptions::new().append(true).open(&path).map_err(context)?;
+        file.write_all(&entry(KIND_START, &attempt.to_le_bytes()))
+            .map_err(context)?;
+        Ok((
+            Checkpoint {
+                path,
+                file: Mutex::new(file),
+                attempt,
+                failed: Mutex::new(None),
+            },
+            Restored {
+                frame,
+                done,
+                torn_bytes,
+            },
+        ))
+    }
+
+    fn append(&self, kind: u8, payload: &[u8]) {
+        let bytes = entry(kind, payload);
+        let result = self.file.lock().unwrap_or_else(|e| e.into_inner()).write_all(&bytes);
+        if let Err(e) = result {
+            let mut failed = self.failed.lock().unwrap_or_else(|e| e.into_inner());
+            if failed.is_none() {
+                crate::commands::warn(&format!(
+                    "{}: cannot journal finished work ({e}); the render goes on, but a restart would redo it",
+                    self.path.display()
+                ));
+                *failed = Some(e.to_string());
+            }
+        }
+    }
+
+    /// Journals a rendered tile; `requests` of its indirect light went to other ranks.
+    pub fn tile(&self, index: u32, requests: u32, pixels: &[PixelValue]) {
+        let mut p = Vec::with_capacity(16 + pixels.len() * PIXEL_FLOATS * 4);
+        for w in [self.attempt, index, requests, pixels.len() as u32] {
+            p.extend_from_slice(&w.to_le_bytes());
+        }
+        for px in pixels {
+            for v in px.components.as_array() {
+                for c in v.to_array() {
+                    p.extend_from_slice(&c.to_le_bytes());
+                }
+            }
+            p.extend_from_slice(&px.records.to_le_bytes());
+        }
+        self.append(KIND_TILE, &p);
+    }
+
+    /// Journals indirect light computed for requests.
+    pub fn results(&self, results: &[RequestResult]) {
+        if results.is_empty() {
+            return;
+        }
+        let mut p = Vec::with_capacity(8 + results.len() * RESULT_BYTES);
+        p.extend_from_slice(&self.attempt.to_le_bytes());
+        p.extend_from_slice(&(results.len() as u32).to_le_bytes());
+        p.extend(encode_results(results));
+        self.append(KIND_RESULTS, &p);
+    }
+}
+
+/// Results as bytes (the journal's form, also sent from PAs to the master).
+pub fn encode_results(results: &[RequestResult]) -> Vec<u8> {
+    let mut out = Vec::with_capacity(results.len() * RESULT_BYTES);
+    for r in results {
+        out.extend_from_slice(&r.pixel.to_le_bytes());
+        out.extend_from_slice(&(r.layer.index() as u32).to_le_bytes());
+        for c in r.value.to_array() {
+            out.extend_from_slice(&c.to_le_bytes());
+        }
+    }
+    out
+}
+
+/// The inverse of [`encode_results`]; `None` for a malformed message.
+pub fn decode_results(bytes: &[u8]) -> Option<Vec<RequestResult>> {
+    if !bytes.len().is_multiple_of(RESULT_BYTES) {
+        return None;
+    }
+    bytes
+        .chunks_exact(RESULT_BYTES)
+        .map(|c| {
+            Some(RequestResult {
+                pixel: u32_at(c, 0)?,
+                layer: Layer::ALL.get(u32_at(c, 4)? as usize).copied()?,
+                value: Vec3::new(f32_at(c, 8)?, f32_at(c, 12)?, f32_at(c, 16)?),
+            })
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::render::tiles;
+
+    fn pixels(tile: &Tile, value: f32) -> Vec<PixelValue> {
+        let n = ((tile.x1 - tile.x0) * (tile.y1 - tile.y0)) as usize;
+        vec![
+            PixelValue {
+                components: Components {
+                    emission: Vec3::splat(value),
+                    direct: Vec3::new(value, 0.0, 1.0),
+                    specular: Vec3::ZERO,
+                    indirect: Vec3::splat(0.25),
+                },
+                records: 1.0,
+            };
+            n
+        ]
+    }
+
+    #[test]
+    fn finished_tiles_come_back_and_unfinished_ones_do_not() {
+        let dir = tempfile::tempdir().unwrap();
+        let all = tiles(8, 4, 4, 4);
+        let (journal, restored) = Checkpoint::open(dir.path(), "job", &all, 8, 4).unwrap();
+        assert_eq!(restored.count(), 0);
+        journal.tile(0, 0, &pixels(&all[0], 2.0));
+        // Tile 1 sent two requests; only one result arrives before the "kill".
+        journal.tile(1, 2, &pixels(&all[1], 3.0));
+        let pixel_of_tile1 = 4;
+        journal.results(&[RequestResult {
+            pixel: pixel_of_tile1,
+            layer: Layer::Indirect,
+            value: Vec3::ONE,
+        }]);
+        drop(journal);
+        let (journal, restored) = Checkpoint::open(dir.path(), "job", &all, 8, 4).unwrap();
+        assert_eq!(restored.done, vec![true, false]);
+        assert_eq!(restored.frame.layer(Layer::Emission)[0], Vec3::splat(2.0));
+        assert_eq!(
+            restored.frame.layer(Layer::Emission)[pixel_of_tile1 as usize],
+            Vec3::ZERO
+        );
+        // The second attempt finishes tile 1; the first attempt's lone result is not reused.
+        journal.tile(1, 2, &pixels(&all[1], 3.0));
+        let results: Vec<RequestResult> = [4u32, 5]
+            .iter()
+            .map(|&pixel| RequestResult {
+                pixel,
+                layer: Layer::Specular,
+                value: Vec3::splat(0.5),
+            })
+            .collect();
+        journal.results(&results);
+        drop(journal);
+        let (_, restored) = Checkpoint::open(dir.path(), "job", &all, 8, 4).unwrap();
+        assert_eq!(restored.done, vec![true, true]);
+        assert_eq!(restored.frame.layer(Layer::Specular)[4], Vec3::splat(0.5));
+        assert_eq!(restored.frame.layer(Layer::Indirect)[4], Vec3::splat(0.25));
+        assert_eq!(restored.frame.layer(Layer::Emission)[5], Vec3::splat(3.0));
+    }
+
+    #[test]
+    fn a_torn_last_entry_is_cut_and_later_entries_stay_readable() {
+        let dir = tempfile::tempdir().unwrap();
+        let all = tiles(8, 8, 4, 4);
+        let (journal, _) = Checkpoint::open(dir.path(), "job", &all, 8, 8).unwrap();
+        journal.tile(0, 0, &pixels(&all[0], 1.0));
+        journal.tile(1, 0, &pixels(&all[1], 1.0));
+        drop(journal);
+        let path = dir.path().join("tiles.journal");
+        let bytes = std::fs::read(&path).unwrap();
+        std::fs::write(&path, &bytes[..bytes.len() - 7]).unwrap();
+        let (journal, restored) = Checkpoint::open(dir.path(), "job", &all, 8, 8).unwrap();
+        assert_eq!(restored.done, vec![true, false, false, false]);
+        assert!(restored.torn_bytes > 0);
+        journal.tile(2, 0, &pixels(&all[2], 1.0));
+        drop(journal);
+        let (_, restored) = Checkpoint::open(dir.path(), "job", &all, 8, 8).unwrap();
+        assert_eq!(restored.done, vec![true, false, true, false]);
+        assert_eq!(restored.torn_bytes, 0);
+    }
+
+    #[test]
+    fn every_cut_of_a_journal_opens() {
+        let dir = tempfile::tempdir().unwrap();
+        let all = tiles(4, 4, 2, 2);
+        let (journal, _) = Checkpoint::open(dir.path(), "job", &all, 4, 4).unwrap();
+        for (i, t) in all.iter().enumerate() {
+            journal.tile(i as u32, 0, &pixels(t, i as f32));
+        }
+        drop(journal);
+        let path = dir.path().join("tiles.journal");
+        let whole = std::fs::read(&path).unwrap();
+        let mut last = 0;
+        for cut in 0..=whole.len() {
+            std::fs::write(&path, &whole[..cut]).unwrap();
+            let (_, restored) = Checkpoint::open(dir.path(), "job", &all, 4, 4).unwrap();
+            assert!(restored.count() >= last, "a longer journal restored fewer tiles");
+            last = restored.count();
+        }
+        assert_eq!(last, 4);
+    }
+
+    #[test]
+    fn another_jobs_journal_is_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let all = tiles(4, 4, 4, 4);
+        Checkpoint::open(dir.path(), "-x 4 -y 4", &all, 4, 4).unwrap();
+        let err = Checkpoint::open(dir.path(), "-x 4 -y 4 -ab 2", &all, 4, 4)
+            .err()
+            .unwrap();
+        assert!(err.contains("another job"), "{err}");
+        std::fs::write(dir.path().join("tiles.journal"), b"garbage that is long enough").unwrap();
+        let err = Checkpoint::open(dir.path(), "job", &all, 4, 4).err().unwrap();
+        assert!(err.contains("not an icrender checkpoint"), "{err}");
+    }
+
+    #[test]
+    fn results_round_trip() {
+        let r = vec![RequestResult {
+            pixel: 9,
+            layer: Layer::Specular,
+            value: Vec3::new(1.0, 2.0, 3.0),
+        }];
+        assert_eq!(decode_results(&encode_results(&r)).unwrap(), r);
+        assert!(decode_results(&[0; 19]).is_none());
+        let mut bad = encode_results(&r);
+        bad[4] = 9;
+        assert!(decode_results(&bad).is_none());
+    }
+}

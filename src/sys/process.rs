@@ -1,0 +1,31 @@
+//! Process lifetime under a launcher: a rank started by mpirun (or by its remote daemon) must
+//! not outlive it. When a scheduler or a user kills mpirun with SIGKILL, it cannot stop its
+//! ranks; without this they would render on as orphans, appending to the same checkpoint and
+//! cache files as the job started again in their place.
+
+/// Asks the kernel to kill this process when its parent (the launcher) dies. `launcher`, when
+/// known, is the launcher's pid: if the parent is no longer that process, the launcher died
+/// before the request could take effect, and this returns an error. Linux only; elsewhere it
+/// does nothing.
+pub fn die_with_parent(launcher: Option<u32>) -> Result<(), String> {
+    #[cfg(target_os = "linux")]
+    {
+        // SAFETY: PR_SET_PDEATHSIG takes a signal number and ignores the other arguments.
+        let status = unsafe { libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGKILL as libc::c_ulong, 0, 0, 0) };
+        if status != 0 {
+            return Err(format!(
+                "cannot ask to end with the launcher: {}",
+                std::io::Error::last_os_error()
+            ));
+        }
+        // The launcher may have died before the request: then this process was re-parented.
+        // SAFETY: getppid has no preconditions.
+        let parent = unsafe { libc::getppid() };
+        if launcher.is_some_and(|pid| pid as libc::pid_t != parent) {
+            return Err("the launcher (mpirun) is gone".into());
+        }
+    }
+    #[cfg(not(target_os = "linux"))]
+    let _ = launcher;
+    Ok(())
+}
