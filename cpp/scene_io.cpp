@@ -367,7 +367,26 @@ std::string human_bytes(uint64_t bytes) {
 
 // How much memory a loaded scene may take: ICRENDER_MAX_SCENE_MEMORY_MB (MiB) when set, for
 // tests and fuzzing; else the machine's physical memory, or the cgroup's limit when lower.
+uint64_t scene_memory_limit_of_machine(std::string *what);
+
+// The caller's limit for the load in progress on this thread (--max-memory); 0 when none.
+thread_local uint64_t t_requested_limit = 0;
+
 uint64_t scene_memory_limit(std::string *what) {
+    if (t_requested_limit > 0) {
+        std::string machine;
+        const uint64_t other = scene_memory_limit_of_machine(&machine);
+        if (t_requested_limit <= other) {
+            *what = "--max-memory";
+            return t_requested_limit;
+        }
+        *what = machine;
+        return other;
+    }
+    return scene_memory_limit_of_machine(what);
+}
+
+uint64_t scene_memory_limit_of_machine(std::string *what) {
     if (const char *env = std::getenv("ICRENDER_MAX_SCENE_MEMORY_MB")) {
         char *end = nullptr;
         errno = 0;
@@ -1620,8 +1639,10 @@ icr_scene *load_scene(const std::string &path, uint32_t flags) {
 
 }  // namespace
 
-extern "C" icr_scene *icr_scene_load(const char *path, uint32_t flags, char *err, size_t err_len) {
+extern "C" icr_scene *icr_scene_load(const char *path, uint32_t flags, uint64_t memory_limit, char *err,
+                                      size_t err_len) {
     if (err && err_len) err[0] = '\0';
+    t_requested_limit = memory_limit;
     try {
         if (!path || !*path) {
             write_error(err, err_len, "empty path");

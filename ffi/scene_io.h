@@ -107,8 +107,10 @@ typedef struct icr_scene icr_scene;
 /*
  * Loads a .gltf or .glb file. On failure returns NULL and writes a one-line, NUL-terminated
  * message (without the path; the caller names the file) into err[0..err_len).
+ * memory_limit: bytes the loaded scene may take (0: only the machine's or the cgroup's
+ * memory); a scene that would take more is refused before its arrays are allocated.
  */
-icr_scene *icr_scene_load(const char *path, uint32_t flags, char *err, size_t err_len);
+icr_scene *icr_scene_load(const char *path, uint32_t flags, uint64_t memory_limit, char *err, size_t err_len);
 /* The arrays of a loaded scene; valid until icr_scene_free. */
 icr_scene_view icr_scene_get_view(const icr_scene *scene);
 void icr_scene_free(icr_scene *scene);

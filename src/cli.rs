@@ -125,6 +125,10 @@ pub struct RenderArgs {
     /// Requests a PR gathers before it sends them to a PA (component mode).
     #[arg(long = "send", default_value_t = 32)]
     pub send: u32,
+    /// Most requests a PA keeps queued (component mode); while its queue is this long it takes
+    /// no more in, and PRs wait before sending (back-pressure instead of unbounded growth).
+    #[arg(long = "pa-queue", default_value_t = 65536)]
+    pub pa_queue: u32,
     /// Ranks that act as PAs in component mode (default: half the workers).
     #[arg(long = "pa")]
     pub pa: Option<u32>,
@@ -180,6 +184,10 @@ pub struct RenderArgs {
     /// Replace output files that already exist (by default an existing file is never touched).
     #[arg(long = "overwrite")]
     pub overwrite: bool,
+    /// Memory one process may use (MiB, or with a K, M, G or T suffix): a render estimated to
+    /// need more is refused before it starts, with the estimate.
+    #[arg(long = "max-memory", value_name = "SIZE", value_parser = parse_memory)]
+    pub max_memory: Option<u64>,
     /// Journal finished tiles and the irradiance cache in DIR, so that a render killed at any
     /// moment and started again with the same command resumes instead of starting over.
     #[arg(long = "checkpoint", value_name = "DIR")]
@@ -283,6 +291,31 @@ pub enum BenchCommand {
 }
 
 /// Parses "WxH" (or a single number for square tiles).
+/// A memory size in bytes from "512" (MiB), "512M", "1.5G", "800K" or "2T".
+pub fn parse_memory(text: &str) -> Result<u64, String> {
+    let text = text.trim();
+    let (number, unit) = match text.char_indices().last() {
+        Some((i, c)) if c.is_ascii_alphabetic() => (&text[..i], c.to_ascii_uppercase()),
+        _ => (text, 'M'),
+    };
+    let scale: f64 = match unit {
+        'K' => 1024.0,
+        'M' => 1024.0 * 1024.0,
+        'G' => 1024.0 * 1024.0 * 1024.0,
+        'T' => 1024.0 * 1024.0 * 1024.0 * 1024.0,
+        _ => return Err(format!("{text:?}: unknown unit (use K, M, G or T)")),
+    };
+    let value: f64 = number
+        .trim()
+        .parse()
+        .map_err(|_| format!("{text:?} is not a memory size such as 512M or 4G"))?;
+    let bytes = value * scale;
+    if !(1.0..1e18).contains(&bytes) {
+        return Err(format!("{text:?} is not a usable memory size"));
+    }
+    Ok(bytes as u64)
+}
+
 pub fn parse_tile(text: &str) -> Result<(u32, u32), String> {
     let bad = || format!("--tile {text}: expected WxH with positive whole numbers, e.g. 32x32");
     let (w, h) = match text.split_once(['x', 'X']) {
@@ -304,6 +337,18 @@ pub fn parse_tile(text: &str) -> Result<(u32, u32), String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn memory_sizes() {
+        assert_eq!(parse_memory("512").unwrap(), 512 << 20);
+        assert_eq!(parse_memory("2G").unwrap(), 2 << 30);
+        assert_eq!(parse_memory("1.5g").unwrap(), 3 << 29);
+        assert_eq!(parse_memory("800K").unwrap(), 800 << 10);
+        assert!(parse_memory("12Q").is_err());
+        assert!(parse_memory("lots").is_err());
+        assert!(parse_memory("0").is_err());
+        assert!(parse_memory("-5G").is_err());
+    }
 
     #[test]
     fn radiance_names_become_long_options() {

@@ -6,6 +6,7 @@ use crate::cli::{MetricArg, RenderArgs, parse_tile};
 use crate::commands::{CommandError, warn};
 use crate::irradiance::record::Metric;
 use crate::irradiance::{CacheSettings, IrradianceCache};
+use crate::memory;
 use crate::render::RenderSettings;
 use crate::scene::view::{Camera, View};
 use crate::scene::{LoadOptions, Scene};
@@ -107,15 +108,47 @@ pub fn cache_settings_line(args: &RenderArgs, scene: &Scene) -> String {
     )
 }
 
+/// Refuses a job whose estimated memory exceeds --max-memory, before the BVH and the render.
+fn check_memory(args: &RenderArgs, scene: &Scene, role: memory::Role, limit: u64) -> Result<(), CommandError> {
+    let component = matches!(args.mode, Some(crate::cli::ModeArg::Component) | None);
+    let estimate = memory::Estimate::of(
+        scene,
+        &memory::Job {
+            width: args.width,
+            height: args.height,
+            spp: args.spp,
+            ambient_bounces: args.ambient_bounces,
+            cache: args.ambient_accuracy > 0.0 && args.ambient_bounces > 0 && scene.needs().diffuse,
+            pa_queue: (role != memory::Role::Single && component).then_some(args.pa_queue),
+            role,
+        },
+    );
+    if estimate.total() > limit {
+        return Err(CommandError(format!(
+            "{}: this render would need about {} per process, more than --max-memory {}",
+            args.scene.display(),
+            estimate.describe(),
+            memory::human(limit)
+        )));
+    }
+    Ok(())
+}
+
 impl Job {
-    pub fn prepare(args: &RenderArgs) -> Result<Job, CommandError> {
+    /// Loads the scene, checks the job fits --max-memory (as a process in `role`), builds the
+    /// BVH, chooses the view and opens the cache.
+    pub fn prepare(args: &RenderArgs, role: memory::Role) -> Result<Job, CommandError> {
         let load_start = Instant::now();
         let material_options = LoadOptions {
             specular_threshold: args.specular_threshold,
             lambertian: args.lambertian,
             allow_outside_refs: args.allow_outside_refs,
+            max_memory: args.max_memory,
         };
         let scene = Scene::load(&args.scene, &material_options)?;
+        if let Some(limit) = args.max_memory {
+            check_memory(args, &scene, role, limit)?;
+        }
         let load_s = load_start.elapsed().as_secs_f64();
         for w in &scene.warnings {
             warn(&format!("{}: {w}", args.scene.display()));

@@ -8,6 +8,7 @@ pub mod export;
 pub mod image;
 pub mod irradiance;
 pub mod job;
+pub mod memory;
 pub mod parallel;
 pub mod progress;
 pub mod render;

@@ -5,6 +5,10 @@ use icrender::{cli, commands};
 use clap::Parser;
 use std::process::ExitCode;
 
+/// Memory the system refuses ends the process with a clear message, not an abort.
+#[global_allocator]
+static ALLOCATOR: icrender::sys::alloc::ReportingAllocator = icrender::sys::alloc::ReportingAllocator;
+
 fn main() -> ExitCode {
     let args = cli::rewrite_radiance_options(std::env::args());
     let cli = match cli::Cli::try_parse_from(args) {

@@ -108,6 +108,8 @@ pub struct RankReport {
     pub requests_forwarded: u64,
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub queue_lengths: Vec<(f64, u32)>,
+    /// PA: the longest its request queue ever was.
+    pub queue_max: u64,
 }
 
 #[derive(Clone, Debug, Default, Serialize)]

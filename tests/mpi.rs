@@ -429,6 +429,45 @@ fn load_balancing_resolves_a_forced_imbalance() {
     assert_eq!(helped, u(s, "requests_forwarded"));
 }
 
+/// A PA whose queue is full takes no more requests in; the PRs wait (their synchronous sends do
+/// not complete) instead of the queue growing without bound, and the render still ends right.
+#[test]
+fn a_full_pa_queue_holds_the_prs_back() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = project_dir().join("scenes/cornell.gltf");
+    let common = ["--mode", "component", "--pa", "1", "--send", "4"];
+    let free = render(dir.path(), &scene, "unbounded", Some(4), &common);
+    let (bound, send) = (16, 4);
+    let mut args = common.to_vec();
+    args.extend(["--pa-queue", "16"]);
+    let held = render(dir.path(), &scene, "bounded", Some(4), &args);
+    let longest = |run: &Run| -> u64 {
+        run.stats["per_rank"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|r| r["role"] == "pa")
+            .map(|r| u(r, "queue_max"))
+            .max()
+            .unwrap()
+    };
+    // Without the bound the queue grows far past it (else this test would prove nothing).
+    assert!(
+        longest(&free) > 4 * bound,
+        "unbounded queue only reached {}",
+        longest(&free)
+    );
+    assert!(
+        longest(&held) <= bound + send,
+        "the queue reached {} with --pa-queue {bound}",
+        longest(&held)
+    );
+    let s = &held.stats;
+    assert_eq!(u(s, "requests_sent"), u(s, "requests_computed"));
+    let err = relmse(&held.image, &free.image);
+    assert!(err < 1e-3, "relMSE {err} between the bounded and the unbounded run");
+}
+
 #[test]
 fn component_layouts() {
     let dir = tempfile::tempdir().unwrap();

@@ -41,7 +41,7 @@ pub fn run(args: &ReferenceArgs) -> CommandResult {
         return Err(CommandError("--noise and --max-seconds must be positive".into()));
     }
     let outputs = Outputs::check(&render_args)?;
-    let mut job = Job::prepare(&render_args)?;
+    let mut job = Job::prepare(&render_args, crate::memory::Role::Single)?;
     // Every pass places its samples anew over each pixel: the reference integrates the pixel's
     // area, as a box-filtered render converges to.
     job.settings.jitter = true;

@@ -262,7 +262,7 @@ pub fn run(args: &RenderArgs) -> CommandResult {
     let (tile_width, tile_height) = crate::cli::parse_tile(&args.tile).map_err(CommandError)?;
     let all_tiles = tiles(args.width, args.height, tile_width, tile_height);
     let (journal, restored) = open_checkpoint(args, &all_tiles)?.map_or((None, None), |(j, r)| (Some(j), Some(r)));
-    let job = Job::prepare(&with_checkpoint_cache(args)?)?;
+    let job = Job::prepare(&with_checkpoint_cache(args)?, crate::memory::Role::Single)?;
     let integrator = Integrator::new(&job.scene, &job.tracer, &job.shading, job.cache.as_ref());
     let s = &job.settings;
     let tiles_restored = restored.as_ref().map_or(0, Restored::count);

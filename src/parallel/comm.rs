@@ -5,12 +5,16 @@
 
 use mpi::Tag;
 use mpi::point_to_point::{Destination, MatchedReceiveVec, Source};
+use mpi::request::{Request, StaticScope};
 use mpi::topology::{Communicator, SimpleCommunicator};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
 /// Longest pause between polls: bounds the latency a waiting rank adds.
 const MAX_PAUSE: Duration = Duration::from_micros(500);
+
+/// A synchronous send in flight (see `Comm::send_marker`); it must be waited for.
+pub struct Marker(Request<'static, [u8], StaticScope>);
 
 /// A received message.
 #[derive(Debug)]
@@ -64,6 +68,36 @@ impl<'c> Comm<'c> {
         self.world.process_at_rank(dest).send_with_tag(data, tag);
         self.counters.messages_sent.fetch_add(1, Ordering::Relaxed);
         self.counters.bytes_sent.fetch_add(data.len() as u64, Ordering::Relaxed);
+    }
+
+    /// Sends a marker with a synchronous send: it completes only once the receiver has taken
+    /// it in, and so (messages between two ranks keep their order) everything sent before it
+    /// with the same tag. `wait_marker` waits for that.
+    pub fn send_marker(&self, dest: i32, tag: Tag, marker: &'static [u8]) -> Marker {
+        let request = self
+            .world
+            .process_at_rank(dest)
+            .immediate_synchronous_send_with_tag(StaticScope, marker, tag);
+        self.counters.messages_sent.fetch_add(1, Ordering::Relaxed);
+        self.counters
+            .bytes_sent
+            .fetch_add(marker.len() as u64, Ordering::Relaxed);
+        Marker(request)
+    }
+
+    /// Waits until the marker's receiver has taken it in, polling with pauses like `receive`
+    /// rather than spinning in MPI.
+    pub fn wait_marker(&self, marker: Marker) {
+        let mut request = marker.0;
+        let mut pause = Duration::from_micros(5);
+        loop {
+            match request.test() {
+                Ok(_) => return,
+                Err(pending) => request = pending,
+            }
+            std::thread::sleep(pause);
+            pause = (pause * 2).min(MAX_PAUSE);
+        }
     }
 
     fn count_received(&self, r: Received) -> Received {
@@ -141,6 +175,14 @@ impl<'c> Comm<'c> {
         all.chunks_exact(LEN)
             .map(|c| String::from_utf8_lossy(&c[..c.iter().position(|&b| b == 0).unwrap_or(LEN)]).into_owned())
             .collect()
+    }
+
+    /// Every rank's flag, by rank. A collective: every rank calls it.
+    pub fn all_flags(&self, flag: bool) -> Vec<bool> {
+        use mpi::collective::CommunicatorCollectives;
+        let mut all = vec![0u8; self.size() as usize];
+        self.world.all_gather_into(&[flag as u8][..], &mut all[..]);
+        all.into_iter().map(|f| f != 0).collect()
     }
 
     /// Ends the whole job (every rank) with an error code.

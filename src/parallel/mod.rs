@@ -229,7 +229,21 @@ pub fn run(args: &RenderArgs, mode: Mode) -> CommandResult {
     if rank != 0 {
         rank_args.ambient_file = None;
     }
-    let mut job = Job::prepare(&rank_args).unwrap_or_else(|e| fatal(&comm, &e.0));
+    // Every rank checks --max-memory for the hungriest role, so they all reach one verdict.
+    let prepared = Job::prepare(&rank_args, crate::memory::Role::AnyRank);
+    // Who could not prepare: if rank 0 could not, it alone says why (the others most likely
+    // failed the same way on the same scene); else each failing rank says why. All then stop.
+    let failed = comm.all_flags(prepared.is_err());
+    let mut job = match prepared {
+        Ok(job) if !failed.contains(&true) => job,
+        Ok(_) => return Err(CommandError(String::new())),
+        Err(e) if rank == 0 => return Err(e),
+        Err(e) if failed[0] => {
+            drop(e);
+            return Err(CommandError(String::new()));
+        }
+        Err(e) => return Err(CommandError(format!("rank {rank}: {}", e.0))),
+    };
     let resume = checkpoint.as_ref().map(|(journal, restored)| (journal, restored));
     if mode == Mode::Component {
         return run_component(args, &comm, job, &all_tiles, &hosts, outputs, wall, universe, resume);
@@ -356,6 +370,7 @@ fn run_component(
                 args.sync.unwrap_or(8).max(1) as usize,
                 args.seed,
                 args.checkpoint.is_some(),
+                args.pa_queue.max(1) as usize,
             );
         } else {
             component::pr::run(

@@ -35,6 +35,8 @@ pub struct LoadOptions {
     /// Let the file refer to buffers and images outside its own folder (refused by default:
     /// a scene from anywhere must not read files anywhere).
     pub allow_outside_refs: bool,
+    /// Bytes the loaded scene may take (--max-memory); None: the machine's memory.
+    pub max_memory: Option<u64>,
 }
 
 impl Default for LoadOptions {
@@ -43,6 +45,7 @@ impl Default for LoadOptions {
             specular_threshold: material::DEFAULT_SPECULAR_THRESHOLD,
             lambertian: false,
             allow_outside_refs: false,
+            max_memory: None,
         }
     }
 }
@@ -93,7 +96,7 @@ impl Scene {
         if path.is_dir() {
             return Err(fail("is a directory, not a glTF file".into()));
         }
-        let gltf = scene_io::load_gltf(path, options.allow_outside_refs).map_err(fail)?;
+        let gltf = scene_io::load_gltf(path, options.allow_outside_refs, options.max_memory).map_err(fail)?;
         Scene::from_gltf(path, gltf, options).map_err(fail)
     }
 
@@ -177,6 +180,18 @@ impl Scene {
 
     pub fn triangle_count(&self) -> usize {
         self.meshes.iter().map(|m| m.indices.len()).sum()
+    }
+
+    /// Bytes the scene's geometry and textures take in memory.
+    pub fn memory_bytes(&self) -> u64 {
+        let mesh = |m: &WorldMesh| {
+            m.positions.len() * 12
+                + m.normals.as_ref().map_or(0, |n| n.len() * std::mem::size_of::<Vec3>())
+                + m.texcoords.as_ref().map_or(0, |t| t.len() * 8)
+                + m.indices.len() * 12
+        };
+        self.meshes.iter().map(|m| mesh(m) as u64).sum::<u64>()
+            + self.textures.iter().map(Texture::memory_bytes).sum::<u64>()
     }
 
     /// Length of the bounding box's diagonal: the scale every tolerance is relative to.

@@ -39,6 +39,11 @@ fn wrap(coord: i64, size: u32, mode: i32) -> usize {
 }
 
 impl Texture {
+    /// Bytes its texels take.
+    pub fn memory_bytes(&self) -> u64 {
+        (self.texels.len() * std::mem::size_of::<Vec4>()) as u64
+    }
+
     pub fn from_gltf(t: &GltfTexture) -> Texture {
         let lut: Vec<f32> = (0..256)
             .map(|i| {

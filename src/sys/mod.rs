@@ -18,6 +18,7 @@ mod abi_bindings {
     include!(concat!(env!("OUT_DIR"), "/abi_bindings.rs"));
 }
 
+pub mod alloc;
 pub mod embree;
 pub mod image_io;
 pub mod process;

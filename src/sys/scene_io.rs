@@ -113,7 +113,8 @@ impl Drop for Handle {
 
 /// Loads a glTF 2.0 file (.gltf or .glb). The error is the loader's one-line message; the caller
 /// adds the file name.
-pub fn load_gltf(path: &Path, allow_outside_refs: bool) -> Result<GltfScene, String> {
+/// `memory_limit`: bytes the loaded scene may take (None: only the machine's memory).
+pub fn load_gltf(path: &Path, allow_outside_refs: bool, memory_limit: Option<u64>) -> Result<GltfScene, String> {
     let c_path =
         CString::new(path.as_os_str().as_encoded_bytes()).map_err(|_| "path contains a NUL byte".to_string())?;
     let mut err = vec![0 as std::os::raw::c_char; ERR_LEN];
@@ -123,7 +124,15 @@ pub fn load_gltf(path: &Path, allow_outside_refs: bool) -> Result<GltfScene, Str
         0
     };
     // SAFETY: valid C string and error buffer of the stated length.
-    let raw = unsafe { abi::icr_scene_load(c_path.as_ptr(), flags, err.as_mut_ptr(), err.len()) };
+    let raw = unsafe {
+        abi::icr_scene_load(
+            c_path.as_ptr(),
+            flags,
+            memory_limit.unwrap_or(0),
+            err.as_mut_ptr(),
+            err.len(),
+        )
+    };
     if raw.is_null() {
         return Err(buffer_message(&err));
     }

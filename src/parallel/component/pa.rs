@@ -24,9 +24,13 @@ use std::time::{Duration, Instant};
 struct Queue {
     requests: VecDeque<AmbientRequest>,
     finish: bool,
+    /// The longest the queue has been.
+    longest: usize,
 }
 
 /// The communicating thread: requests in, forward orders out, until FINISH.
+/// While the queue holds `bound` requests or more, no request batch is taken in: the PRs'
+/// synchronous sends then wait (back-pressure), so the queue stays below `bound` plus one batch.
 fn communicate(
     counters: &Counters,
     queue: &Mutex<Queue>,
@@ -34,6 +38,7 @@ fn communicate(
     pixels: u32,
     forwarded: &AtomicU64,
     rejected: &AtomicU64,
+    bound: usize,
 ) {
     let comm = Comm::new(counters);
     let filters = [
@@ -41,7 +46,17 @@ fn communicate(
         (Some(0), Some(TAG_FORWARD_ORDER)),
         (None, Some(TAG_REQUESTS)),
     ];
-    while let Some(msg) = comm.receive_one_of(&filters, None) {
+    loop {
+        let full = queue.lock().unwrap_or_else(|e| e.into_inner()).requests.len() >= bound;
+        // Full: only the master's messages, looking again at the queue every few milliseconds.
+        let (accepted, wait) = if full {
+            (&filters[..2], Some(Duration::from_millis(2)))
+        } else {
+            (&filters[..], None)
+        };
+        let Some(msg) = comm.receive_one_of(accepted, wait) else {
+            continue;
+        };
         match msg.tag {
             TAG_REQUESTS => match requests::decode(&msg.data, pixels) {
                 Ok(decoded) => {
@@ -49,6 +64,7 @@ fn communicate(
                     // Refused requests still count as done, so the master's totals close.
                     let mut q = queue.lock().unwrap_or_else(|e| e.into_inner());
                     q.requests.extend(decoded.requests);
+                    q.longest = q.longest.max(q.requests.len());
                     drop(q);
                     ready.notify_one();
                 }
@@ -84,7 +100,8 @@ fn communicate(
 }
 
 /// `journal`: --checkpoint is on, so computed requests are reported to the master.
-pub fn run(setup: &WorkerSetup<'_>, sync: usize, seed: u64, journal: bool) {
+/// `bound`: the most requests the queue takes (see `communicate`).
+pub fn run(setup: &WorkerSetup<'_>, sync: usize, seed: u64, journal: bool, bound: usize) {
     let counters = Counters::default();
     let comm_counters = Counters::default();
     let comm = Comm::new(&counters);
@@ -109,8 +126,17 @@ pub fn run(setup: &WorkerSetup<'_>, sync: usize, seed: u64, journal: bool) {
     let mut queue_samples = Vec::new();
     let mut results: Vec<RequestResult> = Vec::new();
     std::thread::scope(|scope| {
-        let comm_thread =
-            scope.spawn(|| communicate(&comm_counters, &queue, &ready, width * height, &forwarded, &rejected));
+        let comm_thread = scope.spawn(|| {
+            communicate(
+                &comm_counters,
+                &queue,
+                &ready,
+                width * height,
+                &forwarded,
+                &rejected,
+                bound,
+            )
+        });
         let integrator = Integrator::new(setup.scene, setup.tracer, setup.shading, cache);
         let clock = ThreadClock::start();
         let mut reported = u64::MAX;
@@ -210,6 +236,7 @@ pub fn run(setup: &WorkerSetup<'_>, sync: usize, seed: u64, journal: bool) {
     report.requests_computed = done;
     report.requests_forwarded = forwarded.load(Ordering::Relaxed);
     report.queue_lengths = queue_samples;
+    report.queue_max = queue.lock().unwrap_or_else(|e| e.into_inner()).longest as u64;
     report.wall_s = start.elapsed().as_secs_f64();
     comm.send(0, TAG_STATS, &serde_json::to_vec(&report).unwrap_or_default());
 }

@@ -7,18 +7,28 @@
 use super::*;
 use crate::checkpoint::{RequestResult, encode_results};
 use crate::image::framebuffer::FrameBuffer;
-use crate::parallel::comm::{Comm, Counters};
+use crate::parallel::comm::{Comm, Counters, Marker};
 use crate::parallel::protocol::{TAG_STATS, decode_work};
 use crate::parallel::{WorkerSetup, rank_report};
 use crate::render::{ThreadClock, ThreadStats, render_tile, store_tile};
 use crate::sampling::Rng;
 use crate::shading::Integrator;
 use crate::shading::request::AmbientRequest;
+use std::collections::HashMap;
 use std::sync::Mutex;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::mpsc::{Receiver, SyncSender, TrySendError, sync_channel};
 use std::time::Instant;
 
+/// Request batches wait here for the courier thread; when this many are waiting, the renderer
+/// waits too.
+const BATCHES_IN_FLIGHT: usize = 16;
+
+/// Hands request batches to the courier, to the PAs in turn.
 struct Sender<'c> {
-    comm: &'c Comm<'c>,
+    outbox: Option<SyncSender<(i32, Vec<u8>)>>,
+    /// Where the renderer's waits for a full outbox are counted (its idle time).
+    idle_ns: &'c AtomicU64,
     pas: &'c [i32],
     next: usize,
     sent: u64,
@@ -28,13 +38,58 @@ impl Sender<'_> {
     /// Sends the buffered requests to the next PA in turn.
     fn send(&mut self, sink: &Mutex<Vec<AmbientRequest>>) {
         let batch = std::mem::take(&mut *sink.lock().unwrap_or_else(|e| e.into_inner()));
+        let Some(outbox) = &self.outbox else { return };
         if batch.is_empty() || self.pas.is_empty() {
             return;
         }
         let pa = self.pas[self.next % self.pas.len()];
         self.next += 1;
         self.sent += batch.len() as u64;
-        self.comm.send(pa, TAG_REQUESTS, &requests::encode(&batch));
+        let message = (pa, requests::encode(&batch));
+        if let Err(TrySendError::Full(message)) = outbox.try_send(message) {
+            let waited = Instant::now();
+            let _ = outbox.send(message);
+            self.idle_ns
+                .fetch_add(waited.elapsed().as_nanos() as u64, Ordering::Relaxed);
+        }
+    }
+
+    /// No more requests: the courier ends once it has delivered what it holds.
+    fn close(&mut self) {
+        self.outbox = None;
+    }
+}
+
+/// Batches sent to one PA between two markers (see `deliver`).
+const WINDOW: usize = 16;
+
+/// The courier thread: sends the request batches, and after every WINDOW batches to a PA a
+/// marker (an empty batch) as a synchronous send, which completes only once that PA has taken
+/// in everything before it. Before it sends the next marker to that PA it waits for the
+/// previous one, so at most 2 x WINDOW batches are ever waiting for a PA. A PA with a full
+/// queue takes nothing in: the courier waits, the outbox fills and the renderer waits
+/// (back-pressure from PA to PR), while a PA that keeps up costs the PR no waiting at all.
+/// The courier ends once every marker has been taken in, so nothing of this PR's is still on
+/// its way when it reports itself idle.
+fn deliver(counters: &Counters, inbox: Receiver<(i32, Vec<u8>)>) {
+    let comm = Comm::new(counters);
+    let mut windows: HashMap<i32, (usize, Option<Marker>)> = HashMap::new();
+    for (pa, batch) in inbox {
+        comm.send(pa, TAG_REQUESTS, &batch);
+        let (since, marker) = windows.entry(pa).or_default();
+        *since += 1;
+        if *since >= WINDOW {
+            if let Some(previous) = marker.take() {
+                comm.wait_marker(previous);
+            }
+            *marker = Some(comm.send_marker(pa, TAG_REQUESTS, &requests::EMPTY_BATCH));
+            *since = 0;
+        }
+    }
+    for (_, (_, marker)) in windows {
+        if let Some(marker) = marker {
+            comm.wait_marker(marker);
+        }
     }
 }
 
@@ -59,6 +114,38 @@ fn sync_records(
 /// `journal`: --checkpoint is on, so finished tiles and computed requests are reported to the
 /// master as they finish.
 pub fn run(setup: &WorkerSetup<'_>, roles: &Roles, send_at: usize, sync: usize, seed: u64, journal: bool) {
+    let courier_counters = Counters::default();
+    let (outbox, inbox) = sync_channel(BATCHES_IN_FLIGHT);
+    std::thread::scope(|scope| {
+        let courier = scope.spawn(|| deliver(&courier_counters, inbox));
+        render_and_help(
+            setup,
+            roles,
+            send_at,
+            sync,
+            seed,
+            journal,
+            outbox,
+            &courier_counters,
+            || {
+                let _ = courier.join();
+            },
+        );
+    });
+}
+
+#[allow(clippy::too_many_arguments)]
+fn render_and_help(
+    setup: &WorkerSetup<'_>,
+    roles: &Roles,
+    send_at: usize,
+    sync: usize,
+    seed: u64,
+    journal: bool,
+    outbox: SyncSender<(i32, Vec<u8>)>,
+    courier_counters: &Counters,
+    join_courier: impl FnOnce(),
+) {
     let counters = Counters::default();
     let comm = Comm::new(&counters);
     let start = Instant::now();
@@ -72,7 +159,8 @@ pub fn run(setup: &WorkerSetup<'_>, roles: &Roles, send_at: usize, sync: usize, 
     let mut stats = ThreadStats::default();
     let clock = ThreadClock::start();
     let mut sender = Sender {
-        comm: &comm,
+        outbox: Some(outbox),
+        idle_ns: &counters.idle_ns,
         pas: &roles.pas,
         next: 0,
         sent: 0,
@@ -113,6 +201,14 @@ pub fn run(setup: &WorkerSetup<'_>, roles: &Roles, send_at: usize, sync: usize, 
         stats.tiles += 1;
     }
     sender.send(&sink);
+    sender.close();
+    // Every batch must have reached its PA before this PR counts as flushed (the master may
+    // end the job once the counts close, and a PA stops taking requests then).
+    let waited = Instant::now();
+    join_courier();
+    counters
+        .idle_ns
+        .fetch_add(waited.elapsed().as_nanos() as u64, Ordering::Relaxed);
     let mut results: Vec<RequestResult> = Vec::new();
     let report_results = |results: &mut Vec<RequestResult>| {
         if journal && !results.is_empty() {
@@ -177,7 +273,13 @@ pub fn run(setup: &WorkerSetup<'_>, roles: &Roles, send_at: usize, sync: usize, 
             .flat_map(|v| v.to_le_bytes())
             .collect::<Vec<u8>>(),
     );
-    let mut report = rank_report(comm.rank(), "pr", &[stats.clone()], &[&counters], counters.idle_s());
+    let mut report = rank_report(
+        comm.rank(),
+        "pr",
+        &[stats.clone()],
+        &[&counters, courier_counters],
+        counters.idle_s(),
+    );
     report.records_received = received;
     report.records_rejected = rejected;
     report.requests_sent = sender.sent;

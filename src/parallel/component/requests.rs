@@ -9,6 +9,8 @@ use glam::Vec3;
 const MAGIC: &[u8; 4] = b"ICRQ";
 const VERSION: u32 = 1;
 pub const REQUEST_BYTES: usize = 100;
+/// A batch of no requests (the PRs' delivery markers): magic, version 1, count 0.
+pub static EMPTY_BATCH: [u8; 12] = [b'I', b'C', b'R', b'Q', 1, 0, 0, 0, 0, 0, 0, 0];
 
 fn put3(out: &mut Vec<u8>, v: Vec3) {
     for c in v.to_array() {
@@ -137,6 +139,13 @@ mod tests {
             material: 7,
             stream: 0xdead_beef_0000_0001,
         }
+    }
+
+    #[test]
+    fn the_empty_batch_is_an_encoded_batch_of_nothing() {
+        assert_eq!(EMPTY_BATCH.as_slice(), encode(&[]).as_slice());
+        let decoded = decode(&EMPTY_BATCH, 1).unwrap();
+        assert_eq!((decoded.requests.len(), decoded.rejected), (0, 0));
     }
 
     #[test]
