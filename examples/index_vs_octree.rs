@@ -40,7 +40,7 @@ fn on_room(rng: &mut Rng) -> (Vec3, Vec3) {
     let face = (rng.next_f32() * 6.0) as usize % 6;
     let (a, b) = (rng.next_f32() * 2.0 - 1.0, rng.next_f32() * 2.0 - 1.0);
     let axis = face / 2;
-    let sign = if face % 2 == 0 { -1.0 } else { 1.0 };
+    let sign = if face.is_multiple_of(2) { -1.0 } else { 1.0 };
     let mut p = [a, b, a];
     p[axis] = sign;
     p[(axis + 1) % 3] = a;

@@ -12,18 +12,6 @@ use std::time::{Duration, Instant, SystemTime};
 
 const KILLS: usize = 5;
 
-fn mpirun_command(np: usize, args: &[String]) -> Command {
-    let mut cmd = Command::new("mpirun");
-    cmd.env("OMPI_ALLOW_RUN_AS_ROOT", "1")
-        .env("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
-        .env("OMPI_MCA_btl_tcp_if_include", "lo")
-        .env("OMPI_MCA_oob_tcp_if_include", "lo")
-        .args(["--oversubscribe", "-np", &np.to_string()])
-        .arg(binary())
-        .args(args);
-    cmd
-}
-
 /// How a render is started: in one process or under mpirun with `np` ranks.
 #[derive(Clone, Copy)]
 enum Launch {
@@ -76,19 +64,6 @@ fn finish(child: Child, what: &str) -> Output {
         stderr(&output)
     );
     output
-}
-
-fn relmse(a: &ImageData, b: &ImageData) -> f64 {
-    let (x, y) = (rgb(a, ""), rgb(b, ""));
-    let mut sum = 0.0;
-    let mut n = 0;
-    for c in 0..3 {
-        for (p, q) in x[c].iter().zip(&y[c]) {
-            sum += ((*p - *q) as f64).powi(2) / ((*q as f64).powi(2) + 0.01);
-            n += 1;
-        }
-    }
-    sum / n as f64
 }
 
 fn read_stats(path: &Path) -> Value {

@@ -280,19 +280,6 @@ fn u(v: &Value, key: &str) -> u64 {
     v[key].as_u64().unwrap_or_else(|| panic!("{key} missing in {v}"))
 }
 
-fn relmse(a: &ImageData, b: &ImageData) -> f64 {
-    let (x, y) = (rgb(a, ""), rgb(b, ""));
-    let mut sum = 0.0;
-    let mut n = 0;
-    for c in 0..3 {
-        for (p, q) in x[c].iter().zip(&y[c]) {
-            sum += ((*p - *q) as f64).powi(2) / ((*q as f64).powi(2) + 0.01);
-            n += 1;
-        }
-    }
-    sum / n as f64
-}
-
 const SMALL: [&str; 8] = ["-x", "48", "-y", "48", "-ad", "64", "--tile", "8x8"];
 
 fn serial(dir: &Path, scene: &Path, name: &str, extra: &[&str]) -> ImageData {

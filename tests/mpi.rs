@@ -16,19 +16,6 @@ fn mpirun(np: usize, args: &[&str]) -> Output {
         .expect("mpirun (openmpi-bin) is installed")
 }
 
-fn mpirun_command(np: usize, args: &[&str]) -> Command {
-    let mut cmd = Command::new("mpirun");
-    cmd.env("OMPI_ALLOW_RUN_AS_ROOT", "1")
-        .env("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
-        // Loopback only; no network probing in tests.
-        .env("OMPI_MCA_btl_tcp_if_include", "lo")
-        .env("OMPI_MCA_oob_tcp_if_include", "lo")
-        .args(["--oversubscribe", "-np", &np.to_string()])
-        .arg(binary())
-        .args(args);
-    cmd
-}
-
 struct Run {
     image: ImageData,
     stats: Value,
@@ -71,19 +58,6 @@ fn render(dir: &Path, scene: &Path, name: &str, np: Option<usize>, extra: &[&str
         image: read_exr(&out),
         stats: serde_json::from_str(&std::fs::read_to_string(&stats).unwrap()).unwrap(),
     }
-}
-
-fn relmse(a: &ImageData, b: &ImageData) -> f64 {
-    let (x, y) = (rgb(a, ""), rgb(b, ""));
-    let mut sum = 0.0;
-    let mut n = 0;
-    for c in 0..3 {
-        for (p, q) in x[c].iter().zip(&y[c]) {
-            sum += ((*p - *q) as f64).powi(2) / ((*q as f64).powi(2) + 0.01);
-            n += 1;
-        }
-    }
-    sum / n as f64
 }
 
 /// How far apart the cache's own images are: the same serial render with records made in

@@ -87,14 +87,9 @@ fn under_mpirun_rank_zero_alone_reports_the_refusal() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("big.exr");
     let scene = project_dir().join("scenes/cornell.gltf");
-    let output = Command::new("mpirun")
-        .env("OMPI_ALLOW_RUN_AS_ROOT", "1")
-        .env("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
-        .env("OMPI_MCA_btl_tcp_if_include", "lo")
-        .env("OMPI_MCA_oob_tcp_if_include", "lo")
-        .args(["--oversubscribe", "-np", "3"])
-        .arg(binary())
-        .args([
+    let output = mpirun_command(
+        3,
+        &[
             "render",
             scene.to_str().unwrap(),
             "-x",
@@ -105,9 +100,10 @@ fn under_mpirun_rank_zero_alone_reports_the_refusal() {
             "1G",
             "-o",
             out.to_str().unwrap(),
-        ])
-        .output()
-        .unwrap();
+        ],
+    )
+    .output()
+    .unwrap();
     assert!(!output.status.success());
     let all = format!("{}{}", stdout(&output), stderr(&output));
     let lines = error_lines(&all);

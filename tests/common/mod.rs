@@ -278,3 +278,32 @@ pub fn inward_box(b: &mut GltfBuilder, lo: [f32; 3], hi: [f32; 3], material: usi
         b.quad(facing(f, centre), Some(material));
     }
 }
+
+/// Relative mean squared error of the composite of `a` against `b` (eps 0.01, as icrender's
+/// own metric), over every channel of every pixel.
+pub fn relmse(a: &ImageData, b: &ImageData) -> f64 {
+    let (x, y) = (rgb(a, ""), rgb(b, ""));
+    let mut sum = 0.0;
+    let mut n = 0;
+    for c in 0..3 {
+        for (p, q) in x[c].iter().zip(&y[c]) {
+            sum += ((*p - *q) as f64).powi(2) / ((*q as f64).powi(2) + 0.01);
+            n += 1;
+        }
+    }
+    sum / n as f64
+}
+
+/// `mpirun` for this machine's tests: as root, oversubscribed (2 cores), loopback only (no
+/// network probing).
+pub fn mpirun_command<S: AsRef<std::ffi::OsStr>>(np: usize, args: &[S]) -> Command {
+    let mut cmd = Command::new("mpirun");
+    cmd.env("OMPI_ALLOW_RUN_AS_ROOT", "1")
+        .env("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
+        .env("OMPI_MCA_btl_tcp_if_include", "lo")
+        .env("OMPI_MCA_oob_tcp_if_include", "lo")
+        .args(["--oversubscribe", "-np", &np.to_string()])
+        .arg(binary())
+        .args(args);
+    cmd
+}

@@ -9,11 +9,16 @@ pub mod pa;
 pub mod pr;
 pub mod requests;
 
+use crate::checkpoint::RequestResult;
+use crate::image::framebuffer::FrameBuffer;
 use crate::irradiance::record::Record;
 use crate::parallel::protocol::{
     Batch, ProtocolError, decode_batch, decode_work_request, encode_batch, encode_work_request,
 };
 use crate::render::PixelValue;
+use crate::sampling::Rng;
+use crate::shading::request::AmbientRequest;
+use crate::shading::{Integrator, RayCounts};
 use mpi::Tag;
 
 /// PR -> MC: give me a tile.
@@ -61,6 +66,29 @@ pub fn decode_tile_report(bytes: &[u8]) -> Result<Option<(u32, u32, Vec<PixelVal
     match decode_work_request(bytes)? {
         (requests, Some((tile, pixels))) => Ok(Some((tile, requests, pixels))),
         (_, None) => Err(ProtocolError("a tile report without a tile".into())),
+    }
+}
+
+/// Computes one request's indirect light (from the rank's cache or as a new record), adds it
+/// times the request's coefficient to the rank's image at the request's pixel, and keeps it in
+/// `results` for the master's --checkpoint journal when given.
+pub fn compute_request(
+    integrator: &Integrator<'_>,
+    request: &AmbientRequest,
+    seed: u64,
+    counts: &mut RayCounts,
+    frame: &mut FrameBuffer,
+    results: Option<&mut Vec<RequestResult>>,
+) {
+    let mut rng = Rng::new(seed, request.stream);
+    let light = integrator.ambient_for_request(request, &mut rng, counts) * request.coefficient;
+    frame.add(request.pixel as usize, request.layer, light);
+    if let Some(results) = results {
+        results.push(RequestResult {
+            pixel: request.pixel,
+            layer: request.layer,
+            value: light,
+        });
     }
 }
 

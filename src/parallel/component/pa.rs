@@ -12,7 +12,6 @@ use crate::parallel::comm::{Comm, Counters};
 use crate::parallel::protocol::{TAG_INITIAL_RECORDS, TAG_STATS};
 use crate::parallel::{WorkerSetup, rank_report};
 use crate::render::{ThreadClock, ThreadStats};
-use crate::sampling::Rng;
 use crate::shading::Integrator;
 use crate::shading::request::AmbientRequest;
 use std::collections::VecDeque;
@@ -193,17 +192,14 @@ pub fn run(setup: &WorkerSetup<'_>, sync: usize, seed: u64, journal: bool, bound
                 }
                 continue;
             };
-            let mut rng = Rng::new(seed, request.stream);
-            let value = integrator.ambient_for_request(&request, &mut rng, &mut stats.rays);
-            let light = value * request.coefficient;
-            frame.add(request.pixel as usize, request.layer, light);
-            if journal {
-                results.push(RequestResult {
-                    pixel: request.pixel,
-                    layer: request.layer,
-                    value: light,
-                });
-            }
+            compute_request(
+                &integrator,
+                &request,
+                seed,
+                &mut stats.rays,
+                &mut frame,
+                journal.then_some(&mut results),
+            );
             done += 1;
             if cache.map_or(0, |c| c.outbox_len()) >= sync {
                 let left = queue.lock().unwrap_or_else(|e| e.into_inner()).requests.len();

@@ -11,7 +11,6 @@ use crate::parallel::comm::{Comm, Counters, Marker};
 use crate::parallel::protocol::{TAG_STATS, decode_work};
 use crate::parallel::{WorkerSetup, rank_report};
 use crate::render::{ThreadClock, ThreadStats, render_tile, store_tile};
-use crate::sampling::Rng;
 use crate::shading::Integrator;
 use crate::shading::request::AmbientRequest;
 use std::collections::HashMap;
@@ -247,17 +246,14 @@ fn render_and_help(
         match requests::decode(&msg.data, width * height) {
             Ok(decoded) => {
                 for request in &decoded.requests {
-                    let mut rng = Rng::new(seed, request.stream);
-                    let value = integrator.ambient_for_request(request, &mut rng, &mut stats.rays);
-                    let light = value * request.coefficient;
-                    frame.add(request.pixel as usize, request.layer, light);
-                    if journal {
-                        results.push(RequestResult {
-                            pixel: request.pixel,
-                            layer: request.layer,
-                            value: light,
-                        });
-                    }
+                    compute_request(
+                        &integrator,
+                        request,
+                        seed,
+                        &mut stats.rays,
+                        &mut frame,
+                        journal.then_some(&mut results),
+                    );
                     // A helper shares its records as often as a PA does.
                     if let Some(cache) = setup.cache
                         && cache.outbox_len() >= sync
