@@ -236,4 +236,62 @@ mod tests {
         assert!(l.illuminate(Vec3::new(10.0, 0.0, 0.0)).is_none());
         assert!(l.illuminate(l.position).is_none());
     }
+
+    /// Irradiance at `point` (surface normal `n`) from a uniformly emitting triangle that faces
+    /// it, by Lambert's contour formula: E = L/2 * sum over edges of angle_i * (gamma_i . n).
+    fn triangle_irradiance(t: &EmitterTriangle, point: Vec3, n: Vec3) -> f64 {
+        let v = [t.p0, t.p0 + t.e1, t.p0 + t.e2].map(|p| (p - point).normalize().as_dvec3());
+        let n = n.as_dvec3();
+        let mut sum = 0.0;
+        for i in 0..3 {
+            let (a, b) = (v[i], v[(i + 1) % 3]);
+            let angle = a.dot(b).clamp(-1.0, 1.0).acos();
+            sum += angle * a.cross(b).normalize().dot(n);
+        }
+        0.5 * sum.abs() * t.radiance.x as f64
+    }
+
+    #[test]
+    fn many_light_estimate_is_unbiased() {
+        // 200 small emitters of varied size and brightness on a ceiling, facing down at a floor
+        // point: the mean of radiance * G / pdf over many samples must equal the sum of each
+        // triangle's exact irradiance.
+        let mut rng = crate::sampling::Rng::new(11, 0);
+        let mut triangles = Vec::new();
+        for k in 0..200 {
+            let centre = Vec3::new(rng.next_f32() * 8.0 - 4.0, rng.next_f32() * 8.0 - 4.0, 3.0);
+            let size = 0.05 + 0.3 * rng.next_f32();
+            let radiance = 0.5 + 20.0 * rng.next_f32() * rng.next_f32();
+            // Wound so that the normal points down (-Z), towards the floor.
+            let (e1, e2) = (Vec3::Y * size, Vec3::X * size * (1.0 + (k % 3) as f32));
+            triangles.push(EmitterTriangle {
+                p0: centre,
+                e1,
+                e2,
+                normal: e1.cross(e2).normalize(),
+                area: 0.5 * e1.cross(e2).length(),
+                radiance: Vec3::splat(radiance),
+                geom_id: 0,
+                prim_id: k,
+            });
+        }
+        assert!(triangles.iter().all(|t| t.normal.z < -0.99));
+        let (point, n) = (Vec3::new(0.5, -0.25, 0.0), Vec3::Z);
+        let exact: f64 = triangles.iter().map(|t| triangle_irradiance(t, point, n)).sum();
+        let set = EmitterSet::new(triangles);
+        let samples = 400_000;
+        let mut sum = 0.0f64;
+        for _ in 0..samples {
+            let Some(p) = set.sample(rng.next_f32(), rng.next_f32(), rng.next_f32()) else {
+                continue;
+            };
+            let offset = p.position - point;
+            let d2 = offset.length_squared();
+            let wi = offset / d2.sqrt();
+            let geometry = (n.dot(wi) * -p.normal.dot(wi)).max(0.0) / d2;
+            sum += (p.radiance.x * geometry / p.pdf_area) as f64;
+        }
+        let mean = sum / samples as f64;
+        assert!((mean - exact).abs() < 0.01 * exact, "estimate {mean}, exact {exact}");
+    }
 }
