@@ -87,7 +87,7 @@ impl ThreadClock {
 pub fn pixel_strata(samples: u32) -> (u32, u32) {
     let samples = samples.max(1);
     let mut rows = (samples as f64).sqrt() as u32;
-    while rows > 1 && samples % rows != 0 {
+    while rows > 1 && !samples.is_multiple_of(rows) {
         rows -= 1;
     }
     let rows = rows.max(1);

@@ -1,6 +1,7 @@
 //! Light sources: punctual lights (KHR_lights_punctual) and emissive triangles, with the
 //! sampling the direct component needs.
 
+use super::light_tree::{Item, LightTree};
 use crate::sys::scene_io::{GltfLight, LightType};
 use glam::Vec3;
 
@@ -120,13 +121,15 @@ pub struct EmitterTriangle {
     pub prim_id: u32,
 }
 
-/// All emissive triangles, chosen in proportion to their power (area x luminance), so bright
-/// and large emitters get most of the shadow rays.
+/// All emissive triangles. A shading point picks one through the light tree, by power
+/// (area x luminance) over squared distance, so bright, large and near emitters get most of the
+/// shadow rays.
 #[derive(Clone, Debug, Default)]
 pub struct EmitterSet {
     pub triangles: Vec<EmitterTriangle>,
     cdf: Vec<f64>,
     total_power: f64,
+    tree: LightTree,
 }
 
 /// A point chosen on an emitter, with the area-measure density of having chosen it.
@@ -150,7 +153,22 @@ impl EmitterSet {
             total += t.area as f64 * luminance(t.radiance).max(1e-12) as f64;
             cdf.push(total);
         }
+        let items: Vec<Item> = triangles
+            .iter()
+            .zip(&cdf)
+            .scan(0.0, |previous, (t, &c)| {
+                let power = c - *previous;
+                *previous = c;
+                let (a, b, d) = (t.p0, t.p0 + t.e1, t.p0 + t.e2);
+                Some(Item {
+                    lo: a.min(b).min(d),
+                    hi: a.max(b).max(d),
+                    power,
+                })
+            })
+            .collect();
         EmitterSet {
+            tree: LightTree::new(&items),
             triangles,
             cdf,
             total_power: total,
@@ -161,25 +179,26 @@ impl EmitterSet {
         self.triangles.is_empty()
     }
 
-    /// Probability of choosing triangle `index`.
+    /// Probability of choosing triangle `index` by power alone (what the tree's estimate
+    /// becomes far from every emitter).
     pub fn pick_probability(&self, index: usize) -> f64 {
         let lo = if index == 0 { 0.0 } else { self.cdf[index - 1] };
         (self.cdf[index] - lo) / self.total_power
     }
 
-    /// Chooses a triangle by power with `u1`, a uniform point on it with `u2`, `u3`.
-    pub fn sample(&self, u1: f32, u2: f32, u3: f32) -> Option<EmitterPoint> {
+    /// Chooses a triangle for a shading point at `point` through the light tree with `u1`, and
+    /// a uniform point on it with `u2`, `u3`.
+    pub fn sample(&self, point: Vec3, u1: f32, u2: f32, u3: f32) -> Option<EmitterPoint> {
         if self.triangles.is_empty() || self.total_power.is_nan() || self.total_power <= 0.0 {
             return None;
         }
-        let target = u1 as f64 * self.total_power;
-        let index = self.cdf.partition_point(|&c| c <= target).min(self.triangles.len() - 1);
+        let (index, probability) = self.tree.pick(point, u1 as f64)?;
         let t = &self.triangles[index];
         // Uniform point on a triangle by the square-root warp.
         let su = u2.sqrt();
         let (b1, b2) = (1.0 - su, u3 * su);
         let position = t.p0 + b1 * t.e1 + b2 * t.e2;
-        let pdf_area = (self.pick_probability(index) / t.area as f64) as f32;
+        let pdf_area = (probability / t.area as f64) as f32;
         (pdf_area.is_finite() && pdf_area > 0.0).then_some(EmitterPoint {
             position,
             normal: t.normal,
@@ -215,8 +234,15 @@ mod tests {
         // Sum over triangles of pdf_area * area equals one.
         let total: f64 = (0..3).map(|i| set.pick_probability(i)).sum();
         assert!((total - 1.0).abs() < 1e-9);
-        let p = set.sample(0.05, 0.3, 0.7).unwrap();
-        assert!((p.pdf_area - (1.0 / 9.0) / 0.5).abs() < 1e-5);
+        // Seen from far away the tree's estimate is the power alone.
+        let far = Vec3::new(0.0, 0.0, 1e4);
+        for i in 0..3 {
+            assert!((set.tree.probability(far, i) - set.pick_probability(i)).abs() < 1e-5);
+        }
+        let p = set.sample(far, 0.05, 0.3, 0.7).unwrap();
+        let picked =
+            (0..3).find(|&i| (p.pdf_area as f64 * set.triangles[i].area as f64 - set.pick_probability(i)).abs() < 1e-5);
+        assert!(picked.is_some(), "pdf_area {} matches no triangle", p.pdf_area);
     }
 
     #[test]
@@ -282,7 +308,7 @@ mod tests {
         let samples = 400_000;
         let mut sum = 0.0f64;
         for _ in 0..samples {
-            let Some(p) = set.sample(rng.next_f32(), rng.next_f32(), rng.next_f32()) else {
+            let Some(p) = set.sample(point, rng.next_f32(), rng.next_f32(), rng.next_f32()) else {
                 continue;
             };
             let offset = p.position - point;

@@ -3,6 +3,7 @@
 
 pub mod auto_view;
 pub mod light;
+pub mod light_tree;
 pub mod material;
 pub mod texture;
 pub mod view;

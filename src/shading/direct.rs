@@ -1,5 +1,5 @@
 //! L_d: light arriving straight from the light sources, by shadow rays. Area emitters are
-//! sampled by power and area; every punctual light gets one ray. The diffuse part sees all
+//! picked through the light tree (power over squared distance) and sampled by area; every punctual light gets one ray. The diffuse part sees all
 //! lights; the glossy lobe sees punctual lights here (nothing else can hit them) and area
 //! emitters through its own specular rays.
 
@@ -41,7 +41,7 @@ pub fn direct_light(
             let u1 = (k as f32 + rng.next_f32()) / emitter_samples as f32;
             let u2 = ((cell % side) as f32 + rng.next_f32()) / side as f32;
             let u3 = ((cell / side) as f32 + rng.next_f32()) / side as f32;
-            let Some(light) = scene.emitters.sample(u1, u2, u3) else {
+            let Some(light) = scene.emitters.sample(hit.position, u1, u2, u3) else {
                 continue;
             };
             let offset = light.position - hit.position;
