@@ -69,19 +69,14 @@ def log(message):
     print(f"peers: {message}", flush=True)
 
 
-def read_rgb(path, scratch):
-    """An EXR's R, G, B as an (height, width, 3) float64 array, through oiiotool and PFM."""
-    pfm = os.path.join(scratch, "pixels.pfm")
-    subprocess.run(["oiiotool", path, "--ch", "R,G,B", "-d", "float", "-o", pfm], check=True, capture_output=True)
-    with open(pfm, "rb") as f:
-        kind = f.readline().strip()
-        width, height = map(int, f.readline().split())
-        scale = float(f.readline())
-        data = np.frombuffer(f.read(), dtype="<f4" if scale < 0 else ">f4")
-    if kind != b"PF":
-        raise RuntimeError(f"{path}: not an RGB image")
-    # PFM stores the bottom row first; only consistency between images matters here.
-    return data.reshape(height, width, 3).astype(np.float64)
+def read_rgb(path, scratch=None):
+    """An EXR's R, G, B (the composite) as an (height, width, 3) float64 array."""
+    exr = common.ensure_module("OpenEXR")
+    channels = exr.File(path).channels()
+    for name in ("RGBA", "RGB"):
+        if name in channels:
+            return channels[name].pixels[..., :3].astype(np.float64)
+    raise RuntimeError(f"{path}: no RGB channels (has {', '.join(channels)})")
 
 
 def errors(image, reference):

@@ -5,11 +5,12 @@
 use crate::image::framebuffer::FrameBuffer;
 use crate::progress::Progress;
 use crate::sampling::Rng;
+use crate::scene::footprint::EmitterFootprint;
 use crate::scene::view::Camera;
 use crate::shading::components::Components;
 use crate::shading::{Integrator, RayCounts};
-use std::sync::Mutex;
 use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
 #[derive(Clone, Debug)]
@@ -22,6 +23,11 @@ pub struct RenderSettings {
     /// Jitter even a single sample over the pixel (a reference's passes then integrate the
     /// pixel's area); otherwise one sample is the pixel's centre, as rpict -pj 0 takes it.
     pub jitter: bool,
+    /// Extra primary rays per pixel that gather only the emission seen first, in the pixels
+    /// where an emitter can be seen (`emission_footprint`): a light's edges are where a box
+    /// filter's error is largest, and these rays cost no shading. Used when it exceeds `spp`.
+    pub emission_samples: u32,
+    pub emission_footprint: Option<Arc<EmitterFootprint>>,
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -120,6 +126,12 @@ pub fn render_pixel(
 ) -> Components {
     let samples = settings.spp.max(1);
     let pixel_index = y as u64 * camera.width as u64 + x as u64;
+    // Only worth it when the extra rays outnumber the pixel samples, which see emission anyway.
+    let split_emission = settings.emission_samples > samples
+        && settings
+            .emission_footprint
+            .as_ref()
+            .is_some_and(|footprint| footprint.covers(x, y));
     let mut sum = Components::default();
     for s in 0..samples {
         let mut rng = Rng::for_sample(settings.seed, pixel_index, s as u64);
@@ -128,9 +140,27 @@ pub fn render_pixel(
         counts.pixel = pixel_index as u32;
         counts.sample = s;
         counts.sample_weight = 1.0 / samples as f32;
-        sum += integrator.primary(origin, dir, &mut rng, counts);
+        sum += if split_emission {
+            integrator.primary_without_first_emission(origin, dir, &mut rng, counts)
+        } else {
+            integrator.primary(origin, dir, &mut rng, counts)
+        };
     }
-    sum * (1.0 / samples as f32)
+    let mut pixel = sum * (1.0 / samples as f32);
+    if split_emission {
+        // The first-hit emission over the pixel's area by its own stratified rays (own streams,
+        // after the pixel samples'): the two parts are estimated apart and add up to the pixel.
+        let extra = settings.emission_samples;
+        let mut emission = glam::Vec3::ZERO;
+        for s in 0..extra {
+            let mut rng = Rng::for_sample(settings.seed, pixel_index, (samples + s) as u64);
+            let (jx, jy) = pixel_offset(s, extra, true, &mut rng);
+            let (origin, dir) = camera.ray(x as f32 + jx, y as f32 + jy);
+            emission += integrator.first_emission(origin, dir, counts);
+        }
+        pixel.emission += emission / extra as f32;
+    }
+    pixel
 }
 
 /// One rendered pixel: its components and the records of the cache it made at level 0.

@@ -26,7 +26,7 @@ fn edge_scene(dir: &Path) -> std::path::PathBuf {
 }
 
 /// Column means of the composite's red channel of an 8 x 256 render of the edge scene.
-fn edge_columns(dir: &Path, name: &str, spp: &str) -> Vec<f64> {
+fn edge_columns(dir: &Path, name: &str, spp: &str, emission_samples: &str) -> Vec<f64> {
     let scene = edge_scene(dir);
     let out = dir.join(format!("{name}.exr"));
     let view = "-vtl -vp 0 0 5 -vd 0 0 -1 -vu 0 1 0 -vh 8 -vv 256";
@@ -45,6 +45,8 @@ fn edge_columns(dir: &Path, name: &str, spp: &str) -> Vec<f64> {
         "0",
         "--spp",
         spp,
+        "--emission-samples",
+        emission_samples,
     ];
     args.extend(view.split_whitespace());
     run_ok(&args);
@@ -61,7 +63,7 @@ fn box_filter_integrates_the_pixel_area_at_an_edge() {
     // 0.3 with a standard error of 0.0044 (each row: 2 of 8 samples in the column of strata
     // [0.25, 0.5), each covered with probability 0.2). A grid with empty cells (8 samples on
     // 3 x 3) would be biased to 0.3375.
-    let columns = edge_columns(dir.path(), "eight", "8");
+    let columns = edge_columns(dir.path(), "eight", "8", "0");
     eprintln!("8 spp column means: {columns:?}");
     for (x, expected) in [(0, 1.0), (1, 1.0), (2, 1.0), (3, 0.3), (4, 0.0), (5, 0.0), (7, 0.0)] {
         assert!(
@@ -71,11 +73,23 @@ fn box_filter_integrates_the_pixel_area_at_an_edge() {
         );
     }
     // 7 samples (a prime) are strips 1/7 wide: still the pixel's area, no bias.
-    let columns = edge_columns(dir.path(), "seven", "7");
+    let columns = edge_columns(dir.path(), "seven", "7", "0");
     assert!((columns[3] - 0.3).abs() < 0.015, "7 spp: {columns:?}");
     // One sample is the pixel centre, which the emitter does not reach.
-    let columns = edge_columns(dir.path(), "one", "1");
+    let columns = edge_columns(dir.path(), "one", "1", "0");
     assert!(columns[3] == 0.0 && columns[2] == 1.0, "1 spp: {columns:?}");
+    // With one shading sample at the centre, 16 emission rays (4 x 4 strata) still integrate
+    // the emitter seen straight on over the pixel's area (standard error 0.002 over 256 rows).
+    let columns = edge_columns(dir.path(), "split", "1", "16");
+    eprintln!("1 spp + 16 emission samples: {columns:?}");
+    assert!(
+        (columns[3] - 0.3).abs() < 0.01,
+        "1 spp + 16 emission samples: {columns:?}"
+    );
+    assert!(
+        columns[2] == 1.0 && columns[4] == 0.0 && columns[0] == 1.0,
+        "{columns:?}"
+    );
 }
 
 fn composite_rel_mse(image: &Path, reference: &Path) -> f64 {

@@ -2,6 +2,7 @@
 //! textures, light sources, cameras and bounds, built from a loaded glTF file.
 
 pub mod auto_view;
+pub mod footprint;
 pub mod light;
 pub mod light_tree;
 pub mod material;
