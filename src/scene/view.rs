@@ -119,7 +119,8 @@ impl Camera {
         let (sx, sy) = match self.view.projection {
             Projection::Perspective => {
                 let depth = v.dot(self.forward);
-                if !(depth > 0.0) {
+                // NaN as well as behind the eye.
+                if depth.is_nan() || depth <= 0.0 {
                     return None;
                 }
                 (
