@@ -133,6 +133,11 @@ pub fn render_pixel(
             .as_ref()
             .is_some_and(|footprint| footprint.covers(x, y));
     let mut sum = Components::default();
+    // Offsets that place this pixel's shadow rays among the strata (a stream no sample uses).
+    let mut pixel_rng = Rng::for_sample(settings.seed, pixel_index, u32::MAX as u64 + 1);
+    counts.pixel_samples = samples;
+    counts.light_offset = pixel_rng.next_u32();
+    counts.light_cell_offset = pixel_rng.next_u32();
     for s in 0..samples {
         let mut rng = Rng::for_sample(settings.seed, pixel_index, s as u64);
         let (jx, jy) = pixel_offset(s, samples, settings.jitter, &mut rng);
@@ -160,6 +165,7 @@ pub fn render_pixel(
         }
         pixel.emission += emission / extra as f32;
     }
+    counts.pixel_samples = 0;
     pixel
 }
 

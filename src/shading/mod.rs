@@ -20,6 +20,7 @@ use crate::scene::Scene;
 use crate::sys::embree::Coherence;
 use crate::tracer::{SurfaceHit, Tracer};
 use components::Components;
+use direct::LightStrata;
 use glam::Vec3;
 use request::AmbientRequest;
 use std::sync::Mutex;
@@ -83,6 +84,11 @@ pub struct RayCounts {
     pub pixel: u32,
     pub sample: u32,
     pub sample_weight: f32,
+    /// The pixel's sample count and its random offsets for stratifying the shadow rays of all
+    /// its samples together (see `direct::LightStrata`); 0 samples: each point on its own.
+    pub pixel_samples: u32,
+    pub light_offset: u32,
+    pub light_cell_offset: u32,
     /// Nesting of ambient computations, so T_amb counts only the outermost.
     ambient_depth: u32,
 }
@@ -307,12 +313,24 @@ impl<'a> Integrator<'a> {
         let has_diffuse = surface.diffuse.max_element() > 0.0;
         let has_specular = surface.specular.max_element() > 0.0;
         if has_diffuse || (has_specular && !self.scene.punctual_lights.is_empty()) {
-            let samples = if state.level == 0 {
-                self.options.light_samples.max(1)
+            let strata = if state.level > 0 {
+                LightStrata::alone(1, rng)
             } else {
-                1
+                let count = self.options.light_samples.max(1);
+                if counts.sample < counts.pixel_samples {
+                    // Stratified with the shadow rays of the pixel's other samples.
+                    LightStrata {
+                        first: counts.sample * count,
+                        count,
+                        total: counts.pixel_samples * count,
+                        offset: counts.light_offset,
+                        cell_offset: counts.light_cell_offset,
+                    }
+                } else {
+                    LightStrata::alone(count, rng)
+                }
             };
-            c.direct = direct::direct_light(self, hit, wo, surface, samples, rng, counts);
+            c.direct = direct::direct_light(self, hit, wo, surface, strata, rng, counts);
         }
         if has_specular {
             c.specular = self.specular(hit, wo, surface, state, rng, counts);
