@@ -157,6 +157,11 @@ pub struct RenderArgs {
     /// Samples per pixel (stratified over the pixel's area).
     #[arg(long = "spp", default_value_t = 1)]
     pub spp: u32,
+    /// Extra primary rays per pixel gathering only the emission seen straight from the eye,
+    /// in pixels where an emitter can appear (used when above --spp). They integrate a light's
+    /// edges over the pixel's area at the cost of one ray each, without shading.
+    #[arg(long = "emission-samples", default_value_t = 16)]
+    pub emission_samples: u32,
     /// Random seed; the same seed gives the same image.
     #[arg(long = "seed", default_value_t = 1)]
     pub seed: u64,

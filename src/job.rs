@@ -8,6 +8,7 @@ use crate::irradiance::record::Metric;
 use crate::irradiance::{CacheSettings, IrradianceCache};
 use crate::memory;
 use crate::render::RenderSettings;
+use crate::scene::footprint::EmitterFootprint;
 use crate::scene::view::{Camera, View};
 use crate::scene::{LoadOptions, Scene};
 use crate::shading::ShadingOptions;
@@ -178,6 +179,9 @@ impl Job {
             tile_height,
             threads,
             jitter: false,
+            emission_samples: args.emission_samples,
+            emission_footprint: (args.emission_samples > 0 && !scene.emitters.is_empty())
+                .then(|| std::sync::Arc::new(EmitterFootprint::new(&scene.emitters, &camera))),
         };
         let needs_ambient = shading.ambient_bounces > 0 && scene.needs().diffuse;
         let cache = if args.ambient_accuracy > 0.0 && needs_ambient {

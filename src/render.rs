@@ -5,12 +5,13 @@
 use crate::checkpoint::{Checkpoint, Restored};
 use crate::image::framebuffer::FrameBuffer;
 use crate::progress::Progress;
-use crate::sampling::{Rng, grid_side};
+use crate::sampling::Rng;
+use crate::scene::footprint::EmitterFootprint;
 use crate::scene::view::Camera;
 use crate::shading::components::Components;
 use crate::shading::{Integrator, RayCounts};
-use std::sync::Mutex;
 use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
 #[derive(Clone, Debug)]
@@ -23,6 +24,11 @@ pub struct RenderSettings {
     /// Jitter even a single sample over the pixel (a reference's passes then integrate the
     /// pixel's area); otherwise one sample is the pixel's centre, as rpict -pj 0 takes it.
     pub jitter: bool,
+    /// Extra primary rays per pixel that gather only the emission seen first, in the pixels
+    /// where an emitter can be seen (`emission_footprint`): a light's edges are where a box
+    /// filter's error is largest, and these rays cost no shading. Used when it exceeds `spp`.
+    pub emission_samples: u32,
+    pub emission_footprint: Option<Arc<EmitterFootprint>>,
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -81,7 +87,36 @@ impl ThreadClock {
     }
 }
 
-/// The components of one pixel: the mean of its samples.
+/// The grid a pixel's `samples` are stratified over: `columns x rows == samples` exactly, as
+/// close to square as `samples`' divisors allow. Every cell has the same area and gets one
+/// sample, so the mean is an unbiased estimate of the pixel's area integral for any count (a
+/// square grid with cells left empty, as 8 samples on 3 x 3 would leave, is not).
+pub fn pixel_strata(samples: u32) -> (u32, u32) {
+    let samples = samples.max(1);
+    let mut rows = (samples as f64).sqrt() as u32;
+    while rows > 1 && !samples.is_multiple_of(rows) {
+        rows -= 1;
+    }
+    let rows = rows.max(1);
+    (samples / rows, rows)
+}
+
+/// Where in the pixel (both in [0, 1)) sample `s` of `samples` falls: a jittered point in its
+/// own cell of the strata grid, or the centre when one unjittered sample is asked for.
+pub fn pixel_offset(s: u32, samples: u32, jitter: bool, rng: &mut Rng) -> (f32, f32) {
+    if samples <= 1 && !jitter {
+        return (0.5, 0.5);
+    }
+    let (columns, rows) = pixel_strata(samples);
+    let (i, j) = (s % columns, (s / columns) % rows);
+    (
+        (i as f32 + rng.next_f32()) / columns as f32,
+        (j as f32 + rng.next_f32()) / rows as f32,
+    )
+}
+
+/// The components of one pixel: the mean of its samples, each with its own primary ray, direct
+/// light and cache lookup (a box filter over the pixel's area).
 pub fn render_pixel(
     integrator: &Integrator<'_>,
     camera: &Camera,
@@ -90,29 +125,49 @@ pub fn render_pixel(
     y: u32,
     counts: &mut RayCounts,
 ) -> Components {
-    let side = grid_side(settings.spp.max(1));
     let samples = settings.spp.max(1);
     let pixel_index = y as u64 * camera.width as u64 + x as u64;
+    // Only worth it when the extra rays outnumber the pixel samples, which see emission anyway.
+    let split_emission = settings.emission_samples > samples
+        && settings
+            .emission_footprint
+            .as_ref()
+            .is_some_and(|footprint| footprint.covers(x, y));
     let mut sum = Components::default();
+    // Offsets that place this pixel's shadow rays among the strata (a stream no sample uses).
+    let mut pixel_rng = Rng::for_sample(settings.seed, pixel_index, u32::MAX as u64 + 1);
+    counts.pixel_samples = samples;
+    counts.light_offset = pixel_rng.next_u32();
+    counts.light_cell_offset = pixel_rng.next_u32();
     for s in 0..samples {
         let mut rng = Rng::for_sample(settings.seed, pixel_index, s as u64);
-        // One sample: the pixel centre. Several: one jittered point per stratum of a grid.
-        let (jx, jy) = if samples == 1 && !settings.jitter {
-            (0.5, 0.5)
-        } else {
-            let (i, j) = (s % side, (s / side) % side);
-            (
-                (i as f32 + rng.next_f32()) / side as f32,
-                (j as f32 + rng.next_f32()) / side as f32,
-            )
-        };
+        let (jx, jy) = pixel_offset(s, samples, settings.jitter, &mut rng);
         let (origin, dir) = camera.ray(x as f32 + jx, y as f32 + jy);
         counts.pixel = pixel_index as u32;
         counts.sample = s;
         counts.sample_weight = 1.0 / samples as f32;
-        sum += integrator.primary(origin, dir, &mut rng, counts);
+        sum += if split_emission {
+            integrator.primary_without_first_emission(origin, dir, &mut rng, counts)
+        } else {
+            integrator.primary(origin, dir, &mut rng, counts)
+        };
     }
-    sum * (1.0 / samples as f32)
+    let mut pixel = sum * (1.0 / samples as f32);
+    if split_emission {
+        // The first-hit emission over the pixel's area by its own stratified rays (own streams,
+        // after the pixel samples'): the two parts are estimated apart and add up to the pixel.
+        let extra = settings.emission_samples;
+        let mut emission = glam::Vec3::ZERO;
+        for s in 0..extra {
+            let mut rng = Rng::for_sample(settings.seed, pixel_index, (samples + s) as u64);
+            let (jx, jy) = pixel_offset(s, extra, true, &mut rng);
+            let (origin, dir) = camera.ray(x as f32 + jx, y as f32 + jy);
+            emission += integrator.first_emission(origin, dir, counts);
+        }
+        pixel.emission += emission / extra as f32;
+    }
+    counts.pixel_samples = 0;
+    pixel
 }
 
 /// One rendered pixel: its components and the records of the cache it made at level 0.
@@ -236,5 +291,52 @@ mod tests {
             }
         }
         assert!(seen.iter().all(|&c| c == 1));
+    }
+
+    #[test]
+    fn strata_tile_the_pixel_for_any_count() {
+        for samples in 1..=64u32 {
+            let (columns, rows) = pixel_strata(samples);
+            assert_eq!(columns * rows, samples);
+            assert!(columns >= rows);
+            // Every cell holds exactly one sample.
+            let mut seen = vec![0u32; samples as usize];
+            let mut rng = Rng::new(3, samples as u64);
+            for s in 0..samples {
+                let (x, y) = pixel_offset(s, samples, true, &mut rng);
+                assert!((0.0..1.0).contains(&x) && (0.0..1.0).contains(&y));
+                let (i, j) = ((x * columns as f32) as u32, (y * rows as f32) as u32);
+                seen[(j * columns + i) as usize] += 1;
+            }
+            assert!(seen.iter().all(|&c| c == 1), "{samples} samples: {seen:?}");
+        }
+        assert_eq!(pixel_strata(8), (4, 2));
+        assert_eq!(pixel_strata(16), (4, 4));
+        assert_eq!(pixel_strata(7), (7, 1));
+    }
+
+    #[test]
+    fn one_unjittered_sample_is_the_centre() {
+        let mut rng = Rng::new(1, 1);
+        assert_eq!(pixel_offset(0, 1, false, &mut rng), (0.5, 0.5));
+        let (x, y) = pixel_offset(0, 1, true, &mut rng);
+        assert!((x, y) != (0.5, 0.5) && (0.0..1.0).contains(&x) && (0.0..1.0).contains(&y));
+    }
+
+    #[test]
+    fn jittered_samples_integrate_a_step_over_the_pixel() {
+        // The fraction of a pixel left of x = 0.3, estimated with 8 stratified samples (4 x 2),
+        // averaged over many pixels: the box filter's exact answer is 0.3.
+        let (pixels, samples) = (20_000u64, 8u32);
+        let mut total = 0.0f64;
+        for p in 0..pixels {
+            let mut rng = Rng::for_sample(5, p, 0);
+            let covered = (0..samples)
+                .filter(|&s| pixel_offset(s, samples, true, &mut rng).0 < 0.3)
+                .count();
+            total += covered as f64 / samples as f64;
+        }
+        let mean = total / pixels as f64;
+        assert!((mean - 0.3).abs() < 2e-3, "mean coverage {mean}");
     }
 }

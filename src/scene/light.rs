@@ -1,6 +1,7 @@
 //! Light sources: punctual lights (KHR_lights_punctual) and emissive triangles, with the
 //! sampling the direct component needs.
 
+use super::light_tree::{Item, LightTree};
 use crate::sys::scene_io::{GltfLight, LightType};
 use glam::Vec3;
 
@@ -120,13 +121,15 @@ pub struct EmitterTriangle {
     pub prim_id: u32,
 }
 
-/// All emissive triangles, chosen in proportion to their power (area x luminance), so bright
-/// and large emitters get most of the shadow rays.
+/// All emissive triangles. A shading point picks one through the light tree, by power
+/// (area x luminance) over squared distance, so bright, large and near emitters get most of the
+/// shadow rays.
 #[derive(Clone, Debug, Default)]
 pub struct EmitterSet {
     pub triangles: Vec<EmitterTriangle>,
     cdf: Vec<f64>,
     total_power: f64,
+    tree: LightTree,
 }
 
 /// A point chosen on an emitter, with the area-measure density of having chosen it.
@@ -150,7 +153,22 @@ impl EmitterSet {
             total += t.area as f64 * luminance(t.radiance).max(1e-12) as f64;
             cdf.push(total);
         }
+        let items: Vec<Item> = triangles
+            .iter()
+            .zip(&cdf)
+            .scan(0.0, |previous, (t, &c)| {
+                let power = c - *previous;
+                *previous = c;
+                let (a, b, d) = (t.p0, t.p0 + t.e1, t.p0 + t.e2);
+                Some(Item {
+                    lo: a.min(b).min(d),
+                    hi: a.max(b).max(d),
+                    power,
+                })
+            })
+            .collect();
         EmitterSet {
+            tree: LightTree::new(&items),
             triangles,
             cdf,
             total_power: total,
@@ -161,25 +179,26 @@ impl EmitterSet {
         self.triangles.is_empty()
     }
 
-    /// Probability of choosing triangle `index`.
+    /// Probability of choosing triangle `index` by power alone (what the tree's estimate
+    /// becomes far from every emitter).
     pub fn pick_probability(&self, index: usize) -> f64 {
         let lo = if index == 0 { 0.0 } else { self.cdf[index - 1] };
         (self.cdf[index] - lo) / self.total_power
     }
 
-    /// Chooses a triangle by power with `u1`, a uniform point on it with `u2`, `u3`.
-    pub fn sample(&self, u1: f32, u2: f32, u3: f32) -> Option<EmitterPoint> {
+    /// Chooses a triangle for a shading point at `point` through the light tree with `u1`, and
+    /// a uniform point on it with `u2`, `u3`.
+    pub fn sample(&self, point: Vec3, u1: f32, u2: f32, u3: f32) -> Option<EmitterPoint> {
         if self.triangles.is_empty() || self.total_power.is_nan() || self.total_power <= 0.0 {
             return None;
         }
-        let target = u1 as f64 * self.total_power;
-        let index = self.cdf.partition_point(|&c| c <= target).min(self.triangles.len() - 1);
+        let (index, probability) = self.tree.pick(point, u1 as f64)?;
         let t = &self.triangles[index];
         // Uniform point on a triangle by the square-root warp.
         let su = u2.sqrt();
         let (b1, b2) = (1.0 - su, u3 * su);
         let position = t.p0 + b1 * t.e1 + b2 * t.e2;
-        let pdf_area = (self.pick_probability(index) / t.area as f64) as f32;
+        let pdf_area = (probability / t.area as f64) as f32;
         (pdf_area.is_finite() && pdf_area > 0.0).then_some(EmitterPoint {
             position,
             normal: t.normal,
@@ -215,8 +234,15 @@ mod tests {
         // Sum over triangles of pdf_area * area equals one.
         let total: f64 = (0..3).map(|i| set.pick_probability(i)).sum();
         assert!((total - 1.0).abs() < 1e-9);
-        let p = set.sample(0.05, 0.3, 0.7).unwrap();
-        assert!((p.pdf_area - (1.0 / 9.0) / 0.5).abs() < 1e-5);
+        // Seen from far away the tree's estimate is the power alone.
+        let far = Vec3::new(0.0, 0.0, 1e4);
+        for i in 0..3 {
+            assert!((set.tree.probability(far, i) - set.pick_probability(i)).abs() < 1e-5);
+        }
+        let p = set.sample(far, 0.05, 0.3, 0.7).unwrap();
+        let picked =
+            (0..3).find(|&i| (p.pdf_area as f64 * set.triangles[i].area as f64 - set.pick_probability(i)).abs() < 1e-5);
+        assert!(picked.is_some(), "pdf_area {} matches no triangle", p.pdf_area);
     }
 
     #[test]
@@ -235,5 +261,63 @@ mod tests {
         assert!((below.irradiance.x - 1.0).abs() < 1e-6);
         assert!(l.illuminate(Vec3::new(10.0, 0.0, 0.0)).is_none());
         assert!(l.illuminate(l.position).is_none());
+    }
+
+    /// Irradiance at `point` (surface normal `n`) from a uniformly emitting triangle that faces
+    /// it, by Lambert's contour formula: E = L/2 * sum over edges of angle_i * (gamma_i . n).
+    fn triangle_irradiance(t: &EmitterTriangle, point: Vec3, n: Vec3) -> f64 {
+        let v = [t.p0, t.p0 + t.e1, t.p0 + t.e2].map(|p| (p - point).normalize().as_dvec3());
+        let n = n.as_dvec3();
+        let mut sum = 0.0;
+        for i in 0..3 {
+            let (a, b) = (v[i], v[(i + 1) % 3]);
+            let angle = a.dot(b).clamp(-1.0, 1.0).acos();
+            sum += angle * a.cross(b).normalize().dot(n);
+        }
+        0.5 * sum.abs() * t.radiance.x as f64
+    }
+
+    #[test]
+    fn many_light_estimate_is_unbiased() {
+        // 200 small emitters of varied size and brightness on a ceiling, facing down at a floor
+        // point: the mean of radiance * G / pdf over many samples must equal the sum of each
+        // triangle's exact irradiance.
+        let mut rng = crate::sampling::Rng::new(11, 0);
+        let mut triangles = Vec::new();
+        for k in 0..200 {
+            let centre = Vec3::new(rng.next_f32() * 8.0 - 4.0, rng.next_f32() * 8.0 - 4.0, 3.0);
+            let size = 0.05 + 0.3 * rng.next_f32();
+            let radiance = 0.5 + 20.0 * rng.next_f32() * rng.next_f32();
+            // Wound so that the normal points down (-Z), towards the floor.
+            let (e1, e2) = (Vec3::Y * size, Vec3::X * size * (1.0 + (k % 3) as f32));
+            triangles.push(EmitterTriangle {
+                p0: centre,
+                e1,
+                e2,
+                normal: e1.cross(e2).normalize(),
+                area: 0.5 * e1.cross(e2).length(),
+                radiance: Vec3::splat(radiance),
+                geom_id: 0,
+                prim_id: k,
+            });
+        }
+        assert!(triangles.iter().all(|t| t.normal.z < -0.99));
+        let (point, n) = (Vec3::new(0.5, -0.25, 0.0), Vec3::Z);
+        let exact: f64 = triangles.iter().map(|t| triangle_irradiance(t, point, n)).sum();
+        let set = EmitterSet::new(triangles);
+        let samples = 400_000;
+        let mut sum = 0.0f64;
+        for _ in 0..samples {
+            let Some(p) = set.sample(point, rng.next_f32(), rng.next_f32(), rng.next_f32()) else {
+                continue;
+            };
+            let offset = p.position - point;
+            let d2 = offset.length_squared();
+            let wi = offset / d2.sqrt();
+            let geometry = (n.dot(wi) * -p.normal.dot(wi)).max(0.0) / d2;
+            sum += (p.radiance.x * geometry / p.pdf_area) as f64;
+        }
+        let mean = sum / samples as f64;
+        assert!((mean - exact).abs() < 0.01 * exact, "estimate {mean}, exact {exact}");
     }
 }

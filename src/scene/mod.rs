@@ -2,7 +2,9 @@
 //! textures, light sources, cameras and bounds, built from a loaded glTF file.
 
 pub mod auto_view;
+pub mod footprint;
 pub mod light;
+pub mod light_tree;
 pub mod material;
 pub mod texture;
 pub mod view;

@@ -112,6 +112,31 @@ impl View {
 }
 
 impl Camera {
+    /// Where `point` appears in the image, in pixels as `ray` takes them; None behind a
+    /// perspective camera (at or behind its position's plane).
+    pub fn project(&self, point: Vec3) -> Option<(f32, f32)> {
+        let v = point - self.view.position;
+        let (sx, sy) = match self.view.projection {
+            Projection::Perspective => {
+                let depth = v.dot(self.forward);
+                // NaN as well as behind the eye.
+                if depth.is_nan() || depth <= 0.0 {
+                    return None;
+                }
+                (
+                    v.dot(self.right) / (depth * self.half_width),
+                    v.dot(self.up) / (depth * self.half_height),
+                )
+            }
+            Projection::Parallel => (v.dot(self.right) / self.half_width, v.dot(self.up) / self.half_height),
+        };
+        let (x, y) = (
+            (sx + 1.0) * 0.5 * self.width as f32,
+            (1.0 - sy) * 0.5 * self.height as f32,
+        );
+        (x.is_finite() && y.is_finite()).then_some((x, y))
+    }
+
     /// Primary ray through image position (x, y) in pixels, with (0, 0) at the top-left corner
     /// of the image: origin and unit direction.
     #[inline]

@@ -1,7 +1,11 @@
 //! L_d: light arriving straight from the light sources, by shadow rays. Area emitters are
-//! sampled by power and area; every punctual light gets one ray. The diffuse part sees all
-//! lights; the glossy lobe sees punctual lights here (nothing else can hit them) and area
-//! emitters through its own specular rays.
+//! picked through the light tree (power over squared distance) and sampled by area; every
+//! punctual light gets one ray. The diffuse part sees all lights; the glossy lobe sees punctual
+//! lights here (nothing else can hit them) and area emitters through its own specular rays.
+//!
+//! The shadow rays of all of a pixel's samples are stratified together (`LightStrata`): with
+//! 16 samples of one ray each, the 16 rays take 16 different strata of the emitter choice and
+//! 16 different cells of the point on it, rather than 16 independent draws.
 
 use super::{Integrator, RayCounts, glossy};
 use crate::sampling::Rng;
@@ -10,12 +14,55 @@ use crate::tracer::SurfaceHit;
 use glam::Vec3;
 use std::f32::consts::PI;
 
+/// Where one shading point's shadow rays fall among all of its pixel's: rays `first ..
+/// first + count` of `total`, and the pixel's random offsets. Ray g takes stratum
+/// (g + offset) mod total of the emitter choice and cell (permute(g) + cell_offset) mod cells
+/// of the grid over the emitter's surface, the permutation drawn per pixel: the rays of a pixel
+/// all differ in both, and with the offsets uniform per pixel each ray alone is uniform, so
+/// the estimate stays unbiased. (A fixed affine pairing of strata and cells, tried first, put
+/// the rays on one emitter into one part of it and raised the noise by 75%.)
+#[derive(Clone, Copy, Debug)]
+pub struct LightStrata {
+    pub first: u32,
+    pub count: u32,
+    pub total: u32,
+    pub offset: u32,
+    pub cell_offset: u32,
+}
+
+impl LightStrata {
+    /// `count` rays stratified among themselves only, with offsets from `rng`.
+    pub fn alone(count: u32, rng: &mut Rng) -> LightStrata {
+        LightStrata {
+            first: 0,
+            count,
+            total: count,
+            offset: rng.next_u32(),
+            cell_offset: rng.next_u32(),
+        }
+    }
+
+    /// The uniforms of ray k (of `count`): stratum of the emitter choice, point on the emitter.
+    fn uniforms(&self, k: u32, side: u32, rng: &mut Rng) -> (f32, f32, f32) {
+        let cells = side * side;
+        let g = self.first + k;
+        let stratum = ((g as u64 + self.offset as u64) % self.total as u64) as u32;
+        let shuffled = crate::sampling::permute(g % cells, cells, self.offset ^ self.cell_offset.rotate_left(16));
+        let cell = ((shuffled as u64 + self.cell_offset as u64) % cells as u64) as u32;
+        (
+            (stratum as f32 + rng.next_f32()) / self.total as f32,
+            ((cell % side) as f32 + rng.next_f32()) / side as f32,
+            ((cell / side) as f32 + rng.next_f32()) / side as f32,
+        )
+    }
+}
+
 pub fn direct_light(
     integrator: &Integrator<'_>,
     hit: &SurfaceHit,
     wo: Vec3,
     surface: &SurfacePoint,
-    emitter_samples: u32,
+    strata: LightStrata,
     rng: &mut Rng,
     counts: &mut RayCounts,
 ) -> Vec3 {
@@ -26,22 +73,11 @@ pub fn direct_light(
 
     if surface.diffuse.max_element() > 0.0 && !scene.emitters.is_empty() {
         let mut sum = Vec3::ZERO;
-        // Stratified: the choice among emitters over k strata, the point on it over a grid,
-        // so k samples spread over the lights instead of clumping. The grid cells are dealt
-        // out in random order: pairing stratum k with cell k would tie each emitter to one
-        // part of the grid, which is not uniform over the emitter.
-        let side = crate::sampling::grid_side(emitter_samples);
-        let mut cells: Vec<u32> = (0..side * side).collect();
-        for i in (1..cells.len()).rev() {
-            let j = (rng.next_u32() as usize) % (i + 1);
-            cells.swap(i, j);
-        }
+        let emitter_samples = strata.count.max(1);
+        let side = crate::sampling::grid_side(strata.total.max(1));
         for k in 0..emitter_samples {
-            let cell = cells[k as usize % cells.len()];
-            let u1 = (k as f32 + rng.next_f32()) / emitter_samples as f32;
-            let u2 = ((cell % side) as f32 + rng.next_f32()) / side as f32;
-            let u3 = ((cell / side) as f32 + rng.next_f32()) / side as f32;
-            let Some(light) = scene.emitters.sample(u1, u2, u3) else {
+            let (u1, u2, u3) = strata.uniforms(k, side, rng);
+            let Some(light) = scene.emitters.sample(hit.position, u1, u2, u3) else {
                 continue;
             };
             let offset = light.position - hit.position;
@@ -98,4 +134,75 @@ pub fn direct_light(
         }
     }
     total
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Stratum and cell of ray k, read back from its uniforms.
+    fn slots(strata: &LightStrata, k: u32, side: u32, rng: &mut Rng) -> (u32, u32) {
+        let (u1, u2, u3) = strata.uniforms(k, side, rng);
+        let stratum = (u1 * strata.total as f32) as u32;
+        (stratum, (u3 * side as f32) as u32 * side + (u2 * side as f32) as u32)
+    }
+
+    #[test]
+    fn a_pixels_rays_take_distinct_strata_and_cells() {
+        let mut rng = Rng::new(4, 5);
+        for (samples, per_sample) in [(1, 1), (4, 1), (8, 2), (16, 1), (3, 5), (64, 4)] {
+            let total = samples * per_sample;
+            let side = crate::sampling::grid_side(total);
+            let (offset, cell_offset) = (rng.next_u32(), rng.next_u32());
+            let mut strata_seen = vec![false; total as usize];
+            let mut cells_seen = vec![false; (side * side) as usize];
+            for s in 0..samples {
+                let strata = LightStrata {
+                    first: s * per_sample,
+                    count: per_sample,
+                    total,
+                    offset,
+                    cell_offset,
+                };
+                for k in 0..per_sample {
+                    let (stratum, cell) = slots(&strata, k, side, &mut rng);
+                    assert!(
+                        !strata_seen[stratum as usize],
+                        "{samples}x{per_sample}: stratum {stratum} twice"
+                    );
+                    assert!(!cells_seen[cell as usize], "{samples}x{per_sample}: cell {cell} twice");
+                    strata_seen[stratum as usize] = true;
+                    cells_seen[cell as usize] = true;
+                }
+            }
+            assert!(strata_seen.iter().all(|&s| s));
+        }
+    }
+
+    #[test]
+    fn over_the_pixel_offsets_each_ray_is_uniform() {
+        // For a fixed ray, every stratum and every cell comes up equally often as the pixel's
+        // offsets run over their range: the ray alone is uniform, so no bias.
+        let mut rng = Rng::new(8, 9);
+        let (total, side) = (12u32, 4u32);
+        let ray = 5u32;
+        let mut strata_count = vec![0u32; total as usize];
+        let mut cell_count = vec![0u32; (side * side) as usize];
+        for offset in 0..total {
+            for cell_offset in 0..side * side {
+                let strata = LightStrata {
+                    first: ray,
+                    count: 1,
+                    total,
+                    offset,
+                    cell_offset,
+                };
+                let (stratum, cell) = slots(&strata, 0, side, &mut rng);
+                strata_count[stratum as usize] += 1;
+                cell_count[cell as usize] += 1;
+            }
+        }
+        assert!(strata_count.iter().all(|&c| c == side * side), "{strata_count:?}");
+        assert!(cell_count.iter().all(|&c| c == total), "{cell_count:?}");
+    }
 }

@@ -20,6 +20,7 @@ use crate::scene::Scene;
 use crate::sys::embree::Coherence;
 use crate::tracer::{SurfaceHit, Tracer};
 use components::Components;
+use direct::LightStrata;
 use glam::Vec3;
 use request::AmbientRequest;
 use std::sync::Mutex;
@@ -83,6 +84,11 @@ pub struct RayCounts {
     pub pixel: u32,
     pub sample: u32,
     pub sample_weight: f32,
+    /// The pixel's sample count and its random offsets for stratifying the shadow rays of all
+    /// its samples together (see `direct::LightStrata`); 0 samples: each point on its own.
+    pub pixel_samples: u32,
+    pub light_offset: u32,
+    pub light_cell_offset: u32,
     /// Nesting of ambient computations, so T_amb counts only the outermost.
     ambient_depth: u32,
 }
@@ -116,6 +122,9 @@ pub struct PathState {
     weight: f32,
     /// Whether emission seen at this hit counts (not for rays gathering indirect diffuse).
     count_emission: bool,
+    /// The emission seen straight from the eye (first hit of a primary ray) is gathered by
+    /// separate rays (`first_emission`), so the primary ray's own hit leaves it out.
+    first_emission_elsewhere: bool,
     /// What light leaving this point is multiplied by before it reaches the pixel: the
     /// rippled jT of the specular path and the opacities passed (RGB).
     throughput: Vec3,
@@ -159,15 +168,68 @@ impl<'a> Integrator<'a> {
 
     /// The components of light arriving at the eye along a primary ray.
     pub fn primary(&self, origin: Vec3, dir: Vec3, rng: &mut Rng, counts: &mut RayCounts) -> Components {
+        self.primary_ray(origin, dir, false, rng, counts)
+    }
+
+    /// As `primary`, less the emission of the first surface hit, which the caller gathers
+    /// with `first_emission` (emission seen through transparent surfaces and mirrors stays).
+    pub fn primary_without_first_emission(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        rng: &mut Rng,
+        counts: &mut RayCounts,
+    ) -> Components {
+        self.primary_ray(origin, dir, true, rng, counts)
+    }
+
+    fn primary_ray(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        first_emission_elsewhere: bool,
+        rng: &mut Rng,
+        counts: &mut RayCounts,
+    ) -> Components {
         counts.primary += 1;
         let state = PathState {
             level: 0,
             specular_depth: 0,
             weight: 1.0,
             count_emission: true,
+            first_emission_elsewhere,
             throughput: Vec3::ONE,
         };
         self.trace(origin, dir, state, Coherence::Coherent, rng, counts).0
+    }
+
+    /// The emission of the first surface a primary ray stops at (times its opacity, as
+    /// `trace` weighs it): one ray, no shading. What `primary_without_first_emission` leaves out.
+    pub fn first_emission(&self, origin: Vec3, dir: Vec3, counts: &mut RayCounts) -> Vec3 {
+        counts.primary += 1;
+        let mut origin = origin;
+        for _ in 0..MAX_MASKED_PASSES {
+            let Some(hit) = self.tracer.intersect(self.scene, origin, dir, Coherence::Coherent) else {
+                return Vec3::ZERO;
+            };
+            let material = &self.scene.materials[hit.material as usize];
+            if !material.is_emissive() && !material.may_be_transparent() {
+                return Vec3::ZERO;
+            }
+            let surface = material.at(hit.uv, &self.scene.textures);
+            if surface.opacity <= 0.0 {
+                origin = self.tracer.spawn_point(&hit, dir);
+                continue;
+            }
+            let front = hit.geometric_normal.dot(-dir) > 0.0;
+            let emission = if material.is_emissive() && front {
+                material.emission * surface.opacity
+            } else {
+                Vec3::ZERO
+            };
+            return if emission.is_finite() { emission } else { Vec3::ZERO };
+        }
+        Vec3::ZERO
     }
 
     /// The components along a ray, and how far it went to the first surface that stopped it
@@ -244,18 +306,31 @@ impl<'a> Integrator<'a> {
         let wo = -dir;
         let mut c = Components::default();
         // Emitters shine from their front side only.
-        if state.count_emission && material.is_emissive() && hit.geometric_normal.dot(wo) > 0.0 {
+        let seen_first = state.first_emission_elsewhere && state.level == 0 && state.specular_depth == 0;
+        if state.count_emission && !seen_first && material.is_emissive() && hit.geometric_normal.dot(wo) > 0.0 {
             c.emission = material.emission;
         }
         let has_diffuse = surface.diffuse.max_element() > 0.0;
         let has_specular = surface.specular.max_element() > 0.0;
         if has_diffuse || (has_specular && !self.scene.punctual_lights.is_empty()) {
-            let samples = if state.level == 0 {
-                self.options.light_samples.max(1)
+            let strata = if state.level > 0 {
+                LightStrata::alone(1, rng)
             } else {
-                1
+                let count = self.options.light_samples.max(1);
+                if counts.sample < counts.pixel_samples {
+                    // Stratified with the shadow rays of the pixel's other samples.
+                    LightStrata {
+                        first: counts.sample * count,
+                        count,
+                        total: counts.pixel_samples * count,
+                        offset: counts.light_offset,
+                        cell_offset: counts.light_cell_offset,
+                    }
+                } else {
+                    LightStrata::alone(count, rng)
+                }
             };
-            c.direct = direct::direct_light(self, hit, wo, surface, samples, rng, counts);
+            c.direct = direct::direct_light(self, hit, wo, surface, strata, rng, counts);
         }
         if has_specular {
             c.specular = self.specular(hit, wo, surface, state, rng, counts);
@@ -375,6 +450,7 @@ impl<'a> Integrator<'a> {
             specular_depth: request.specular_depth,
             weight: request.weight,
             count_emission: false,
+            first_emission_elsewhere: false,
             throughput: Vec3::ONE,
         };
         self.ambient_radiance(&hit, state, rng, counts)
