@@ -445,9 +445,11 @@ impl<'a> Integrator<'a> {
         counts.lookups += 1;
         if let Some(value) = cache.lookup(hit.position, hit.normal, state.level) {
             counts.hits += 1;
+            cache.trace(counts.pixel, state.level, hit.position, hit.normal, None);
             return value;
         }
         let record = self.compute_record(cache, hit, state, rng, counts);
+        cache.trace(counts.pixel, state.level, hit.position, hit.normal, Some(&record));
         counts.records_computed += 1;
         if state.level == 0 {
             counts.records_level0 += 1;
