@@ -52,7 +52,7 @@ fn trace_cache_lists_every_lookup_and_record() {
     assert_eq!(records.len() as u64, s["records_computed"].as_u64().unwrap());
     let hits = lookups.iter().filter(|l| l[3] == "1").count() as u64;
     assert_eq!(hits, s["hits"].as_u64().unwrap());
-    assert!(records.len() > 0 && lookups.iter().all(|l| l.len() == 10) && records.iter().all(|r| r.len() == 22));
+    assert!(!records.is_empty() && lookups.iter().all(|l| l.len() == 10) && records.iter().all(|r| r.len() == 22));
     // Every pixel index is inside the image.
     assert!(lookups.iter().all(|l| l[1].parse::<u32>().unwrap() < 24 * 24));
 }
