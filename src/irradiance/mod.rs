@@ -130,13 +130,17 @@ impl IrradianceCache {
         Ok(self)
     }
 
-    /// Traces a lookup (and, after a miss, the record made for it) when tracing is on.
-    pub fn trace(&self, pixel: u32, level: u32, point: Vec3, normal: Vec3, record: Option<&Record>) {
+    /// Whether `--trace-cache` is on.
+    pub fn tracing(&self) -> bool {
+        self.trace.is_some()
+    }
+
+    /// Traces a lookup at `record`'s position and normal, and the record a miss there makes
+    /// (after a hit: would make), when tracing is on.
+    pub fn trace(&self, pixel: u32, level: u32, hit: bool, record: &Record) {
         if let Some(t) = &self.trace {
-            t.write(&trace::lookup_line(pixel, level, record.is_none(), point, normal));
-            if let Some(r) = record {
-                t.write(&trace::record_line(pixel, r));
-            }
+            t.write(&trace::lookup_line(pixel, level, hit, record.position, record.normal));
+            t.write(&trace::record_line(pixel, record));
         }
     }
 

@@ -3,9 +3,12 @@
 //! geometry that decides where it may be used. The bench's cluster simulation replays it.
 //!
 //! Lines, in the order the cache saw them (one thread gives a deterministic order):
-//! `L pixel level hit x y z nx ny nz` and, after a missed lookup,
-//! `R pixel level x y z nx ny nz ux uy uz r0 r1 h0 .. h7` (the record's position, normal,
-//! first principal axis, radii and leak-test horizon per sector; infinite horizons as `inf`).
+//! `L pixel level hit x y z nx ny nz`, each followed by
+//! `R pixel level x y z nx ny nz ux uy uz r0 r1 h0 .. h7`: the record the lookup made (miss) or
+//! would have made (hit; sampled for the trace only, so a traced run is much slower): position,
+//! normal, first principal axis, radii and leak-test horizon per sector (infinite as `inf`).
+//! With -ab 1 the traced render is the same as without the trace; with more bounces the sampled
+//! records' own bounces go through the cache and add to it.
 
 use super::record::Record;
 use glam::Vec3;
