@@ -26,7 +26,9 @@ A miss at a point the serial run answered from the cache makes a record shaped l
 that answered it there (its radii, axis and horizon, at the new point and normal).
 
 Messages cost latency + bytes / bandwidth on the network and a fixed CPU time per message on
-both ends. Simulated time is per rank; the master's answers take a round trip.
+both ends. Simulated time is per rank; the master's answers take a round trip. With `cores` set,
+the worker ranks share that many cores in time slices (a machine running more ranks than cores,
+as the one the measurements come from); by default every rank has a processor of its own.
 """
 
 import bisect
@@ -235,7 +237,7 @@ class Sim:
     """One simulated render. `workers` excludes the master (paper: processors)."""
 
     def __init__(self, trace, mode, workers, costs, network="1gbit", tile=(16, 16), sync=None, send=32, pa=None,
-                 pa_sync=8, wake=POLL_WAKE):
+                 pa_sync=8, wake=POLL_WAKE, cores=None, quantum=3e-3):
         self.t = trace
         self.mode = mode
         self.W = workers
@@ -245,6 +247,11 @@ class Sim:
         # src/parallel/comm.rs): on average a message is noticed this long after it arrives
         # (half of it at each end of a round trip).
         self.wake = wake
+        # Fewer cores than worker ranks (the measuring machine, --oversubscribe): the ranks take
+        # turns, `cores` at a time, in time slices of `quantum` seconds (the order of Linux's
+        # scheduler slices). None: a processor per rank (a cluster).
+        self.groups = max(1, math.ceil(workers / cores)) if cores else 1
+        self.quantum = quantum
         self.tiles = deque(trace.tiles(*tile))
         self.sync = sync if sync is not None else 50
         self.send = send
@@ -259,6 +266,24 @@ class Sim:
         self.master = []  # records at the master, in arrival order (t_master ascending)
         self.master_times = []
         self.seen_sync = [-math.inf] * workers  # master time of each rank's last sync
+
+    def cpu(self, w, t, work):
+        """When rank w, starting at t, has done `work` seconds of computing."""
+        if self.groups <= 1 or work <= 0.0:
+            return t + work
+        q, G, g = self.quantum, self.groups, w % self.groups
+        k = math.floor(t / q + 1e-9)
+        if k % G != g:  # wait for this rank's next slice
+            k += (g - k) % G
+            t = max(t, k * q)
+        while True:
+            run = min(work, (k + 1) * q - t)
+            t += run
+            work -= run
+            if work <= 1e-12:
+                return t
+            k += G  # the others' slices pass
+            t = k * q
 
     # -- messages ------------------------------------------------------------------------
     def msg(self, nbytes, count=1):
@@ -341,7 +366,7 @@ class Sim:
                     r = self.new_record(entry, w)
                     if self.mode != "noshare":
                         outbox[w].append(r)
-            clock[w] += spent
+            clock[w] = self.cpu(w, clock[w], spent)
             res.busy[w] += spent
             if self.mode != "noshare" and len(outbox[w]) >= self.sync:
                 self.share(w, clock, outbox)
@@ -401,6 +426,25 @@ class Sim:
         heapq.heapify(heap)
         outstanding = 0  # requests sent but not computed
 
+        parked = deque()
+
+        def dispatch(p, now):
+            best = max(pas, key=lambda a: len(queue[a]))
+            share = len(queue[best]) // 2
+            if share < MIN_SHARE:
+                return False
+            taken = deque()
+            for _ in range(share):
+                taken.appendleft(queue[best].pop())
+            res.forwarded += share
+            start = max(clock[p], now)
+            back = start + self.msg(8) + self.msg(12 + REQUEST_BYTES * share) + self.lat + 1.5 * self.wake
+            res.idle[p] += back - clock[p]
+            clock[p] = back
+            helping[p] = deque(e for _, e in taken)
+            heapq.heappush(heap, (clock[p], p))
+            return True
+
         def sync_master(w, arrive_extra=0.0):
             t0 = clock[w]
             records = outbox[w]
@@ -413,6 +457,8 @@ class Sim:
             res.busy[w] += 2 * c.message
             res.idle[w] += back - t0
             clock[w] = back + c.message
+            while w in queue and parked and dispatch(parked[0], arrive):
+                parked.popleft()
 
         def flush(p):
             nonlocal outstanding
@@ -444,7 +490,7 @@ class Sim:
             else:
                 spent += c.record
                 outbox[w].append(self.new_record(entry, w))
-            clock[w] += spent
+            clock[w] = self.cpu(w, clock[w], spent)
             res.busy[w] += spent
             if len(outbox[w]) >= self.pa_sync:
                 sync_master(w)
@@ -500,7 +546,7 @@ class Sim:
                     else:
                         buffer[w].append(entry)
                         spent += c.request_pr
-                clock[w] += spent
+                clock[w] = self.cpu(w, clock[w], spent)
                 res.busy[w] += spent
                 if len(buffer[w]) >= self.send:
                     flush(w)
@@ -514,28 +560,12 @@ class Sim:
                 continue
             flush(w)
             pr_done.add(w)
-            # Load balancing: half of the longest queue the master knows of.
-            t0 = clock[w]
-            best = max(pas, key=lambda a: len([1 for x in queue[a] if x[0] <= t0]) if queue[a] else 0)
-            available = [x for x in queue[best] if x[0] <= t0 + 2 * self.lat]
-            share = len(available) // 2
-            if share >= MIN_SHARE:
-                taken = deque()
-                for _ in range(share):
-                    taken.appendleft(queue[best].pop())
-                res.forwarded += share
-                back = t0 + self.msg(8) + self.msg(12 + REQUEST_BYTES * share) + self.lat + 1.5 * self.wake
-                res.idle[w] += back - t0
-                clock[w] = back
-                helping[w] = deque(e for _, e in taken)
-                heapq.heappush(heap, (clock[w], w))
+            # Load balancing: half of the longest PA queue; otherwise the master keeps the PR
+            # waiting until a PA reports a queue worth splitting (or everything is done).
+            if dispatch(w, clock[w]):
                 continue
             if outstanding > 0:
-                # Nothing worth taking now: ask again a little later.
-                wait = max(self.lat * 4, c.record)
-                res.idle[w] += wait
-                clock[w] += wait
-                heapq.heappush(heap, (clock[w], w))
+                parked.append(w)
                 continue
             res.end[w] = clock[w]
         for a in pas:

@@ -50,6 +50,8 @@ SCENES = {
     "corridor": (os.path.join(common.ROOT, "scenes", "corridor.gltf"), 0.2, (512, 512)),
     "conference": (os.path.join(common.SHARED_SCENES, "conference_room", "conference.gltf"), 0.2, (672, 512)),
 }
+# Radiance is slow on the conference room (minutes at 128x128): its side by side is smaller by default.
+RADIANCE_SMALL = {"conference": (64, 64)}
 MPI_ENV = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1",
                OMPI_MCA_btl_tcp_if_include="lo", OMPI_MCA_oob_tcp_if_include="lo")
 
@@ -115,7 +117,8 @@ def run_mpi(scene, mode, np, base, ref, work, timeout):
             "t_amb_s": sum(r["t_amb_s"] for r in ranks), "t_notamb_s": sum(r["t_notamb_s"] for r in ranks),
             "aggregated_s": workers_cpu(s), "idle_s": workers_idle(s), "render_s": s["render_s"], "wall_s": wall,
             "messages": s["messages"], "bytes": s["bytes"], "rmse": rmse, "relmse": relmse,
-            "requests_sent": s.get("requests_sent", 0), "requests_forwarded": s.get("requests_forwarded", 0)}
+            "requests_sent": s.get("requests_sent", 0), "requests_forwarded": s.get("requests_forwarded", 0),
+            "tiles": sum(r.get("tiles", 0) for r in ranks)}
 
 
 def mean_row(rows):
@@ -278,7 +281,7 @@ def main():
     parser.add_argument("--scenes", default=",".join(SCENES))
     parser.add_argument("--size", help="WxH for every scene (default 128x128; --full: the paper's)")
     parser.add_argument("--ranks", help="MPI process counts, master included (default 3,4,5; --full 3,5,9)")
-    parser.add_argument("--repeat", type=int, help="runs per configuration, median taken (default 3; --full 1)")
+    parser.add_argument("--repeat", type=int, help="runs per configuration, median taken (default 2; --full 1)")
     parser.add_argument("--ad", type=int, default=512)
     parser.add_argument("--as", dest="as_", type=int, default=128)
     parser.add_argument("--ar", type=int, default=64)
@@ -288,6 +291,10 @@ def main():
     parser.add_argument("--predict-size", help="image size of the prediction's trace (default 256x256; --full: the paper's)")
     parser.add_argument("--ref-seconds", type=float, default=90, help="time limit of each reference (default 90 s)")
     parser.add_argument("--no-radiance", action="store_true", help="skip rpict and rtrace")
+    parser.add_argument("--radiance-size", help="WxH of the Radiance side by side (default: the bench's, but "
+                        "64x64 for the conference room, where rpict takes minutes; --full: the bench's)")
+    parser.add_argument("--rtrace-all", action="store_true",
+                        help="rtrace -n at every worker count (default: the largest only; --full: all)")
     parser.add_argument("--cluster-csv", default=os.path.join(common.ROOT, "bench", "out", "cluster-bench.csv"))
     parser.add_argument("--out", default=os.path.join(common.ROOT, "bench", "out", "paper"))
     parser.add_argument("--docs", default=DOCS, help="where RESULTS.md and results/ go")
@@ -296,7 +303,7 @@ def main():
     started = time.perf_counter()
     command = "python3 bench/paper.py" + ("" if len(sys.argv) == 1 else " " + " ".join(shlex.quote(a) for a in sys.argv[1:]))
     ranks = [int(r) for r in (args.ranks or ("3,5,9" if args.full else "3,4,5")).split(",")]
-    repeat = args.repeat or (1 if args.full else 3)
+    repeat = args.repeat or (1 if args.full else 2)
     scenes = args.scenes.split(",")
     os.makedirs(args.out, exist_ok=True)
     results_dir = os.path.join(args.docs, "results")
@@ -359,10 +366,34 @@ def main():
                 say(f"{name:>10} {mode:<12} {np} proc: {row['misses']:7.1f} misses, {row['aggregated_s']:.3f} s CPU "
                     f"({row['aggregated_s_min']:.3f}-{row['aggregated_s_max']:.3f}), idle {row['idle_s']:.3f} s, "
                     f"relMSE {row['relmse']:.3e}")
+        write_csv(os.path.join(args.out, "runs.csv"), runs)  # so far (the final one is written at the end)
         if not args.no_radiance:
-            view = exr_view(os.path.join(sdir, "serial.exr"))
-            rows, rad_version = radiance(name, path, size, ambient, view, ref, [n - 1 for n in ranks], sdir)
+            rsize = size
+            if args.radiance_size:
+                rsize = tuple(int(v) for v in args.radiance_size.split("x"))
+            elif name in RADIANCE_SMALL and not args.full:
+                rsize = RADIANCE_SMALL[name]
+            counts = [n - 1 for n in ranks] if (args.full or args.rtrace_all) else [max(ranks) - 1]
+            rdir = os.path.join(sdir, "radiance")
+            os.makedirs(rdir, exist_ok=True)
+            icr = srow
+            rref = ref
+            if rsize != size:
+                rw, rh = rsize
+                rbase = ["-x", str(rw), "-y", str(rh)] + base[4:]
+                rref = os.path.join(args.out, f"ref-{name}-{rw}x{rh}.exr")
+                common.reference(path, rref, ["-x", str(rw), "-y", str(rh), "-ab", "1", "--spp", "1",
+                                              "--light-samples", "16"], noise=0.01, max_seconds=args.ref_seconds)
+                icr = dict(run_serial(path, rbase, rref, rdir), scene=name, width=rw, height=rh)
+                view = exr_view(os.path.join(rdir, "serial.exr"))
+            else:
+                view = exr_view(os.path.join(sdir, "serial.exr"))
+            rows, rad_version = radiance(name, path, rsize, ambient, view, rref, counts, rdir)
+            for r in rows:
+                r.update(width=rsize[0], height=rsize[1])
             rad_rows += rows
+            setups[name]["radiance_icrender"] = icr
+            setups[name]["radiance_size"] = rsize
 
     # Derived figures: speed-ups against the serial run, gain of component mode.
     for r in runs:
@@ -396,9 +427,17 @@ def main():
         st["costs"] = sim_costs(st["serial"], w * h)
         sims[name] = trace
         mine = [r for r in runs if r["scene"] == name]
+        # How long a rank waiting for the master waits here, beyond the work: the noshare runs'
+        # idle time per tile request (their only waits). On cores shared by more processes than
+        # there are cores this is the time a woken process waits for a core.
+        noshare = [r for r in mine if r["mode"] == "noshare" and r.get("tiles")]
+        wake = (sum(r["idle_s"] for r in noshare) / sum(r["tiles"] for r in noshare)) if noshare else icsim.POLL_WAKE
+        st["wake"] = wake
+        say(f"{name}: a round trip to the master takes {wake * 1e3:.2f} ms here (noshare runs' idle time per tile)")
         for r in mine:
             costs, how = validation_costs(r, mine, st["serial"], w * h)
-            res = icsim.simulate(trace, r["mode"], r["workers"], costs, network="loopback", tile=(tw, th))
+            res = icsim.simulate(trace, r["mode"], r["workers"], costs, network="loopback", tile=(tw, th),
+                                 wake=max(wake, 1e-6), cores=os.cpu_count())
             say(f"{name:>10} {r['mode']:<12} {r['processes']} proc: {costs} from {how}")
             sim_rows.append({"scene": name, "mode": r["mode"], "processes": r["processes"], "workers": r["workers"],
                              "costs_from": how,
@@ -489,7 +528,8 @@ def cluster_validation(path, args, tw, th):
             continue
         trace, costs, st = traces[r["scene"]]
         workers = int(r["ranks"]) - 1
-        res = icsim.simulate(trace, r["mode"], workers, costs, network=links[r["link"]], tile=(16, 16))
+        res = icsim.simulate(trace, r["mode"], workers, costs, network=links[r["link"]], tile=(16, 16),
+                             cores=os.cpu_count())
         real_misses, real_bytes = float(r["misses"]), float(r["bytes"])
         out.append({"scene": r["scene"], "link": r["link"], "mode": r["mode"], "processes": int(r["ranks"]),
                     "real_misses": real_misses, "sim_misses": res.misses, "misses_err_pct": pct(res.misses, real_misses),

@@ -153,28 +153,34 @@ def render(*, command, elapsed, runs, gains, rad_rows, sim_rows, cluster_rows, c
                  "sources), `oconv`, then `rpict` with the view icrender used (from its EXR), the same size and "
                  "`-ab 1 -aa -ad -as -ar`, one centred ray per pixel (`-ps 1 -pj 0`, as icrender at 1 spp), and "
                  "`-af` to count records (`lookamb -d`). Radiance's own parallel rendering: `vwrays | rtrace -n N "
-                 "-ffc` with one shared ambient file, N = the worker counts above. Times: wall and CPU of the "
+                 "-ffc` with one shared ambient file, by default at the largest worker count only (`--rtrace-all`: every "
+                 "count), against icrender's cheapest mode (aggregated CPU) at as many workers. The conference room's "
+                 "side by side is 64x64 by default (rpict needs minutes at 128x128 here), with its own reference and "
+                 "icrender serial run at that size. Times: wall and CPU of the "
                  "process(es); icrender's are its serial run (CPU: T_amb + T_notamb; wall: render time) and its "
                  "best mode at N workers (aggregated CPU).\n")
         rows = []
         for name in scenes:
-            s = setups[name]["serial"]
+            st = setups[name]
+            s = st.get("radiance_icrender", st["serial"])
+            rsize = st.get("radiance_size", st["size"])
+            label = f"{name} {rsize[0]}x{rsize[1]}"
             rp = next((r for r in rad_rows if r["scene"] == name and r["renderer"] == "rpict"), None)
             if rp:
-                rows.append([name, "rpict", 1, f(rp["wall_s"]), f(rp["cpu_s"]), rp["records"], f(rp["relmse"], "{:.3e}"),
+                rows.append([label, "rpict", 1, f(rp["wall_s"]), f(rp["cpu_s"]), rp["records"], f(rp["relmse"], "{:.3e}"),
                              ""])
-                rows.append([name, "icrender serial", 1, f(s["render_s"]), f(s["aggregated_s"]), f(s["misses"], "{:.0f}"),
+                rows.append([label, "icrender serial", 1, f(s["render_s"]), f(s["aggregated_s"]), f(s["misses"], "{:.0f}"),
                              f(s["relmse"], "{:.3e}"),
                              f"CPU x{s['aggregated_s'] / rp['cpu_s']:.3f}, records x{s['misses'] / max(rp['records'], 1):.3f}, "
                              f"relMSE x{s['relmse'] / rp['relmse']:.2f}" if rp["cpu_s"] and rp["relmse"] else ""])
             for rt in [r for r in rad_rows if r["scene"] == name and r["renderer"] != "rpict"]:
                 n = rt["processes"]
-                best = [r for r in runs if r["scene"] == name and r["workers"] == n and r["mode"] in MODES]
-                rows.append([name, f"rtrace -n {n}", n, f(rt["wall_s"]), f(rt["cpu_s"]), rt["records"],
+                rows.append([label, f"rtrace -n {n}", n, f(rt["wall_s"]), f(rt["cpu_s"]), rt["records"],
                              f(rt["relmse"], "{:.3e}"), ""])
-                if best:
+                best = [r for r in runs if r["scene"] == name and r["workers"] == n and r["mode"] in MODES]
+                if best and tuple(rsize) == tuple(st["size"]):
                     b = min(best, key=lambda r: r["aggregated_s"])
-                    rows.append([name, f"icrender {b['mode']}", n, f(b["render_s"]), f(b["aggregated_s"]),
+                    rows.append([label, f"icrender {b['mode']} ({n} workers)", n, f(b["render_s"]), f(b["aggregated_s"]),
                                  f(b["misses"], "{:.0f}"), f(b["relmse"], "{:.3e}"),
                                  f"CPU x{b['aggregated_s'] / rt['cpu_s']:.3f}, records x{b['misses'] / max(rt['records'], 1):.3f}"
                                  if rt["cpu_s"] else ""])
@@ -195,8 +201,15 @@ def render(*, command, elapsed, runs, gains, rad_rows, sim_rows, cluster_rows, c
              "N processes (on these shared, oversubscribed cores a record's CPU cost grows with the processes "
              "about, which the serial run cannot show), and the cost of a component-mode request (made, sent, "
              "received, handled) from the component runs at the *other* counts; the serial run uses the serial "
-             "costs. Messages cost 20 us of CPU at each end; a waiting rank notices a message 0.25 ms after it "
-             "arrives on average (the renderer's polling back-off). The prediction below uses the serial runs' "
+             "costs. Messages cost 20 us of CPU at each end. A round trip to the master costs, beyond the network, "
+             "what a waiting rank loses before it notices the answer: here, the noshare runs' idle time per tile "
+             "request (" + ", ".join(f"{k} {v['wake'] * 1e3:.2f} ms" for k, v in setups.items() if "wake" in v) +
+             "; on oversubscribed cores mostly the wait for a core); on the predicted clusters 0.5 ms (the "
+             "renderer's polling back-off, 0.25 ms at each end). The measured runs had more worker ranks than "
+             f"cores, so their simulation shares {os.cpu_count()} cores among the ranks in 3 ms time slices (the "
+             "order of Linux's scheduler slices; an assumption, not fitted): ranks taking turns make fewer "
+             "records twice than ranks running at once, which matters most to component mode's PAs. The "
+             "prediction gives every rank a processor. The prediction below uses the serial runs' "
              "costs (a processor to itself) and the request cost of all component runs. "
              "Error = (simulated - measured) / measured.\n")
     worst = {}
