@@ -479,12 +479,18 @@ def main():
         costs.request_pr = costs.request_pa = request_cost(comp, runs, st["serial"], w * h) / 2
         serial_res = icsim.simulate(ptrace, "serial", 1, costs, network="1gbit", tile=(tw, th))
         say(f"{name}: predicting {pw}x{ph} ({len(ptrace.tiles(tw, th))} tiles), {costs}")
-        for net in ("1gbit", "100gbit"):
+        # What if a request cost only what the protocol needs (1 us to make, send and read) and a
+        # waiting rank noticed a message at once (blocking receives instead of polling)?
+        lean = icsim.Costs(record=costs.record, pixel=costs.pixel, message=costs.message, request_pr=1e-6,
+                           request_pa=1e-6)
+        scenarios = {"1gbit": (costs, icsim.POLL_WAKE, "1gbit"), "100gbit": (costs, icsim.POLL_WAKE, "100gbit"),
+                     "1gbit-lean": (lean, 1e-6, "1gbit")}
+        for net, (c, wake, network) in scenarios.items():
             for p in predict:
                 for mode in MODES:
                     if mode == "component" and p < 2:
                         continue
-                    res = icsim.simulate(ptrace, mode, p, costs, network=net, tile=(tw, th))
+                    res = icsim.simulate(ptrace, mode, p, c, network=network, tile=(tw, th), wake=wake)
                     pred_rows.append({"scene": name, "network": net, "mode": mode, "workers": p,
                                       "width": pw, "height": ph, "misses": res.misses,
                                       "serial_misses": serial_res.misses,
