@@ -183,6 +183,10 @@ pub struct RenderArgs {
     /// Report the error against this reference EXR after rendering.
     #[arg(long = "reference")]
     pub reference: Option<PathBuf>,
+    /// Serial mode: write every irradiance cache lookup and new record to this text file (for
+    /// the bench's cluster simulation; see src/irradiance/trace.rs).
+    #[arg(long = "trace-cache", hide = true)]
+    pub trace_cache: Option<PathBuf>,
     /// Do not write the PNG preview.
     #[arg(long = "no-preview")]
     pub no_preview: bool,

@@ -198,7 +198,7 @@ impl Job {
                 scene.cube_size(),
             );
             let cache = IrradianceCache::new(settings);
-            Some(match &args.ambient_file {
+            let cache = match &args.ambient_file {
                 Some(path) => {
                     let cache = cache
                         .with_file(path, &cache_settings_line(args, &scene))
@@ -214,6 +214,10 @@ impl Job {
                     }
                     cache
                 }
+                None => cache,
+            };
+            Some(match &args.trace_cache {
+                Some(path) => cache.with_trace(path).map_err(CommandError)?,
                 None => cache,
             })
         } else {

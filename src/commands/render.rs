@@ -248,6 +248,9 @@ pub fn run(args: &RenderArgs) -> CommandResult {
         None => Mode::Serial,
     };
     if mode != Mode::Serial {
+        if args.trace_cache.is_some() {
+            return Err(CommandError("--trace-cache traces the serial mode only".into()));
+        }
         return crate::parallel::run(args, mode);
     }
     let wall = Instant::now();

@@ -8,6 +8,7 @@ pub mod hemisphere;
 pub mod index;
 pub mod persist;
 pub mod record;
+pub mod trace;
 
 use glam::Vec3;
 use hemisphere::Hemisphere;
@@ -91,6 +92,8 @@ pub struct IrradianceCache {
     pub load_report: LoadReport,
     /// Records made here and not yet shared with other ranks (None when nothing is shared).
     outbox: Option<Mutex<Vec<Record>>>,
+    /// `--trace-cache`: lookups and new records written as text.
+    trace: Option<trace::CacheTrace>,
 }
 
 impl IrradianceCache {
@@ -106,6 +109,7 @@ impl IrradianceCache {
             file: None,
             load_report: LoadReport::default(),
             outbox: None,
+            trace: None,
         }
     }
 
@@ -118,6 +122,26 @@ impl IrradianceCache {
         self.file = Some(file);
         self.load_report = report;
         Ok(self)
+    }
+
+    /// Writes every lookup and new record to a text file (see `trace`).
+    pub fn with_trace(mut self, path: &std::path::Path) -> Result<IrradianceCache, String> {
+        self.trace = Some(trace::CacheTrace::create(path)?);
+        Ok(self)
+    }
+
+    /// Whether `--trace-cache` is on.
+    pub fn tracing(&self) -> bool {
+        self.trace.is_some()
+    }
+
+    /// Traces a lookup at `record`'s position and normal, and the record a miss there makes
+    /// (after a hit: would make), when tracing is on.
+    pub fn trace(&self, pixel: u32, level: u32, hit: bool, record: &Record) {
+        if let Some(t) = &self.trace {
+            t.write(&trace::lookup_line(pixel, level, hit, record.position, record.normal));
+            t.write(&trace::record_line(pixel, record));
+        }
     }
 
     pub fn len(&self) -> usize {
@@ -191,6 +215,9 @@ impl IrradianceCache {
 
     /// Flushes the file; its first write error, if any.
     pub fn finish(&self) -> Result<(), String> {
+        if let Some(t) = &self.trace {
+            t.finish()?;
+        }
         self.file.as_ref().map_or(Ok(()), CacheFile::finish)
     }
 

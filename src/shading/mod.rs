@@ -521,9 +521,17 @@ impl<'a> Integrator<'a> {
         counts.lookups += 1;
         if let Some(value) = cache.lookup(hit.position, hit.normal, state.level) {
             counts.hits += 1;
+            if cache.tracing() {
+                // The record a miss here would make (for the trace only: its own random stream
+                // and counters, so the render and its statistics stay as without the trace).
+                let mut rng = Rng::new(!u64::from(counts.pixel), counts.lookups);
+                let shadow = self.compute_record(cache, hit, state, &mut rng, &mut RayCounts::default());
+                cache.trace(counts.pixel, state.level, true, &shadow);
+            }
             return value;
         }
         let record = self.compute_record(cache, hit, state, rng, counts);
+        cache.trace(counts.pixel, state.level, false, &record);
         counts.records_computed += 1;
         if state.level == 0 {
             counts.records_level0 += 1;

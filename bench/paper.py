@@ -1,0 +1,590 @@
+#!/usr/bin/env python3
+"""The paper's evaluation (Debattista, Santos & Chalmers, EGPGV 2006, section 6), Radiance side by
+side, and a cluster-scale prediction, in one command:
+
+    python3 bench/paper.py            # small default (about 20 minutes on 2 cores)
+    python3 bench/paper.py --full     # the paper's image sizes and more ranks (hours)
+
+For the Cornell box, the corridor and the conference room it
+  1. renders (or reuses, from bench/out/paper/) a converged reference per scene and size;
+  2. runs the serial renderer (with --trace-cache, the simulation's input) and noshare,
+     centralised, broadcast and component modes under mpirun at each process count (--ranks; the
+     master controller is one of the processes, as in the paper's "additional node");
+  3. records each run's statistics and its error against the reference;
+  4. exports each scene to Radiance, runs rpict with the same view and -ab -aa -ad -as -ar, and
+     rtrace -n N with a shared ambient file at the same worker counts;
+  5. simulates every mode from the serial trace (bench/icsim.py), prints the prediction error
+     at the measured counts, predicts 4 .. 1024 processors on 1 Gbit and 100 Gbit networks, and
+     checks the cluster test bed's measurements (bench/out/cluster-bench.csv) when present;
+  6. writes CSVs and plots under bench/out/paper/ and docs/results/, and docs/RESULTS.md.
+
+Times: this machine's cores are shared, so "aggregated time" is CPU time (T_amb + T_notamb
+summed over the worker ranks, from --stats), and "speed-up" measured here is the work speed-up
+P x T_serial / aggregated time (what P dedicated processors would reach without idle time); the
+wall-clock speed-up is printed too but means little with more ranks than cores.
+"""
+
+import argparse
+import csv
+import datetime
+import json
+import os
+import platform
+import re
+import shlex
+import shutil
+import statistics
+import subprocess
+import sys
+import time
+
+import common
+import icsim
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+DOCS = os.path.join(common.ROOT, "docs")
+MODES = ["noshare", "centralised", "broadcast", "component"]
+# name: (scene path, -aa as in the paper: 0.1 for the Cornell box, 0.2 otherwise, full size)
+SCENES = {
+    "cornell": (os.path.join(common.SHARED_SCENES, "cornell_box", "CornellBox-Original.gltf"), 0.1, (512, 512)),
+    "corridor": (os.path.join(common.ROOT, "scenes", "corridor.gltf"), 0.2, (512, 512)),
+    "conference": (os.path.join(common.SHARED_SCENES, "conference_room", "conference.gltf"), 0.2, (672, 512)),
+}
+# Radiance is slow on the conference room (minutes at 128x128): its side by side is smaller by default.
+RADIANCE_SMALL = {"conference": (64, 64)}
+MPI_ENV = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1",
+               OMPI_MCA_btl_tcp_if_include="lo", OMPI_MCA_oob_tcp_if_include="lo")
+
+
+def say(msg):
+    print(f"[paper] {msg}", flush=True)
+
+
+def rel(path):
+    return os.path.relpath(path, common.ROOT)
+
+
+# -- runs ------------------------------------------------------------------------------------
+
+def workers_cpu(stats):
+    """Aggregated time of the worker ranks (the master controller excluded): T_amb + T_notamb."""
+    ranks = [r for r in stats.get("per_rank", []) if r.get("role") != "mc"]
+    if not ranks:
+        return stats["t_amb_s"] + stats["t_notamb_s"]
+    return sum(r["t_amb_s"] + r["t_notamb_s"] for r in ranks)
+
+
+def workers_idle(stats):
+    return sum(r.get("idle_s", 0.0) for r in stats.get("per_rank", []) if r.get("role") != "mc")
+
+
+def composite_error(exr, ref):
+    e = common.compare(exr, ref)
+    return e.get("composite", (float("nan"), float("nan")))
+
+
+def run_serial(scene, base, ref, work, trace=None):
+    out = os.path.join(work, "serial.exr")
+    opts = base + ["--threads", "1"] + (["--trace-cache", trace] if trace else [])
+    start = time.perf_counter()
+    stats, _ = common.render(scene, out, opts)
+    wall = time.perf_counter() - start
+    rmse, relmse = composite_error(out, ref) if ref else (float("nan"), float("nan"))
+    return {"mode": "serial", "processes": 1, "workers": 1, "misses": stats["records_computed"],
+            "lookups": stats["lookups"], "t_amb_s": stats["t_amb_s"], "t_notamb_s": stats["t_notamb_s"],
+            "aggregated_s": stats["t_amb_s"] + stats["t_notamb_s"], "idle_s": 0.0, "render_s": stats["render_s"],
+            "wall_s": wall, "messages": 0, "bytes": 0, "rmse": rmse, "relmse": relmse}
+
+
+def run_mpi(scene, mode, np, base, ref, work, timeout):
+    out, stats_path = os.path.join(work, f"{mode}-{np}.exr"), os.path.join(work, f"{mode}-{np}.json")
+    for p in (out, stats_path):
+        if os.path.exists(p):
+            os.remove(p)
+    cmd = ["mpirun", "--oversubscribe", "-np", str(np), common.BINARY, "render", scene, "-o", out, "--mode", mode,
+           "-q", "--no-preview", "--overwrite", "--stats", stats_path] + base
+    start = time.perf_counter()
+    result = subprocess.run(cmd, capture_output=True, text=True, env=MPI_ENV, timeout=timeout)
+    wall = time.perf_counter() - start
+    if result.returncode != 0:
+        lines = [l for l in result.stderr.splitlines() if l.strip()]
+        raise RuntimeError(lines[-1] if lines else f"exit code {result.returncode}")
+    with open(stats_path) as f:
+        s = json.load(f)
+    rmse, relmse = composite_error(out, ref)
+    ranks = [r for r in s["per_rank"] if r.get("role") != "mc"]
+    return {"mode": mode, "processes": np, "workers": np - 1, "misses": s["records_computed"], "lookups": s["lookups"],
+            "t_amb_s": sum(r["t_amb_s"] for r in ranks), "t_notamb_s": sum(r["t_notamb_s"] for r in ranks),
+            "aggregated_s": workers_cpu(s), "idle_s": workers_idle(s), "render_s": s["render_s"], "wall_s": wall,
+            "messages": s["messages"], "bytes": s["bytes"], "rmse": rmse, "relmse": relmse,
+            "requests_sent": s.get("requests_sent", 0), "requests_forwarded": s.get("requests_forwarded", 0),
+            "tiles": sum(r.get("tiles", 0) for r in ranks)}
+
+
+def mean_row(rows):
+    """Repeated runs as one: the median of each number (robust to a run the shared machine
+    slowed down), the rest from the first."""
+    out = dict(rows[0])
+    for k, v in rows[0].items():
+        if isinstance(v, (int, float)) and k not in ("processes", "workers"):
+            out[k] = statistics.median(r[k] for r in rows)
+    out["repeats"] = len(rows)
+    out["aggregated_s_min"] = min(r["aggregated_s"] for r in rows)
+    out["aggregated_s_max"] = max(r["aggregated_s"] for r in rows)
+    return out
+
+
+# -- Radiance -----------------------------------------------------------------------------
+
+def exr_view(exr):
+    out = subprocess.run(["oiiotool", "--info", "-v", exr], capture_output=True, text=True, check=True).stdout
+    m = re.search(r'^\s*icrender/view:\s*"(.*)"\s*$', out, re.M)
+    return m.group(1) if m else None
+
+
+def radiance(scene_name, scene, size, ambient, view, ref, ranks, work):
+    """rpict on one core, then rtrace -n N with a shared ambient file: rows of time, records, error."""
+    import vs_radiance  # the bench beside this one: pyradiance's binaries and environment
+    bin_dir, env = vs_radiance.radiance_tools()
+    rad, octree = os.path.join(work, "scene.rad"), os.path.join(work, "scene.oct")
+    for p in (rad, octree):
+        if os.path.exists(p):
+            os.remove(p)
+    subprocess.run([common.BINARY, "export", scene, "-o", rad], check=True, capture_output=True)
+    with open(octree, "wb") as f:
+        subprocess.run([os.path.join(bin_dir, "oconv"), rad], stdout=f, env=env, check=True)
+    w, h = size
+    amb_opts = ["-ab", "1", "-aa", str(ambient["aa"]), "-ad", str(ambient["ad"]), "-as", str(ambient["as"]),
+                "-ar", str(ambient["ar"])]
+    version = subprocess.run([os.path.join(bin_dir, "rpict"), "-version"], capture_output=True, text=True, env=env)
+    rows = []
+
+    def records(amb):
+        out = subprocess.run([os.path.join(bin_dir, "lookamb"), "-h", "-d", amb], capture_output=True, text=True,
+                             env=env).stdout
+        return sum(1 for line in out.splitlines() if line.strip())
+
+    def finish(label, procs, hdr, amb, wall, cpu):
+        exr = hdr[:-4] + ".exr"
+        subprocess.run(["oiiotool", hdr, "-o", exr], check=True, capture_output=True)
+        rmse, relmse = composite_error(exr, ref)
+        rows.append({"scene": scene_name, "renderer": label, "processes": procs, "wall_s": wall, "cpu_s": cpu,
+                     "records": records(amb), "rmse": rmse, "relmse": relmse})
+        say(f"{scene_name:>10} {label:<14} {procs} proc: {wall:6.2f} s wall, {cpu:6.2f} s CPU, "
+            f"{rows[-1]['records']} records, relMSE {relmse:.3e}")
+
+    # rpict, one process: one centred ray per pixel (-ps 1 -pj 0) as icrender at 1 spp.
+    hdr, amb = os.path.join(work, "rpict.hdr"), os.path.join(work, "rpict.amb")
+    for p in (hdr, amb):
+        if os.path.exists(p):
+            os.remove(p)
+    cmd = [os.path.join(bin_dir, "rpict"), "-x", str(w), "-y", str(h), "-pa", "0", "-ps", "1", "-pj", "0",
+           *shlex.split(view), *amb_opts, "-af", amb, octree]
+    wall, cpu = timed(cmd, hdr, env)
+    finish("rpict", 1, hdr, amb, wall, cpu)
+    # rtrace -n N: Radiance's own multi-process rendering, sharing one ambient file.
+    vw = [os.path.join(bin_dir, "vwrays"), "-ff", "-x", str(w), "-y", str(h), "-pa", "0", "-pj", "0",
+          *shlex.split(view)]
+    for n in ranks:
+        hdr, amb = os.path.join(work, f"rtrace-{n}.hdr"), os.path.join(work, f"rtrace-{n}.amb")
+        for p in (hdr, amb):
+            if os.path.exists(p):
+                os.remove(p)
+        rays = subprocess.run(vw, capture_output=True, env=env, check=True).stdout
+        dims = subprocess.run(vw[:1] + ["-d"] + vw[1:], capture_output=True, text=True, env=env,
+                              check=True).stdout.split()
+        cmd = [os.path.join(bin_dir, "rtrace"), "-n", str(n), "-ffc", *dims, *amb_opts, "-af", amb, octree]
+        wall, cpu = timed(cmd, hdr, env, stdin=rays)
+        finish("rtrace -n", n, hdr, amb, wall, cpu)
+    return rows, (version.stdout or version.stderr).strip()
+
+
+def timed(cmd, out_path, env, stdin=None):
+    import resource
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    start = time.perf_counter()
+    with open(out_path, "wb") as f:
+        subprocess.run(cmd, stdout=f, stderr=subprocess.PIPE, input=stdin, env=env, check=True)
+    wall = time.perf_counter() - start
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return wall, (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+
+
+# -- simulation ----------------------------------------------------------------------------
+
+def sim_costs(serial, pixels, component=None):
+    """Per-record and per-pixel costs measured from the scene's serial runs (CPU seconds); the
+    cost of a component-mode request (made, sent, received, handled: split evenly between the PR
+    and the rank that computes it) from a real component-mode run's aggregated time beyond its
+    records and pixels, when one is given (the calibration run)."""
+    record = serial["t_amb_s"] / max(serial["misses"], 1)
+    pixel = serial["t_notamb_s"] / pixels
+    request = 0.0
+    if component and component.get("requests_sent"):
+        extra = component["aggregated_s"] - component["misses"] * record - pixels * pixel
+        request = max(extra, 0.0) / component["requests_sent"]
+    return icsim.Costs(record=record, pixel=pixel, message=20e-6, request_pr=request / 2, request_pa=request / 2)
+
+
+def mode_costs(runs, processes, pixels, serial):
+    """Per-record and per-pixel CPU costs measured from the given runs of the traditional modes at
+    one process count (on shared cores a record costs more CPU time with more processes about),
+    or the serial runs' when there are none."""
+    same = [r for r in runs if r["processes"] == processes and r["mode"] in ("noshare", "centralised", "broadcast")]
+    if not same:
+        return sim_costs(serial, pixels), "the serial runs"
+    record = sum(r["t_amb_s"] for r in same) / max(sum(r["misses"] for r in same), 1)
+    pixel = sum(r["t_notamb_s"] for r in same) / (pixels * len(same))
+    return icsim.Costs(record=record, pixel=pixel, message=20e-6), \
+        f"{'/'.join(r['mode'] for r in same)} at {processes} processes"
+
+
+def request_cost(comp_runs, runs, serial, pixels):
+    """CPU seconds per component-mode request: the component runs' aggregated time beyond their
+    records and pixels (costed as the traditional modes' at the same count), per request."""
+    extra, requests = 0.0, 0
+    for r in comp_runs:
+        c, _ = mode_costs(runs, r["processes"], pixels, serial)
+        extra += r["aggregated_s"] - r["misses"] * c.record - pixels * c.pixel
+        requests += r.get("requests_sent", 0)
+    return max(extra, 0.0) / requests if requests else 0.0
+
+
+def validation_costs(row, runs, serial, pixels):
+    """Costs to simulate one measured run, measured from *other* runs of the same scene (leave one
+    out): per record and pixel from the other traditional modes at the same process count (the
+    serial runs for the serial run), per request from the component runs at the other counts."""
+    if row["mode"] == "serial":
+        return sim_costs(serial, pixels), "the serial runs"
+    others = [r for r in runs if r is not row and r["mode"] != row["mode"]]
+    costs, how = mode_costs(others, row["processes"], pixels, serial)
+    if row["mode"] == "component":
+        comp = [r for r in runs if r["mode"] == "component" and r["processes"] != row["processes"]]
+        if comp:
+            req = request_cost(comp, runs, serial, pixels)
+            how += f"; requests from component at {'/'.join(str(r['processes']) for r in comp)} processes"
+        else:
+            req = request_cost([row], runs, serial, pixels)
+            how += "; requests from this run (calibration: its time is fitted)"
+        costs.request_pr = costs.request_pa = req / 2
+    return costs, how
+
+
+def pct(pred, real):
+    return 100.0 * (pred - real) / real if real else float("nan")
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--full", action="store_true",
+                        help="the paper's sizes (512x512, conference 672x512) and 3,5,9 processes")
+    parser.add_argument("--scenes", default=",".join(SCENES))
+    parser.add_argument("--size", help="WxH for every scene (default 128x128; --full: the paper's)")
+    parser.add_argument("--ranks", help="MPI process counts, master included (default 3,4,5; --full 3,5,9)")
+    parser.add_argument("--repeat", type=int, help="runs per configuration, median taken (default 2; --full 1)")
+    parser.add_argument("--ad", type=int, default=512)
+    parser.add_argument("--as", dest="as_", type=int, default=128)
+    parser.add_argument("--ar", type=int, default=64)
+    parser.add_argument("--tile", default="16x16")
+    parser.add_argument("--predict", default="4,8,16,24,64,128,256,512,1024",
+                        help="processor counts (workers) the simulation predicts")
+    parser.add_argument("--predict-size", help="image size of the prediction's trace (default 256x256; --full: the paper's)")
+    parser.add_argument("--ref-seconds", type=float, default=90, help="time limit of each reference (default 90 s)")
+    parser.add_argument("--no-radiance", action="store_true", help="skip rpict and rtrace")
+    parser.add_argument("--radiance-size", help="WxH of the Radiance side by side (default: the bench's, but "
+                        "64x64 for the conference room, where rpict takes minutes; --full: the bench's)")
+    parser.add_argument("--rtrace-all", action="store_true",
+                        help="rtrace -n at every worker count (default: the largest only; --full: all)")
+    parser.add_argument("--cluster-csv", default=os.path.join(common.ROOT, "bench", "out", "cluster-bench.csv"))
+    parser.add_argument("--out", default=os.path.join(common.ROOT, "bench", "out", "paper"))
+    parser.add_argument("--docs", default=DOCS, help="where RESULTS.md and results/ go")
+    parser.add_argument("--timeout", type=int, default=900, help="seconds before one mpirun is given up")
+    args = parser.parse_args()
+    started = time.perf_counter()
+    command = "python3 bench/paper.py" + ("" if len(sys.argv) == 1 else " " + " ".join(shlex.quote(a) for a in sys.argv[1:]))
+    ranks = [int(r) for r in (args.ranks or ("3,5,9" if args.full else "3,4,5")).split(",")]
+    repeat = args.repeat or (1 if args.full else 2)
+    scenes = args.scenes.split(",")
+    os.makedirs(args.out, exist_ok=True)
+    results_dir = os.path.join(args.docs, "results")
+    os.makedirs(results_dir, exist_ok=True)
+    say("building icrender")
+    common.build()
+    work = common.scratch()
+    tw, th = (int(v) for v in args.tile.split("x"))
+
+    runs, rad_rows, setups = [], [], {}
+    rad_version = None
+    for name in scenes:
+        path, aa, full_size = SCENES[name]
+        size = tuple(int(v) for v in args.size.split("x")) if args.size else (full_size if args.full else (128, 128))
+        w, h = size
+        ambient = {"aa": aa, "ad": args.ad, "as": args.as_, "ar": args.ar}
+        base = ["-x", str(w), "-y", str(h), "-ab", "1", "-aa", str(aa), "-ad", str(args.ad), "-as", str(args.as_),
+                "-ar", str(args.ar), "--tile", args.tile]
+        ref = os.path.join(args.out, f"ref-{name}-{w}x{h}.exr")
+        t0 = time.perf_counter()
+        if not os.path.exists(ref):
+            say(f"{name}: reference {w}x{h} (at most {args.ref_seconds:.0f} s)")
+        common.reference(path, ref, ["-x", str(w), "-y", str(h), "-ab", "1", "--spp", "1", "--light-samples", "16"],
+                         noise=0.01, max_seconds=args.ref_seconds)
+        ref_s = time.perf_counter() - t0
+        sdir = os.path.join(work, name)
+        os.makedirs(sdir, exist_ok=True)
+        trace = os.path.join(args.out, f"trace-{name}-{w}x{h}.txt")
+        # The traced run samples a record at every lookup (slow): its times are not used.
+        traced = run_serial(path, base, None, sdir, trace=trace)
+        serial = [run_serial(path, base, ref, sdir) for _ in range(max(repeat, 3))]
+        if any(r["misses"] != traced["misses"] for r in serial):
+            say(f"{name}: WARNING: the traced run made {traced['misses']} records, the others "
+                f"{[r['misses'] for r in serial]}")
+        srow = mean_row(serial)
+        srow["aggregated_s"] = statistics.median(r["aggregated_s"] for r in serial)
+        srow["t_amb_s"] = statistics.median(r["t_amb_s"] for r in serial)
+        srow["t_notamb_s"] = statistics.median(r["t_notamb_s"] for r in serial)
+        srow.update(scene=name, width=w, height=h)
+        runs.append(srow)
+        say(f"{name:>10} serial       : {srow['misses']:.0f} misses, {srow['aggregated_s']:.3f} s CPU, "
+            f"relMSE {srow['relmse']:.3e}")
+        setups[name] = {"path": path, "size": size, "aa": aa, "base": base, "ref": ref, "trace": trace,
+                        "serial": srow, "ref_s": ref_s}
+        for mode in MODES:
+            for np in ranks:
+                if mode == "component" and np < 3:
+                    continue
+                reps = []
+                for _ in range(repeat):
+                    try:
+                        reps.append(run_mpi(path, mode, np, base, ref, sdir, args.timeout))
+                    except (RuntimeError, subprocess.TimeoutExpired) as e:
+                        say(f"{name:>10} {mode:<12} {np} processes: FAILED: {e}")
+                if not reps:
+                    continue
+                row = mean_row(reps)
+                row.update(scene=name, width=w, height=h)
+                runs.append(row)
+                say(f"{name:>10} {mode:<12} {np} proc: {row['misses']:7.1f} misses, {row['aggregated_s']:.3f} s CPU "
+                    f"({row['aggregated_s_min']:.3f}-{row['aggregated_s_max']:.3f}), idle {row['idle_s']:.3f} s, "
+                    f"relMSE {row['relmse']:.3e}")
+        write_csv(os.path.join(args.out, "runs.csv"), runs)  # so far (the final one is written at the end)
+        if not args.no_radiance:
+            rsize = size
+            if args.radiance_size:
+                rsize = tuple(int(v) for v in args.radiance_size.split("x"))
+            elif name in RADIANCE_SMALL and not args.full:
+                rsize = RADIANCE_SMALL[name]
+            counts = [n - 1 for n in ranks] if (args.full or args.rtrace_all) else [max(ranks) - 1]
+            rdir = os.path.join(sdir, "radiance")
+            os.makedirs(rdir, exist_ok=True)
+            icr = srow
+            rref = ref
+            if rsize != size:
+                rw, rh = rsize
+                rbase = ["-x", str(rw), "-y", str(rh)] + base[4:]
+                rref = os.path.join(args.out, f"ref-{name}-{rw}x{rh}.exr")
+                common.reference(path, rref, ["-x", str(rw), "-y", str(rh), "-ab", "1", "--spp", "1",
+                                              "--light-samples", "16"], noise=0.01, max_seconds=args.ref_seconds)
+                icr = dict(run_serial(path, rbase, rref, rdir), scene=name, width=rw, height=rh)
+                view = exr_view(os.path.join(rdir, "serial.exr"))
+            else:
+                view = exr_view(os.path.join(sdir, "serial.exr"))
+            rows, rad_version = radiance(name, path, rsize, ambient, view, rref, counts, rdir)
+            for r in rows:
+                r.update(width=rsize[0], height=rsize[1])
+            rad_rows += rows
+            setups[name]["radiance_icrender"] = icr
+            setups[name]["radiance_size"] = rsize
+
+    # Derived figures: speed-ups against the serial run, gain of component mode.
+    for r in runs:
+        s = setups[r["scene"]]["serial"]
+        p = r["workers"]
+        r["efficiency_pct"] = 100.0 * s["aggregated_s"] / r["aggregated_s"] if r["aggregated_s"] else float("nan")
+        r["work_speedup"] = p * s["aggregated_s"] / r["aggregated_s"] if r["aggregated_s"] else float("nan")
+        r["wall_speedup"] = s["render_s"] / r["render_s"] if r["render_s"] else float("nan")
+        busy_total = r["aggregated_s"] + r["idle_s"]
+        r["idle_pct"] = 100.0 * r["idle_s"] / busy_total if busy_total else 0.0
+    gains = []
+    for name in scenes:
+        for np in ranks:
+            by_mode = {r["mode"]: r for r in runs if r["scene"] == name and r["processes"] == np and r["mode"] in MODES}
+            if "component" not in by_mode or len(by_mode) < 2:
+                continue
+            others = sorted((r["work_speedup"], m) for m, r in by_mode.items() if m != "component")
+            second, second_mode = others[-1]
+            gains.append({"scene": name, "processes": np, "workers": np - 1,
+                          "component_speedup": by_mode["component"]["work_speedup"], "second_mode": second_mode,
+                          "second_speedup": second,
+                          "gain_pct": 100.0 * (by_mode["component"]["work_speedup"] / second - 1.0)})
+
+    # -- simulation: validation at the measured counts ---------------------------------------
+    say("simulation: validating against the measured runs")
+    sim_rows, sims = [], {}
+    for name in scenes:
+        st = setups[name]
+        w, h = st["size"]
+        trace = icsim.Trace(st["trace"], w, h, st["aa"])
+        st["costs"] = sim_costs(st["serial"], w * h)
+        sims[name] = trace
+        mine = [r for r in runs if r["scene"] == name]
+        # How long a rank waiting for the master waits here, beyond the work: the noshare runs'
+        # idle time per tile request (their only waits). On cores shared by more processes than
+        # there are cores this is the time a woken process waits for a core.
+        noshare = [r for r in mine if r["mode"] == "noshare" and r.get("tiles")]
+        wake = (sum(r["idle_s"] for r in noshare) / sum(r["tiles"] for r in noshare)) if noshare else icsim.POLL_WAKE
+        st["wake"] = wake
+        say(f"{name}: a round trip to the master takes {wake * 1e3:.2f} ms here (noshare runs' idle time per tile)")
+        for r in mine:
+            costs, how = validation_costs(r, mine, st["serial"], w * h)
+            res = icsim.simulate(trace, r["mode"], r["workers"], costs, network="loopback", tile=(tw, th),
+                                 wake=max(wake, 1e-6), cores=os.cpu_count())
+            say(f"{name:>10} {r['mode']:<12} {r['processes']} proc: {costs} from {how}")
+            sim_rows.append({"scene": name, "mode": r["mode"], "processes": r["processes"], "workers": r["workers"],
+                             "costs_from": how,
+                             "real_misses": r["misses"], "sim_misses": res.misses,
+                             "misses_err_pct": pct(res.misses, r["misses"]),
+                             "real_aggregated_s": r["aggregated_s"], "sim_aggregated_s": res.aggregated,
+                             "time_err_pct": pct(res.aggregated, r["aggregated_s"]),
+                             "real_messages": r["messages"], "sim_messages": res.messages,
+                             "real_bytes": r["bytes"], "sim_bytes": res.bytes})
+    for r in sim_rows:
+        say(f"{r['scene']:>10} {r['mode']:<12} {r['processes']} proc: misses real {r['real_misses']:7.1f} "
+            f"sim {r['sim_misses']:6d} ({r['misses_err_pct']:+5.1f}%), aggregated time real "
+            f"{r['real_aggregated_s']:.3f} s sim {r['sim_aggregated_s']:.3f} s ({r['time_err_pct']:+5.1f}%)")
+
+    # -- the cluster test bed's runs (issue 10), if measured ------------------------------
+    cluster_rows, cluster_note = cluster_validation(args.cluster_csv, args, tw, th)
+
+    # -- prediction ------------------------------------------------------------------------
+    predict = [int(p) for p in args.predict.split(",")]
+    pred_rows = []
+    for name in scenes:
+        st = setups[name]
+        if args.predict_size:
+            pw, ph = (int(v) for v in args.predict_size.split("x"))
+        else:
+            pw, ph = SCENES[name][2] if args.full else (256, 256)
+        ptrace_path = os.path.join(args.out, f"trace-{name}-{pw}x{ph}.txt")
+        if (pw, ph) != st["size"]:
+            pbase = ["-x", str(pw), "-y", str(ph)] + st["base"][4:]
+            pserial = run_serial(st["path"], pbase, None, os.path.join(work, name), trace=ptrace_path)
+        else:
+            pserial = st["serial"]
+            ptrace_path = st["trace"]
+        ptrace = icsim.Trace(ptrace_path, pw, ph, st["aa"])
+        # Per record and pixel: the serial runs (a processor to itself); per request: the
+        # component runs at every measured count.
+        costs = st["costs"]
+        comp = [r for r in runs if r["scene"] == name and r["mode"] == "component"]
+        costs.request_pr = costs.request_pa = request_cost(comp, runs, st["serial"], w * h) / 2
+        serial_res = icsim.simulate(ptrace, "serial", 1, costs, network="1gbit", tile=(tw, th))
+        say(f"{name}: predicting {pw}x{ph} ({len(ptrace.tiles(tw, th))} tiles), {costs}")
+        # What if a request cost only what the protocol needs (1 us to make, send and read) and a
+        # waiting rank noticed a message at once (blocking receives instead of polling)?
+        lean = icsim.Costs(record=costs.record, pixel=costs.pixel, message=costs.message, request_pr=1e-6,
+                           request_pa=1e-6)
+        scenarios = {"1gbit": (costs, icsim.POLL_WAKE, "1gbit"), "100gbit": (costs, icsim.POLL_WAKE, "100gbit"),
+                     "1gbit-lean": (lean, 1e-6, "1gbit")}
+        for net, (c, wake, network) in scenarios.items():
+            for p in predict:
+                for mode in MODES:
+                    if mode == "component" and p < 2:
+                        continue
+                    res = icsim.simulate(ptrace, mode, p, c, network=network, tile=(tw, th), wake=wake)
+                    pred_rows.append({"scene": name, "network": net, "mode": mode, "workers": p,
+                                      "width": pw, "height": ph, "misses": res.misses,
+                                      "serial_misses": serial_res.misses,
+                                      "aggregated_s": res.aggregated, "makespan_s": res.makespan,
+                                      "speedup": serial_res.makespan / res.makespan,
+                                      "efficiency_pct": 100 * serial_res.makespan / res.makespan / p,
+                                      "idle_pct": 100 * res.idle_fraction, "messages": res.messages,
+                                      "bytes": res.bytes})
+        say(f"{name}: prediction done ({time.perf_counter() - started:.0f} s so far)")
+
+    elapsed = time.perf_counter() - started
+    write_outputs(args, runs, gains, rad_rows, sim_rows, cluster_rows, cluster_note, pred_rows, setups, scenes,
+                  ranks, repeat, command, elapsed, rad_version, predict)
+    say(f"done in {elapsed / 60:.1f} min")
+
+
+def cluster_validation(path, args, tw, th):
+    """Simulates the test bed's runs (bench/cluster_bench.py) at their size and link speed."""
+    if not os.path.exists(path):
+        note = f"{rel(path)} is absent (run `sudo python3 bench/cluster_bench.py` first): cluster check skipped."
+        say(note)
+        return [], note
+    with open(path) as f:
+        rows = [r for r in csv.DictReader(f) if r.get("status") == "ok"]
+    serial = {r["scene"]: r for r in rows if r["mode"] == "serial"}
+    # cluster_bench.py's defaults; the CSV does not record them.
+    size, opts = (192, 144), "-ab 1 -aa 0.2 -ad 256 -as 64 --tile 16x16"
+    out, work = [], common.scratch()
+    links = {"unshaped": "loopback", "1gbit": "1gbit", "100mbit": "100mbit"}
+    traces = {}
+    for name, s in serial.items():
+        if name not in SCENES:
+            continue
+        trace = os.path.join(args.out, f"trace-cluster-{name}.txt")
+        base = ["-x", str(size[0]), "-y", str(size[1])] + opts.split()
+        run_serial(SCENES[name][0], base, None, work, trace=trace)
+        st = run_serial(SCENES[name][0], base, None, work)
+        traces[name] = (icsim.Trace(trace, size[0], size[1], 0.2), sim_costs(st, size[0] * size[1]), st)
+    for r in rows:
+        if r["mode"] == "serial" or r["scene"] not in traces or r["link"] not in links:
+            continue
+        trace, costs, st = traces[r["scene"]]
+        workers = int(r["ranks"]) - 1
+        res = icsim.simulate(trace, r["mode"], workers, costs, network=links[r["link"]], tile=(16, 16),
+                             cores=os.cpu_count())
+        real_misses, real_bytes = float(r["misses"]), float(r["bytes"])
+        out.append({"scene": r["scene"], "link": r["link"], "mode": r["mode"], "processes": int(r["ranks"]),
+                    "real_misses": real_misses, "sim_misses": res.misses, "misses_err_pct": pct(res.misses, real_misses),
+                    "real_messages": int(r["messages"]), "sim_messages": res.messages,
+                    "real_bytes": real_bytes, "sim_bytes": res.bytes, "bytes_err_pct": pct(res.bytes, real_bytes)})
+        say(f"cluster {r['scene']:>10} {r['link']:>8} {r['mode']:<12} {r['ranks']} proc: misses real "
+            f"{real_misses:.0f} sim {res.misses} ({out[-1]['misses_err_pct']:+.1f}%), bytes real {real_bytes:.3g} "
+            f"sim {res.bytes:.3g} ({out[-1]['bytes_err_pct']:+.1f}%)")
+    return out, f"{len(out)} runs of {rel(path)} simulated at their link speed ({size[0]}x{size[1]}, {opts})."
+
+
+# -- outputs -------------------------------------------------------------------------------
+
+def write_csv(path, rows):
+    if not rows:
+        return
+    keys = []
+    for r in rows:
+        keys += [k for k in r if k not in keys]
+    with open(path, "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=keys)
+        w.writeheader()
+        w.writerows(rows)
+    say(f"wrote {rel(path)}")
+
+
+def write_outputs(args, runs, gains, rad_rows, sim_rows, cluster_rows, cluster_note, pred_rows, setups, scenes,
+                  ranks, repeat, command, elapsed, rad_version, predict):
+    import plots
+    results_dir = os.path.join(args.docs, "results")
+    csvs = {"runs.csv": runs, "gains.csv": gains, "radiance.csv": rad_rows, "validation.csv": sim_rows,
+            "cluster-validation.csv": cluster_rows, "prediction.csv": pred_rows}
+    for fname, rows in csvs.items():
+        write_csv(os.path.join(args.out, fname), rows)
+        write_csv(os.path.join(results_dir, fname), rows)
+    figures = plots.make_all(results_dir, runs, gains, sim_rows, pred_rows, scenes)
+    for f in figures:
+        shutil.copy(os.path.join(results_dir, f), os.path.join(args.out, f))
+    import report
+    text = report.render(command=command, elapsed=elapsed, runs=runs, gains=gains, rad_rows=rad_rows,
+                         sim_rows=sim_rows, cluster_rows=cluster_rows, cluster_note=cluster_note,
+                         pred_rows=pred_rows, setups=setups, scenes=scenes, ranks=ranks, repeat=repeat,
+                         rad_version=rad_version, figures=figures, predict=predict, args=args)
+    path = os.path.join(args.docs, "RESULTS.md")
+    with open(path, "w") as f:
+        f.write(text)
+    say(f"wrote {rel(path)}")
+
+
+if __name__ == "__main__":
+    sys.path.insert(0, HERE)
+    main()
