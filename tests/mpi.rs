@@ -119,6 +119,10 @@ fn every_mode_matches_serial_and_statistics_add_up() {
                 assert_eq!(records, u(s, "records_computed"));
                 let messages: u64 = ranks.iter().map(|r| u(r, "messages")).sum();
                 assert_eq!(messages, u(s, "messages"));
+                // Every message sent is received, the statistics' own included: the books balance.
+                let total = |key: &str| ranks.iter().map(|r| u(r, key)).sum::<u64>();
+                assert_eq!(total("messages"), total("messages_received"), "{name}: messages");
+                assert_eq!(total("bytes"), total("bytes_received"), "{name}: bytes");
                 for key in [
                     "mode",
                     "ranks",
@@ -366,6 +370,9 @@ fn component_mode_matches_serial_and_computes_every_request_once() {
             assert_eq!(u(s, "requests_sent"), u(s, "requests_computed"));
             let sent: u64 = ranks.iter().map(|r| u(r, "requests_sent")).sum();
             assert_eq!(sent, u(s, "requests_sent"));
+            let total = |key: &str| ranks.iter().map(|r| u(r, key)).sum::<u64>();
+            assert_eq!(total("messages"), total("messages_received"));
+            assert_eq!(total("bytes"), total("bytes_received"));
             for r in ranks.iter().filter(|r| r["role"] == "pa") {
                 assert!(
                     !r["queue_lengths"].as_array().unwrap().is_empty(),

@@ -86,6 +86,23 @@ pub fn rank_report(rank: i32, role: &str, threads: &[ThreadStats], counters: &[&
     }
 }
 
+/// Sends the rank's statistics to the master, counting this last message in them too (its
+/// length is part of what it reports, so the count is settled over a few serialisations).
+pub fn send_report(comm: &Comm<'_>, mut report: RankReport) {
+    report.messages += 1;
+    let before = report.bytes;
+    let mut json = serde_json::to_vec(&report).unwrap_or_default();
+    for _ in 0..4 {
+        let total = before + json.len() as u64;
+        if report.bytes == total {
+            break;
+        }
+        report.bytes = total;
+        json = serde_json::to_vec(&report).unwrap_or_default();
+    }
+    comm.send(0, protocol::TAG_STATS, &json);
+}
+
 /// Whether this process was started by mpirun (Open MPI, MPICH or a PMIx launcher).
 pub fn under_mpirun() -> bool {
     ["OMPI_COMM_WORLD_SIZE", "PMI_SIZE", "PMIX_RANK"]

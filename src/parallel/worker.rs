@@ -7,7 +7,7 @@ use super::Mode;
 use super::WorkerSetup;
 use super::comm::{Comm, Counters};
 use super::protocol::*;
-use super::rank_report;
+use super::{rank_report, send_report};
 use crate::irradiance::IrradianceCache;
 use crate::irradiance::record::Record;
 use crate::render::{ThreadClock, ThreadStats, render_tile};
@@ -188,6 +188,5 @@ pub fn run(setup: &WorkerSetup<'_>, mode: Mode, sync: usize, persist_local: bool
     report.records_received = received.load(Ordering::Relaxed);
     report.records_rejected = rejected.load(Ordering::Relaxed);
     report.wall_s = start.elapsed().as_secs_f64();
-    let json = serde_json::to_vec(&report).unwrap_or_default();
-    comm.send(0, TAG_STATS, &json);
+    send_report(&comm, report);
 }

@@ -9,8 +9,8 @@ use super::*;
 use crate::checkpoint::{RequestResult, encode_results};
 use crate::image::framebuffer::FrameBuffer;
 use crate::parallel::comm::{Comm, Counters};
-use crate::parallel::protocol::{TAG_INITIAL_RECORDS, TAG_STATS};
-use crate::parallel::{WorkerSetup, rank_report};
+use crate::parallel::protocol::TAG_INITIAL_RECORDS;
+use crate::parallel::{WorkerSetup, rank_report, send_report};
 use crate::render::{ThreadClock, ThreadStats};
 use crate::shading::Integrator;
 use crate::shading::request::AmbientRequest;
@@ -234,5 +234,5 @@ pub fn run(setup: &WorkerSetup<'_>, sync: usize, seed: u64, journal: bool, bound
     report.queue_lengths = queue_samples;
     report.queue_max = queue.lock().unwrap_or_else(|e| e.into_inner()).longest as u64;
     report.wall_s = start.elapsed().as_secs_f64();
-    comm.send(0, TAG_STATS, &serde_json::to_vec(&report).unwrap_or_default());
+    send_report(&comm, report);
 }

@@ -8,8 +8,8 @@ use super::*;
 use crate::checkpoint::{RequestResult, encode_results};
 use crate::image::framebuffer::FrameBuffer;
 use crate::parallel::comm::{Comm, Counters, Marker};
-use crate::parallel::protocol::{TAG_STATS, decode_work};
-use crate::parallel::{WorkerSetup, rank_report};
+use crate::parallel::protocol::decode_work;
+use crate::parallel::{WorkerSetup, rank_report, send_report};
 use crate::render::{ThreadClock, ThreadStats, render_tile, store_tile};
 use crate::shading::Integrator;
 use crate::shading::request::AmbientRequest;
@@ -293,7 +293,7 @@ fn render_and_help(
     report.requests_sent = sender.sent;
     report.requests_computed = helped;
     report.wall_s = start.elapsed().as_secs_f64();
-    comm.send(0, TAG_STATS, &serde_json::to_vec(&report).unwrap_or_default());
+    send_report(&comm, report);
 }
 
 /// Waits for forwarded requests from any PA or the master's FINISH.
