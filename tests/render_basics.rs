@@ -216,8 +216,9 @@ fn info_and_compare_commands() {
     assert_eq!(json["cameras"], 1);
 
     let dir = tempfile::tempdir().unwrap();
-    let a = render_default(dir.path(), "a", &[]);
-    let b = render_default(dir.path(), "b", &["--seed", "9", "-aa", "0"]);
+    // No emission rays of their own (they are jittered): the pixel centre alone sees emitters.
+    let a = render_default(dir.path(), "a", &["--emission-samples", "0"]);
+    let b = render_default(dir.path(), "b", &["--seed", "9", "-aa", "0", "--emission-samples", "0"]);
     let same = stdout(&run_ok(&[
         "compare",
         a.to_str().unwrap(),
