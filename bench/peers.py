@@ -69,10 +69,10 @@ SCENES = {
         "file": os.path.join(common.SHARED_SCENES, "conference_room", "conference.gltf"),
         "size": (320, 240), "ab": 2,
         "icrender": [
-            "-aa 0.3 -ad 32 -as 8 -ar 16 --spp 4 --light-samples 1",
-            "-aa 0.3 -ad 64 -as 16 -ar 16 --spp 4 --light-samples 1",
-            "-aa 0.2 -ad 128 -as 32 -ar 32 --spp 8 --light-samples 1",
-            "-aa 0.15 -ad 256 -as 64 -ar 32 --spp 16 --light-samples 1",
+            "-aa 0.3 -ad 32 -as 8 -ar 16 --spp 4 --light-samples 1 --emission-samples 128",
+            "-aa 0.3 -ad 64 -as 16 -ar 16 --spp 4 --light-samples 1 --emission-samples 256",
+            "-aa 0.2 -ad 128 -as 32 -ar 32 --spp 8 --light-samples 1 --emission-samples 256",
+            "-aa 0.15 -ad 256 -as 64 -ar 32 --spp 16 --light-samples 1 --emission-samples 256",
         ],
         "reference_seconds": 300,
     },
@@ -238,29 +238,44 @@ def interpolate_time(rows, error, metric, clock):
     return None if best == float("inf") else best
 
 
-def targets(name, rows, metric, clock):
-    """Prints issue 9's target for a scene on one error measure and one clock."""
+def error_at(rows, t, metric, clock):
+    """A renderer's error at time t, log-log interpolated between its runs; None outside them."""
+    pts = sorted((r[clock], r[metric]) for r in rows)
+    for (t0, e0), (t1, e1) in zip(pts, pts[1:]):
+        if t0 <= t <= t1 and t1 > t0:
+            f = (np.log(t) - np.log(t0)) / (np.log(t1) - np.log(t0))
+            return float(np.exp(np.log(e0) + f * (np.log(e1) - np.log(e0))))
+    return pts[0][1] if len(pts) == 1 and pts[0][0] == t else None
+
+
+def targets(name, rows, metric, clock, peer_names=("mitsuba", "cycles", "cycles+oidn")):
+    """Prints issue 9's target for a scene on one error measure and one clock, against the
+    best of `peer_names`."""
     ours = [r for r in rows if r["renderer"] == "icrender"]
-    peers = {p: [r for r in rows if r["renderer"] == p] for p in ("mitsuba", "cycles", "cycles+oidn")}
+    peers = {p: [r for r in rows if r["renderer"] == p] for p in peer_names}
     peers = {p: rs for p, rs in peers.items() if rs}
     if not ours or not peers:
         return
-    tag = f"{name} [{metric}, {clock}]"
+    tag = f"{name} [{metric}, {clock}, vs {'/'.join(peers)}]"
     if name == "cornell":
-        # Below the best peer at every time: at each peer point, how much sooner icrender
-        # reaches that error (below 1: later, or never in the measured range).
-        worst = None
-        for p, rs in peers.items():
-            for r in rs:
-                t = interpolate_time(ours, r[metric], metric, clock)
-                ratio = r[clock] / t if t else 0.0
-                if worst is None or ratio < worst[0]:
-                    worst = (ratio, p, r, t)
-        ratio, p, r, t = worst
+        # Below the best peer at every time: at each time where icrender's curve and some peer's
+        # were both measured, the best peer's error over icrender's (log-log interpolated).
+        compared = []
+        for t in sorted({r[clock] for r in rows}):
+            e_ours = error_at(ours, t, metric, clock)
+            e_peer = min((e for e in (error_at(rs, t, metric, clock) for rs in peers.values()) if e), default=None)
+            if e_ours is not None and e_peer is not None:
+                compared.append((t, e_peer / e_ours, e_ours, e_peer))
+        if not compared:
+            return
+        t, ratio, e_ours, e_peer = min(compared, key=lambda c: c[1])
         verdict = "met" if ratio > 1 else "missed"
-        when = f"icrender in {t:.2f} s ({ratio:.2f}x sooner)" if t else "icrender never in the measured range"
-        log(f"{tag}: 'below the best peer at every time': {verdict}; tightest: {p} {r['spp']} spp "
-            f"{r[metric]:.2e} in {r[clock]:.2f} s, {when}")
+        losses = [c[0] for c in compared if c[1] <= 1]
+        span = f"{compared[0][0]:.2f} .. {compared[-1][0]:.2f} s"
+        log(f"{tag}: 'below the best peer at every time' ({span}): {verdict}; worst at {t:.2f} s: icrender "
+            f"{e_ours:.2e}, best peer {e_peer:.2e} (peer error / ours {ratio:.2f})"
+            + (f"; icrender below until {losses[0]:.2f} s" if losses else ""))
+
     else:
         candidates = [(p, r) for p, rs in peers.items() for r in rs if r["spp"] == 16]
         if not candidates:
@@ -272,6 +287,15 @@ def targets(name, rows, metric, clock):
         when = f"icrender in {t:.2f} s ({speedup:.2f}x sooner)" if t else "icrender never in the measured range"
         log(f"{tag}: '3x sooner than the best peer at 16 spp': {verdict}: {p} 16 spp {r[metric]:.2e} "
             f"in {r[clock]:.2f} s, {when}")
+
+
+def report_targets(name, rows):
+    """The targets on every measure and clock, against all peers and against the raw path
+    tracers alone (no denoiser)."""
+    for peer_names in (("mitsuba", "cycles", "cycles+oidn"), ("mitsuba", "cycles")):
+        for clock in CLOCKS:
+            for metric in ("relmse", "relmse_4x4", "rmse"):
+                targets(name, rows, metric, clock, peer_names)
 
 
 def plot(name, cfg, rows, path):
@@ -314,12 +338,22 @@ def main():
     parser.add_argument("--reference-spp", type=int, default=0,
                         help="Mitsuba's reference (default: 4096 for the Cornell box, 512 for the others)")
     parser.add_argument("--reference-noise", type=float, default=0.004, help="icrender reference's noise target")
+    parser.add_argument("--report-only", action="store_true",
+                        help="re-read docs/peers/peers-SCENE.csv, print the targets and redraw the plot")
     parser.add_argument("--no-mitsuba", action="store_true")
     parser.add_argument("--no-cycles", action="store_true")
     parser.add_argument("--out", default=os.path.join(common.ROOT, "bench", "out", "peers"))
     parser.add_argument("--plots", default=os.path.join(common.ROOT, "docs", "peers"),
                         help="where the CSV and PNG go (committed)")
     args = parser.parse_args()
+    if args.report_only:
+        for name in args.scenes.split(","):
+            with open(os.path.join(args.plots, f"peers-{name}.csv")) as f:
+                rows = [{k: (v if k in ("scene", "renderer", "settings", "seconds_all") else float(v))
+                         for k, v in r.items()} for r in csv.DictReader(f)]
+            plot(name, SCENES[name], rows, os.path.join(args.plots, f"peers-{name}.png"))
+            report_targets(name, rows)
+        return
     common.build()
     if not args.no_mitsuba:
         common.ensure_module("mitsuba")
@@ -342,9 +376,7 @@ def main():
             log(f"{name}: {r['renderer']:12} {r['settings']:70} {r['spp']:4} spp {r['seconds']:8.3f} s "
                 f"(CPU/cores {r['core_seconds']:7.3f} s) "
                 f"relMSE {r['relmse']:.2e} 4x4 {r['relmse_4x4']:.2e} RMSE {r['rmse']:.2e}")
-        for clock in CLOCKS:
-            for metric in ("relmse", "relmse_4x4", "rmse"):
-                targets(name, rows, metric, clock)
+        report_targets(name, rows)
         load = os.getloadavg()
         log(f"{name}: done in {time.time() - start:.0f} s; load average {load[0]:.2f} {load[1]:.2f} {load[2]:.2f}; "
             f"{csv_path}")
