@@ -349,7 +349,7 @@ def main():
     if args.report_only:
         for name in args.scenes.split(","):
             with open(os.path.join(args.plots, f"peers-{name}.csv")) as f:
-                rows = [{k: (v if k in ("scene", "renderer", "settings", "seconds_all") else float(v))
+                rows = [{k: (v if k in ("scene", "renderer", "settings", "seconds_all") else int(v) if k == "spp" else float(v))
                          for k, v in r.items()} for r in csv.DictReader(f)]
             plot(name, SCENES[name], rows, os.path.join(args.plots, f"peers-{name}.png"))
             report_targets(name, rows)
