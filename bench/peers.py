@@ -334,7 +334,7 @@ def main():
     parser.add_argument("--peer-spp-large", default="4,8,16,32,64",
                         help="the conference room's and Sibenik's (a full sweep there takes many minutes)")
     parser.add_argument("--max-denoised-spp", type=int, default=64, help="Cycles+OIDN up to this many spp")
-    parser.add_argument("--repeats", type=int, default=2, help="passes over all renderers; fastest time kept")
+    parser.add_argument("--repeats", type=int, default=1, help="passes over all renderers; fastest time kept")
     parser.add_argument("--reference-spp", type=int, default=0,
                         help="Mitsuba's reference (default: 4096 for the Cornell box, 512 for the others)")
     parser.add_argument("--reference-noise", type=float, default=0.004, help="icrender reference's noise target")
