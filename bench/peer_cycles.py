@@ -6,7 +6,8 @@ bench/peers.py in its own process.
     python3 bench/peer_cycles.py JOB.json
 
 JOB: {"scene", "view", "width", "height", "ab", "spp": [..], "denoised_spp": [..], "out",
-"prefix", "threads"}. Prints one JSON line per render: {"spp", "denoised", "seconds", "exr"}.
+"prefix", "threads"}. Prints one JSON line per render: {"spp", "denoised", "seconds",
+"cpu_seconds" (the process's, all threads), "exr"}.
 
 The scene is built from the glTF's arrays (not Blender's importer, which would convert axes
 and light units): two-sided diffuse (roughness 0, Lambertian) of the base colour, textures
@@ -91,6 +92,10 @@ def mesh_object(bpy, k, mesh, blender_material):
     me.polygons.add(len(indices))
     me.polygons.foreach_set("loop_start", np.arange(0, indices.size, 3, dtype=np.int32))
     me.update(calc_edges=True)
+    me.validate(clean_customdata=False)
+    # Flat faces, as glTF without NORMAL asks (and as icrender and Mitsuba shade): smooth
+    # vertex normals averaged over a box's corners turned half a face black.
+    me.polygons.foreach_set("use_smooth", np.zeros(len(indices), dtype=bool))
     if mesh["uv"] is not None:
         layer = me.uv_layers.new(name="UVMap")
         uv = mesh["uv"][indices.ravel()].astype(np.float32)
@@ -179,11 +184,11 @@ def render(bpy, job, spp, denoised):
     tag = "cycles-oidn" if denoised else "cycles"
     exr = os.path.join(job["out"], f"{job['prefix']}-{tag}-{spp}spp.exr")
     s.render.filepath = exr
-    start = time.perf_counter()
+    start, cpu_start = time.perf_counter(), time.process_time()
     bpy.ops.render.render(write_still=False)
-    seconds = time.perf_counter() - start
+    seconds, cpu = time.perf_counter() - start, time.process_time() - cpu_start
     bpy.data.images["Render Result"].save_render(exr)
-    return seconds, exr
+    return seconds, cpu, exr
 
 
 def main():
@@ -194,11 +199,13 @@ def main():
     build(bpy, job)
     render(bpy, job, 1, False)  # builds the BVH and compiles the kernels (kept: persistent data)
     for spp in job["spp"]:
-        seconds, exr = render(bpy, job, spp, False)
-        print(json.dumps({"spp": spp, "denoised": False, "seconds": seconds, "exr": exr}), flush=True)
+        seconds, cpu, exr = render(bpy, job, spp, False)
+        print(json.dumps({"spp": spp, "denoised": False, "seconds": seconds, "cpu_seconds": cpu, "exr": exr}),
+              flush=True)
     for spp in job.get("denoised_spp", []):
-        seconds, exr = render(bpy, job, spp, True)
-        print(json.dumps({"spp": spp, "denoised": True, "seconds": seconds, "exr": exr}), flush=True)
+        seconds, cpu, exr = render(bpy, job, spp, True)
+        print(json.dumps({"spp": spp, "denoised": True, "seconds": seconds, "cpu_seconds": cpu, "exr": exr}),
+              flush=True)
 
 
 if __name__ == "__main__":

@@ -6,7 +6,8 @@
 
 JOB: {"scene", "view" (icrender's -vt.. options), "width", "height", "ab", "spp": [..],
 "out": folder, "prefix", "sampler"}. Prints one JSON line per render:
-{"spp", "seconds", "exr"}; seconds is mi.render alone (the scene and its BVH are built before).
+{"spp", "seconds", "cpu_seconds", "exr"}; times are mi.render's alone (the scene and its BVH are
+built before), cpu_seconds the process's CPU time over it (all threads).
 
 The scene: every material a two-sided diffuse of its base colour (texture kept), alpha-blended
 ones a mask of their alpha, emitters one-sided area lights of their emission, point lights
@@ -112,12 +113,12 @@ def main():
     os.makedirs(work, exist_ok=True)
     scene = mi.load_dict(scene_dict(job, work))
     for spp in job["spp"]:
-        start = time.perf_counter()
+        start, cpu_start = time.perf_counter(), time.process_time()
         image = mi.render(scene, spp=spp, seed=spp)
-        seconds = time.perf_counter() - start
+        seconds, cpu = time.perf_counter() - start, time.process_time() - cpu_start
         exr = os.path.join(job["out"], f"{job['prefix']}-mitsuba-{spp}spp.exr")
         mi.Bitmap(image).write(exr)
-        print(json.dumps({"spp": spp, "seconds": seconds, "exr": exr}), flush=True)
+        print(json.dumps({"spp": spp, "seconds": seconds, "cpu_seconds": cpu, "exr": exr}), flush=True)
 
 
 if __name__ == "__main__":
