@@ -28,6 +28,7 @@ import argparse
 import csv
 import datetime
 import json
+import multiprocessing
 import os
 import platform
 import re
@@ -485,26 +486,42 @@ def main():
                            request_pa=1e-6)
         scenarios = {"1gbit": (costs, icsim.POLL_WAKE, "1gbit"), "100gbit": (costs, icsim.POLL_WAKE, "100gbit"),
                      "1gbit-lean": (lean, 1e-6, "1gbit")}
-        for net, (c, wake, network) in scenarios.items():
-            for p in predict:
-                for mode in MODES:
-                    if mode == "component" and p < 2:
-                        continue
-                    res = icsim.simulate(ptrace, mode, p, c, network=network, tile=(tw, th), wake=wake)
-                    pred_rows.append({"scene": name, "network": net, "mode": mode, "workers": p,
-                                      "width": pw, "height": ph, "misses": res.misses,
-                                      "serial_misses": serial_res.misses,
-                                      "aggregated_s": res.aggregated, "makespan_s": res.makespan,
-                                      "speedup": serial_res.makespan / res.makespan,
-                                      "efficiency_pct": 100 * serial_res.makespan / res.makespan / p,
-                                      "idle_pct": 100 * res.idle_fraction, "messages": res.messages,
-                                      "bytes": res.bytes})
+        tasks = [(net, mode, p, c, wake, network) for net, (c, wake, network) in scenarios.items() for p in predict
+                 for mode in MODES if not (mode == "component" and p < 2)]
+        # The simulations are independent and deterministic: one process per core.
+        with multiprocessing.Pool(os.cpu_count() or 1, initializer=_load_trace,
+                                  initargs=(ptrace_path, pw, ph, st["aa"], (tw, th))) as pool:
+            results = pool.map(_predict_one, tasks)
+        for (net, mode, p, _, _, _), res in zip(tasks, results):
+            pred_rows.append({"scene": name, "network": net, "mode": mode, "workers": p,
+                              "width": pw, "height": ph, "misses": res["misses"],
+                              "serial_misses": serial_res.misses,
+                              "aggregated_s": res["aggregated"], "makespan_s": res["makespan"],
+                              "speedup": serial_res.makespan / res["makespan"],
+                              "efficiency_pct": 100 * serial_res.makespan / res["makespan"] / p,
+                              "idle_pct": 100 * res["idle_fraction"], "messages": res["messages"],
+                              "bytes": res["bytes"]})
         say(f"{name}: prediction done ({time.perf_counter() - started:.0f} s so far)")
 
     elapsed = time.perf_counter() - started
     write_outputs(args, runs, gains, rad_rows, sim_rows, cluster_rows, cluster_note, pred_rows, setups, scenes,
                   ranks, repeat, command, elapsed, rad_version, predict)
     say(f"done in {elapsed / 60:.1f} min")
+
+
+_TRACE = {}
+
+
+def _load_trace(path, width, height, accuracy, tile):
+    _TRACE["trace"] = icsim.Trace(path, width, height, accuracy)
+    _TRACE["tile"] = tile
+
+
+def _predict_one(task):
+    _, mode, p, costs, wake, network = task
+    res = icsim.simulate(_TRACE["trace"], mode, p, costs, network=network, tile=_TRACE["tile"], wake=wake)
+    return {"misses": res.misses, "aggregated": res.aggregated, "makespan": res.makespan,
+            "idle_fraction": res.idle_fraction, "messages": res.messages, "bytes": res.bytes}
 
 
 def cluster_validation(path, args, tw, th):
