@@ -20,8 +20,8 @@
 
 use crate::image::framebuffer::{FrameBuffer, Layer};
 use crate::irradiance::codec::checksum;
+use crate::parallel::protocol::{PIXEL_FLOATS, decode_pixels, encode_pixels};
 use crate::render::{PixelValue, Tile};
-use crate::shading::components::Components;
 use glam::Vec3;
 use std::fs::{File, OpenOptions};
 use std::io::{Read, Write};
@@ -32,8 +32,6 @@ const MAGIC: &[u8; 8] = b"ICRJRNL1";
 const KIND_START: u8 = 0;
 const KIND_TILE: u8 = 1;
 const KIND_RESULTS: u8 = 2;
-/// Floats of one journalled pixel: four layers of RGB and the records count.
-const PIXEL_FLOATS: usize = 13;
 /// One result: pixel, layer, RGB.
 const RESULT_BYTES: usize = 20;
 /// No entry is larger than a 16k x 16k tile's pixels; a longer length is damage.
@@ -58,6 +56,11 @@ pub struct Restored {
 impl Restored {
     pub fn count(&self) -> usize {
         self.done.iter().filter(|d| **d).count()
+    }
+
+    /// The tiles still to render, in order.
+    pub fn unfinished(&self) -> Vec<usize> {
+        (0..self.done.len()).filter(|&i| !self.done[i]).collect()
     }
 }
 
@@ -126,22 +129,7 @@ fn decode_entry(kind: u8, p: &[u8]) -> Option<Entry> {
             if body.len() != (count as usize).checked_mul(PIXEL_FLOATS * 4)? {
                 return None;
             }
-            let pixels = body
-                .chunks_exact(PIXEL_FLOATS * 4)
-                .map(|c| {
-                    let f = |i: usize| f32_at(c, 4 * i).expect("in range");
-                    let v = |i: usize| Vec3::new(f(i), f(i + 1), f(i + 2));
-                    PixelValue {
-                        components: Components {
-                            emission: v(0),
-                            direct: v(3),
-                            specular: v(6),
-                            indirect: v(9),
-                        },
-                        records: f(12),
-                    }
-                })
-                .collect();
+            let pixels = decode_pixels(body);
             Some(Entry::Tile {
                 attempt,
                 tile,
@@ -357,14 +345,7 @@ impl Checkpoint {
         for w in [self.attempt, index, requests, pixels.len() as u32] {
             p.extend_from_slice(&w.to_le_bytes());
         }
-        for px in pixels {
-            for v in px.components.as_array() {
-                for c in v.to_array() {
-                    p.extend_from_slice(&c.to_le_bytes());
-                }
-            }
-            p.extend_from_slice(&px.records.to_le_bytes());
-        }
+        encode_pixels(pixels, &mut p);
         self.append(KIND_TILE, &p);
     }
 
@@ -379,6 +360,20 @@ impl Checkpoint {
         p.extend(encode_results(results));
         self.append(KIND_RESULTS, &p);
     }
+}
+
+/// How many tiles the journal in `dir` holds as finished, read without changing it (a journal
+/// being written is read up to its last whole entry). For watching a render's progress.
+pub fn finished_tiles(dir: &Path, tiles: &[Tile], width: u32, height: u32) -> usize {
+    let Ok(bytes) = std::fs::read(dir.join("tiles.journal")) else {
+        return 0;
+    };
+    let header = 12 + u32_at(&bytes, 8).unwrap_or(0) as usize;
+    if !bytes.starts_with(MAGIC) || bytes.len() < header {
+        return 0;
+    }
+    let (entries, _) = read_entries(&bytes, header);
+    restore(entries, tiles, width, height).1.iter().filter(|d| **d).count()
 }
 
 /// Results as bytes (the journal's form, also sent from PAs to the master).
@@ -415,6 +410,7 @@ pub fn decode_results(bytes: &[u8]) -> Option<Vec<RequestResult>> {
 mod tests {
     use super::*;
     use crate::render::tiles;
+    use crate::shading::components::Components;
 
     fn pixels(tile: &Tile, value: f32) -> Vec<PixelValue> {
         let n = ((tile.x1 - tile.x0) * (tile.y1 - tile.y0)) as usize;
@@ -450,6 +446,7 @@ mod tests {
         drop(journal);
         let (journal, restored) = Checkpoint::open(dir.path(), "job", &all, 8, 4).unwrap();
         assert_eq!(restored.done, vec![true, false]);
+        assert_eq!(finished_tiles(dir.path(), &all, 8, 4), 1);
         assert_eq!(restored.frame.layer(Layer::Emission)[0], Vec3::splat(2.0));
         assert_eq!(
             restored.frame.layer(Layer::Emission)[pixel_of_tile1 as usize],

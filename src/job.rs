@@ -109,6 +109,12 @@ pub fn cache_settings_line(args: &RenderArgs, scene: &Scene) -> String {
     )
 }
 
+/// Whether the job keeps an irradiance cache: indirect diffuse light to compute (-ab above 0 and a
+/// diffuse surface) and an accuracy that allows reuse (-aa above 0; -aa 0 is brute force).
+fn uses_cache(args: &RenderArgs, scene: &Scene) -> bool {
+    args.ambient_accuracy > 0.0 && args.ambient_bounces > 0 && scene.needs().diffuse
+}
+
 /// Refuses a job whose estimated memory exceeds --max-memory, before the BVH and the render.
 fn check_memory(args: &RenderArgs, scene: &Scene, role: memory::Role, limit: u64) -> Result<(), CommandError> {
     let component = matches!(args.mode, Some(crate::cli::ModeArg::Component) | None);
@@ -119,7 +125,7 @@ fn check_memory(args: &RenderArgs, scene: &Scene, role: memory::Role, limit: u64
             height: args.height,
             spp: args.spp,
             ambient_bounces: args.ambient_bounces,
-            cache: args.ambient_accuracy > 0.0 && args.ambient_bounces > 0 && scene.needs().diffuse,
+            cache: uses_cache(args, scene),
             pa_queue: (role != memory::Role::Single && component).then_some(args.pa_queue),
             role,
         },
@@ -183,8 +189,7 @@ impl Job {
             emission_footprint: (args.emission_samples > 0 && !scene.emitters.is_empty())
                 .then(|| std::sync::Arc::new(EmitterFootprint::new(&scene.emitters, &camera))),
         };
-        let needs_ambient = shading.ambient_bounces > 0 && scene.needs().diffuse;
-        let cache = if args.ambient_accuracy > 0.0 && needs_ambient {
+        let cache = if uses_cache(args, &scene) {
             let metric = match args.ic_metric {
                 MetricArg::Hessian => Metric::Hessian,
                 MetricArg::Ward88 => Metric::Ward88,

@@ -235,15 +235,14 @@ pub fn render_resumable(
     checkpoint: Option<(&Checkpoint, Restored)>,
 ) -> (FrameBuffer, Vec<ThreadStats>) {
     let all = tiles(camera.width, camera.height, settings.tile_width, settings.tile_height);
-    let (journal, start, done) = match checkpoint {
-        Some((journal, restored)) => (Some(journal), restored.frame, restored.done),
+    let (journal, todo, start) = match checkpoint {
+        Some((journal, restored)) => (Some(journal), restored.unfinished(), restored.frame),
         None => (
             None,
+            (0..all.len()).collect(),
             FrameBuffer::new(camera.width, camera.height),
-            vec![false; all.len()],
         ),
     };
-    let todo: Vec<usize> = (0..all.len()).filter(|&i| !done[i]).collect();
     progress.advance(all.len() - todo.len());
     let next = AtomicUsize::new(0);
     let frame = Mutex::new(start);

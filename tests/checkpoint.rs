@@ -5,6 +5,8 @@
 
 mod common;
 use common::*;
+use icrender::checkpoint;
+use icrender::render::tiles;
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
@@ -131,8 +133,17 @@ fn any_process_with(marker: &str) -> bool {
 }
 
 /// Renders once uninterrupted, then KILLS times: start with a checkpoint, SIGKILL `victims[i]`
-/// at a moment inside the render, start again with the same command, and check the result.
-fn kill_and_resume(launch: Launch, scene: &Path, extra: &[&str], victims: &[(&str, Option<u32>)]) {
+/// once the journal holds 10 % .. 80 % of the tiles as finished (spread, jittered), start again
+/// with the same command, and check the result. `size` and `tile`: the image's and the tiles'
+/// side in pixels, as `extra` gives them.
+fn kill_and_resume(
+    launch: Launch,
+    scene: &Path,
+    extra: &[&str],
+    victims: &[(&str, Option<u32>)],
+    size: u32,
+    tile: u32,
+) {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     let whole_out = d.join("whole.exr");
@@ -156,7 +167,7 @@ fn kill_and_resume(launch: Launch, scene: &Path, extra: &[&str], victims: &[(&st
     let whole = read_exr(&whole_out);
     let stats = read_stats(&whole_stats);
     let render_s = stats["render_s"].as_f64().unwrap();
-    let whole_journal = std::fs::metadata(whole_checkpoint.join("tiles.journal")).unwrap().len();
+    let all_tiles = tiles(size, size, tile, tile);
     let total_tiles = tiles_rendered(&stats);
 
     // The cache's own spread: the same job in another record order (another tile size would
@@ -185,16 +196,17 @@ fn kill_and_resume(launch: Launch, scene: &Path, extra: &[&str], victims: &[(&st
             .stderr(Stdio::piped())
             .spawn()
             .unwrap();
-        // Spread over the render by its progress (not by the clock, which a loaded machine
-        // stretches): when the journal holds 10 % .. 80 % of what a whole render journals.
+        // Spread over the render by its progress (finished tiles, not the clock, which a
+        // loaded machine stretches, nor the journal's size: in component mode tiles finish
+        // only as the PAs' results come in, after most of the journal's bytes).
         let fraction = 0.1 + 0.7 * (i as f64 + jitter()) / KILLS as f64;
+        let target = ((fraction * all_tiles.len() as f64).ceil() as usize).max(1);
         let pid = victim_pid(&child, &marker, *rank, launch);
-        let journal = checkpoint.join("tiles.journal");
         let waiting = Instant::now();
-        while std::fs::metadata(&journal).map_or(0, |m| m.len()) < (fraction * whole_journal as f64) as u64 {
+        while checkpoint::finished_tiles(&checkpoint, &all_tiles, size, size) < target {
             assert!(
                 waiting.elapsed() < Duration::from_secs(60),
-                "run {i}: the journal does not grow"
+                "run {i}: the render does not progress"
             );
             std::thread::sleep(Duration::from_millis(2));
         }
@@ -216,7 +228,7 @@ fn kill_and_resume(launch: Launch, scene: &Path, extra: &[&str], victims: &[(&st
             std::thread::sleep(Duration::from_millis(20));
         }
         if status.success() {
-            panic!("run {i}: the {victim_name} was killed at {fraction:.2} of the journal but the job succeeded");
+            panic!("run {i}: the {victim_name} was killed at {fraction:.2} of the tiles but the job succeeded");
         }
         assert!(!out.exists(), "run {i}: a killed render left an image");
 
@@ -231,7 +243,7 @@ fn kill_and_resume(launch: Launch, scene: &Path, extra: &[&str], victims: &[(&st
         let restored = stats["tiles_restored"].as_u64().unwrap();
         let rendered = tiles_rendered(&stats);
         eprintln!(
-            "run {i}: killed the {victim_name} at {fraction:.2} of the journal (render {render_s:.2} s of {whole_s:.2} s); restart restored {restored} and rendered {rendered} of {total_tiles} tiles"
+            "run {i}: killed the {victim_name} at {fraction:.2} of the tiles (render {render_s:.2} s of {whole_s:.2} s); restart restored {restored} and rendered {rendered} of {total_tiles} tiles"
         );
         assert_eq!(
             restored + rendered,
@@ -261,7 +273,7 @@ fn cornell() -> PathBuf {
 fn a_killed_render_resumes_without_redoing_tiles() {
     let extra = ["-x", "160", "-y", "160", "-ab", "2", "-ad", "256", "--tile", "16x16"];
     let victims = [("process", None); KILLS];
-    kill_and_resume(Launch::Single, &cornell(), &extra, &victims);
+    kill_and_resume(Launch::Single, &cornell(), &extra, &victims, 160, 16);
 }
 
 #[test]
@@ -288,7 +300,7 @@ fn a_killed_component_render_resumes_whoever_died() {
         ("mpirun", None),
         ("PR", Some(2)),
     ];
-    kill_and_resume(Launch::Mpi(4), &cornell(), &extra, &victims);
+    kill_and_resume(Launch::Mpi(4), &cornell(), &extra, &victims, 128, 16);
 }
 
 #[test]

@@ -165,22 +165,17 @@ impl Outputs {
     }
 }
 
-/// With --checkpoint, the cache goes to the checkpoint directory unless -af names a file, so a
-/// resumed render starts with the records the killed one wrote.
-pub fn with_checkpoint_cache(args: &RenderArgs) -> Result<RenderArgs, CommandError> {
+/// With --checkpoint, the cache goes to the checkpoint directory (which `open_checkpoint` has
+/// made) unless -af names a file, so a resumed render starts with the records the killed one
+/// wrote.
+pub fn with_checkpoint_cache(args: &RenderArgs) -> RenderArgs {
     let mut args = args.clone();
-    if let Some(dir) = &args.checkpoint {
-        std::fs::create_dir_all(dir).map_err(|e| {
-            CommandError(format!(
-                "{}: cannot create the checkpoint directory: {e}",
-                dir.display()
-            ))
-        })?;
-        if args.ambient_file.is_none() {
-            args.ambient_file = Some(checkpoint::cache_file(dir));
-        }
+    if let Some(dir) = &args.checkpoint
+        && args.ambient_file.is_none()
+    {
+        args.ambient_file = Some(checkpoint::cache_file(dir));
     }
-    Ok(args)
+    args
 }
 
 /// What identifies a job to its checkpoint: everything that changes the image or the tiles.
@@ -265,7 +260,7 @@ pub fn run(args: &RenderArgs) -> CommandResult {
     let (tile_width, tile_height) = crate::cli::parse_tile(&args.tile).map_err(CommandError)?;
     let all_tiles = tiles(args.width, args.height, tile_width, tile_height);
     let (journal, restored) = open_checkpoint(args, &all_tiles)?.map_or((None, None), |(j, r)| (Some(j), Some(r)));
-    let job = Job::prepare(&with_checkpoint_cache(args)?, crate::memory::Role::Single)?;
+    let job = Job::prepare(&with_checkpoint_cache(args), crate::memory::Role::Single)?;
     let integrator = Integrator::new(&job.scene, &job.tracer, &job.shading, job.cache.as_ref());
     let s = &job.settings;
     let tiles_restored = restored.as_ref().map_or(0, Restored::count);

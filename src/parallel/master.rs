@@ -55,11 +55,14 @@ pub fn run(comm: &Comm<'_>, plan: &Plan<'_>) -> Result<MasterResult, MasterError
     let start = Instant::now();
     let size = comm.size() as usize;
     let workers = size - 1;
-    let (mut frame, mut tiles_done) = match resume {
-        Some((_, restored)) => (restored.frame.clone(), restored.done.clone()),
-        None => (FrameBuffer::new(width, height), vec![false; tiles.len()]),
+    let (mut frame, mut tiles_done, todo) = match resume {
+        Some((_, restored)) => (restored.frame.clone(), restored.done.clone(), restored.unfinished()),
+        None => (
+            FrameBuffer::new(width, height),
+            vec![false; tiles.len()],
+            (0..tiles.len()).collect(),
+        ),
     };
-    let todo: Vec<usize> = (0..tiles.len()).filter(|&i| !tiles_done[i]).collect();
 
     // Every worker starts from the records of the cache file (possibly none).
     let initial: Vec<Record> = cache.map_or_else(Vec::new, |c| c.records());

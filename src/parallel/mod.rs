@@ -238,7 +238,7 @@ pub fn run(args: &RenderArgs, mode: Mode) -> CommandResult {
         None
     };
     let mut rank_args = if rank == 0 {
-        with_checkpoint_cache(args).unwrap_or_else(|e| fatal(&comm, &e.0))
+        with_checkpoint_cache(args)
     } else {
         args.clone()
     };

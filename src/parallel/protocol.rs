@@ -105,19 +105,45 @@ pub fn encode_work_request(thread: u32, finished: Option<(u32, &[PixelValue])>) 
     if let Some((tile, pixels)) = finished {
         out.extend_from_slice(&tile.to_le_bytes());
         out.extend_from_slice(&(pixels.len() as u32).to_le_bytes());
-        for p in pixels {
-            for v in p.components.as_array() {
-                for c in v.to_array() {
-                    out.extend_from_slice(&c.to_le_bytes());
-                }
-            }
-            out.extend_from_slice(&p.records.to_le_bytes());
-        }
+        encode_pixels(pixels, &mut out);
     }
     out
 }
 
-const PIXEL_FLOATS: usize = 13;
+/// Floats of one pixel on the wire (and in the checkpoint journal): four RGB layers, records.
+pub const PIXEL_FLOATS: usize = 13;
+
+/// Appends pixels as little-endian floats, PIXEL_FLOATS each.
+pub fn encode_pixels(pixels: &[PixelValue], out: &mut Vec<u8>) {
+    for p in pixels {
+        for v in p.components.as_array() {
+            for c in v.to_array() {
+                out.extend_from_slice(&c.to_le_bytes());
+            }
+        }
+        out.extend_from_slice(&p.records.to_le_bytes());
+    }
+}
+
+/// The inverse of [`encode_pixels`] for a body of whole pixels (the caller checks the length);
+/// the values are not judged here.
+pub fn decode_pixels(body: &[u8]) -> Vec<PixelValue> {
+    body.chunks_exact(PIXEL_FLOATS * 4)
+        .map(|c| {
+            let f = |i: usize| f32::from_le_bytes(c[4 * i..4 * i + 4].try_into().expect("4 bytes"));
+            let v = |i: usize| Vec3::new(f(3 * i), f(3 * i + 1), f(3 * i + 2));
+            PixelValue {
+                components: Components {
+                    emission: v(0),
+                    direct: v(1),
+                    specular: v(2),
+                    indirect: v(3),
+                },
+                records: f(12),
+            }
+        })
+        .collect()
+}
 
 /// A decoded work request: the thread, and the finished tile with its pixels, if any.
 pub type WorkRequest = (u32, Option<(u32, Vec<PixelValue>)>);
@@ -136,26 +162,18 @@ pub fn decode_work_request(bytes: &[u8]) -> Result<WorkRequest, ProtocolError> {
             body.len()
         )));
     }
-    let floats: Vec<f32> = body
-        .chunks_exact(4)
-        .map(|b| f32::from_le_bytes(b.try_into().expect("4 bytes")))
-        .collect();
-    let mut pixels = Vec::with_capacity(count);
-    for p in floats.chunks_exact(PIXEL_FLOATS) {
-        // A pixel that is not finite and non-negative cannot come from a healthy renderer.
-        if p.iter().any(|v| !v.is_finite() || *v < 0.0) {
-            return Err(ProtocolError("tile result holds a negative or non-finite value".into()));
-        }
-        let v = |i: usize| Vec3::new(p[3 * i], p[3 * i + 1], p[3 * i + 2]);
-        pixels.push(PixelValue {
-            components: Components {
-                emission: v(0),
-                direct: v(1),
-                specular: v(2),
-                indirect: v(3),
-            },
-            records: p[12],
-        });
+    let pixels = decode_pixels(body);
+    // A pixel that is not finite and non-negative cannot come from a healthy renderer.
+    let healthy = |p: &PixelValue| {
+        p.components
+            .as_array()
+            .iter()
+            .flat_map(|v| v.to_array())
+            .chain([p.records])
+            .all(|v| v.is_finite() && v >= 0.0)
+    };
+    if !pixels.iter().all(healthy) {
+        return Err(ProtocolError("tile result holds a negative or non-finite value".into()));
     }
     Ok((thread, Some((tile, pixels))))
 }

@@ -66,10 +66,18 @@ pub fn run(
     let size = comm.size() as usize;
     // Tiles an earlier run finished (--checkpoint) are not handed out again.
     let todo: Vec<usize> = match resume {
-        Some((_, restored)) => (0..tiles.len()).filter(|&i| !restored.done[i]).collect(),
+        Some((_, restored)) => restored.unfinished(),
         None => (0..tiles.len()).collect(),
     };
     let journal = resume.map(|(journal, _)| journal);
+    // Indirect light computed for requests, into the journal (--checkpoint only).
+    let journal_results = |source: i32, data: &[u8]| -> Result<(), String> {
+        let results = decode_results(data).ok_or_else(|| format!("rank {source} sent malformed results"))?;
+        if let Some(journal) = journal {
+            journal.results(&results);
+        }
+        Ok(())
+    };
     let mut next_tile = 0usize;
     let mut tiles_given = 0usize;
     let mut store: Vec<(usize, Record)> =
@@ -216,13 +224,7 @@ pub fn run(
                     state.waiting = true;
                 }
             }
-            TAG_RESULTS => {
-                let results =
-                    decode_results(&msg.data).ok_or_else(|| format!("rank {source} sent malformed results"))?;
-                if let Some(journal) = journal {
-                    journal.results(&results);
-                }
-            }
+            TAG_RESULTS => journal_results(source, &msg.data)?,
             TAG_PR_SYNC => {
                 let batch = decode_batch(&msg.data).map_err(|e| malformed("record batch", e))?;
                 records_received += batch.records.len() as u64;
@@ -303,13 +305,7 @@ pub fn run(
                 }
                 reports[msg.source as usize] = Some(report);
             }
-            TAG_RESULTS => {
-                let results =
-                    decode_results(&msg.data).ok_or_else(|| format!("rank {} sent malformed results", msg.source))?;
-                if let Some(journal) = journal {
-                    journal.results(&results);
-                }
-            }
+            TAG_RESULTS => journal_results(msg.source, &msg.data)?,
             TAG_PA_STATUS => {
                 let (_, batch) = decode_counts_and_records(&msg.data, 2).map_err(|e| e.0)?;
                 persist(&batch.records);

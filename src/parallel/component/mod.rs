@@ -9,9 +9,10 @@ pub mod pa;
 pub mod pr;
 pub mod requests;
 
-use crate::checkpoint::RequestResult;
+use crate::checkpoint::{RequestResult, encode_results};
 use crate::image::framebuffer::FrameBuffer;
 use crate::irradiance::record::Record;
+use crate::parallel::comm::Comm;
 use crate::parallel::protocol::{
     Batch, ProtocolError, decode_batch, decode_work_request, encode_batch, encode_work_request,
 };
@@ -89,6 +90,14 @@ pub fn compute_request(
             layer: request.layer,
             value: light,
         });
+    }
+}
+
+/// With --checkpoint: sends the results gathered since the last call to the master (before
+/// the message that counts them as done), leaving `results` empty.
+pub fn send_results(comm: &Comm<'_>, results: &mut Vec<RequestResult>) {
+    if !results.is_empty() {
+        comm.send(0, TAG_RESULTS, &encode_results(&std::mem::take(results)));
     }
 }
 

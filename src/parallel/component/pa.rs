@@ -6,7 +6,7 @@
 //! master, reporting its queue length and how many requests it has computed.
 
 use super::*;
-use crate::checkpoint::{RequestResult, encode_results};
+use crate::checkpoint::RequestResult;
 use crate::image::framebuffer::FrameBuffer;
 use crate::parallel::comm::{Comm, Counters};
 use crate::parallel::protocol::TAG_INITIAL_RECORDS;
@@ -147,9 +147,7 @@ pub fn run(setup: &WorkerSetup<'_>, sync: usize, seed: u64, journal: bool, bound
                                 samples: &mut Vec<(f64, u32)>,
                                 results: &mut Vec<RequestResult>| {
             // The results first: the status counts them as done.
-            if journal && !results.is_empty() {
-                comm.send(0, TAG_RESULTS, &encode_results(&std::mem::take(results)));
-            }
+            send_results(&comm, results);
             let records = cache.map_or_else(Vec::new, |c| c.take_outbox());
             // Refused requests count as done: the PR counted them as sent.
             let finished = done + rejected.load(Ordering::Relaxed);

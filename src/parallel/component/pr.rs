@@ -5,7 +5,7 @@
 //! forwarded from a loaded PA. Its image goes to the master only at the end.
 
 use super::*;
-use crate::checkpoint::{RequestResult, encode_results};
+use crate::checkpoint::RequestResult;
 use crate::image::framebuffer::FrameBuffer;
 use crate::parallel::comm::{Comm, Counters, Marker};
 use crate::parallel::protocol::decode_work;
@@ -195,8 +195,9 @@ fn render_and_help(
         let Some(Ok(Some(index))) = work else { break };
         let tile = &setup.tiles[index as usize];
         sender.start_tile(index);
-        let pending = |sender: &Sender<'_>| sender.sent + sink.lock().map_or(0, |s| s.len() as u64);
-        let requests_before = pending(&sender);
+        // The outgoing buffer is empty here (flushed at every tile's end), so what this tile
+        // sent is the change in the count sent.
+        let sent_before = sender.sent;
         let pixels = render_tile(&integrator, setup.camera, setup.settings, tile, &mut stats.rays, |_| {
             if sink.lock().map_or(0, |s| s.len()) >= send_at {
                 sender.send(&sink);
@@ -205,7 +206,7 @@ fn render_and_help(
         // The tile's last requests go to its PA now, not with the next tile's.
         sender.send(&sink);
         if journal {
-            let requests = (pending(&sender) - requests_before) as u32;
+            let requests = (sender.sent - sent_before) as u32;
             finished_tile = encode_tile_report(index, requests, &pixels);
         }
         store_tile(&mut frame, tile, &pixels);
@@ -221,17 +222,12 @@ fn render_and_help(
         .idle_ns
         .fetch_add(waited.elapsed().as_nanos() as u64, Ordering::Relaxed);
     let mut results: Vec<RequestResult> = Vec::new();
-    let report_results = |results: &mut Vec<RequestResult>| {
-        if journal && !results.is_empty() {
-            comm.send(0, TAG_RESULTS, &encode_results(&std::mem::take(results)));
-        }
-    };
 
     // Helping: compute what the master has a PA forward, until it says everything is done.
     let mut helped = 0u64;
     loop {
         let records = setup.cache.map_or_else(Vec::new, |c| c.take_outbox());
-        report_results(&mut results);
+        send_results(&comm, &mut results);
         comm.send(
             0,
             TAG_PR_IDLE,
@@ -258,7 +254,7 @@ fn render_and_help(
                     if let Some(cache) = setup.cache
                         && cache.outbox_len() >= sync
                     {
-                        report_results(&mut results);
+                        send_results(&comm, &mut results);
                         sync_records(&comm, cache, cache.take_outbox(), &mut received, &mut rejected);
                     }
                 }
