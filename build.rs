@@ -17,7 +17,7 @@ fn main() {
     let embree = find_embree();
     generate_embree_bindings(&embree, &out);
     generate_abi_bindings(&out);
-    compile_cpp();
+    compile_cpp(&out);
 }
 
 struct Embree {
@@ -82,16 +82,28 @@ fn generate_embree_bindings(embree: &Embree, out: &Path) {
 fn generate_abi_bindings(out: &Path) {
     bindgen::Builder::default()
         .header("ffi/scene_io.h")
-        .header("ffi/image_io.h")
         .allowlist_function("icr_.*")
         .allowlist_type("icr_.*")
         .allowlist_var("ICR_.*")
         .default_enum_style(bindgen::EnumVariation::Consts)
         .layout_tests(false)
         .generate()
-        .expect("bindgen failed on ffi/scene_io.h or ffi/image_io.h")
+        .expect("bindgen failed on ffi/scene_io.h")
         .write_to_file(out.join("abi_bindings.rs"))
         .expect("writing ABI bindings");
+    // The image shim is a library of its own, opened when an image is first read or written
+    // (see compile_image_library): its functions come as a table loaded at run time.
+    bindgen::Builder::default()
+        .header("ffi/image_io.h")
+        .allowlist_function("icr_.*")
+        .allowlist_type("icr_.*")
+        .dynamic_library_name("ImageLibrary")
+        .dynamic_link_require_all(true)
+        .layout_tests(false)
+        .generate()
+        .expect("bindgen failed on ffi/image_io.h")
+        .write_to_file(out.join("image_bindings.rs"))
+        .expect("writing image ABI bindings");
 }
 
 /// Include directories and libraries of OpenImageIO from pkg-config, with the Debian layout as
@@ -130,8 +142,7 @@ fn openimageio_flags() -> (Vec<String>, Vec<String>) {
     (includes, libs)
 }
 
-fn compile_cpp() {
-    let (oiio_includes, oiio_libs) = openimageio_flags();
+fn compile_cpp(out: &Path) {
     let mut build = cc::Build::new();
     build
         .cpp(true)
@@ -139,16 +150,39 @@ fn compile_cpp() {
         .include("ffi")
         .include("/usr/include/stb")
         .file("cpp/scene_io.cpp")
-        .file("cpp/image_io.cpp")
         .flag_if_supported("-Wno-unused-parameter")
         .flag_if_supported("-Wno-missing-field-initializers")
         .opt_level(2);
-    for dir in &oiio_includes {
-        build.include(dir);
-    }
     build.compile("icrender_cpp");
-    for lib in &oiio_libs {
-        println!("cargo:rustc-link-lib=dylib={lib}");
-    }
     println!("cargo:rustc-link-lib=dylib=stdc++");
+    compile_image_library(out);
+}
+
+/// The OpenImageIO shim as a shared library of its own, `libicrender_image.so`, which the binary
+/// opens on first use (src/sys/image_io.rs) instead of linking it. OpenImageIO pulls in about
+/// 270 shared libraries (codecs, GDAL, OpenCV, ...) whose symbol binding cost every process
+/// about 0.3 s of CPU at start, before main(): now only a process that reads or writes an image
+/// pays it (under mpirun, rank 0), not every rank and every command.
+/// It is written next to the binaries (target/<profile>/) and in OUT_DIR, where the binary looks.
+fn compile_image_library(out: &Path) {
+    let (oiio_includes, oiio_libs) = openimageio_flags();
+    let compiler = cc::Build::new().cpp(true).get_compiler();
+    let library = out.join("libicrender_image.so");
+    let mut cmd = compiler.to_command();
+    cmd.args(["-std=c++17", "-O2", "-fPIC", "-shared", "-Iffi"])
+        .args(oiio_includes.iter().map(|d| format!("-I{d}")))
+        .args(["-Wno-unused-parameter", "cpp/image_io.cpp", "-o"])
+        .arg(&library)
+        .args(oiio_libs.iter().map(|l| format!("-l{l}")))
+        .arg("-lstdc++");
+    let status = cmd.status().expect("running the C++ compiler for libicrender_image.so");
+    assert!(
+        status.success(),
+        "compiling cpp/image_io.cpp into {} failed",
+        library.display()
+    );
+    // OUT_DIR is target/<profile>/build/<crate>-<hash>/out: three levels up are the binaries.
+    if let Some(profile_dir) = out.ancestors().nth(3) {
+        let _ = std::fs::copy(&library, profile_dir.join("libicrender_image.so"));
+    }
 }

@@ -12,6 +12,11 @@ fewer cores than ranks the ranks share the cores, so wall times mix the network'
 oversubscription; misses, idle time and bytes are what the links change. `bytes` is what the
 ranks report sending; `kernel_bytes` is what the kernel counted on their hosts' links over the
 whole mpirun (TCP/IP headers, ACKs and mpirun's own control traffic included).
+
+Each link setting's message cost is measured too (`icrender bench messages` between hosts 0 and
+1: latency and bandwidth, in cluster-links.csv), and at the end every run is simulated by the
+cluster-scale simulation (bench/cluster_sim.py, bench/icsim.py) with those measured costs, its
+prediction error printed per run and in all (cluster-validation.csv).
 """
 
 import argparse
@@ -23,6 +28,7 @@ import subprocess
 import sys
 import time
 
+import cluster_sim
 import common
 
 TESTBED = os.path.join(common.ROOT, "tests", "cluster", "testbed.sh")
@@ -77,8 +83,23 @@ def run_mode(scene, mode, ranks, base, work, timeout):
     with open(stats_path) as f:
         s = json.load(f)
     kernel = sum(a - b for a, b in zip(after[:ranks], before[:ranks]))
+    workers = [r for r in s.get("per_rank", []) if r.get("role") != "mc"]
     return {"mpirun_s": elapsed, "wall_s": s["wall_s"], "render_s": s["render_s"], "misses": s["records_computed"],
-            "idle_s": s["idle_s"], "messages": s["messages"], "bytes": s["bytes"], "kernel_bytes": kernel}, None
+            "idle_s": s["idle_s"], "messages": s["messages"], "bytes": s["bytes"], "kernel_bytes": kernel,
+            "aggregated_s": sum(r["t_amb_s"] + r["t_notamb_s"] for r in workers),
+            "requests_sent": s.get("requests_sent", 0)}, None
+
+
+def measure_link(link):
+    """Latency and bandwidth between hosts 0 and 1 as MPI sees them (`icrender bench messages`)."""
+    result = testbed("mpirun", "-np", 2, common.BINARY, "bench", "messages", check=False, timeout=120)
+    if result.returncode != 0:
+        print(f"cluster_bench: link {link}: message cost not measured: {result.stderr.strip()[-200:]}")
+        return None
+    cost = json.loads(result.stdout.strip().splitlines()[-1])
+    print(f"{'link':>10} {link:>9}: latency {cost['latency_s'] * 1e6:7.1f} us, bandwidth "
+          f"{cost['bandwidth_bytes_per_s'] / 1e6:8.1f} MB/s (icrender bench messages, host 0 <-> host 1)")
+    return {"link": link, "latency_s": cost["latency_s"], "bandwidth_bytes_per_s": cost["bandwidth_bytes_per_s"]}
 
 
 def main():
@@ -106,20 +127,25 @@ def main():
     work = common.scratch()
     rows = []
     fields = ["scene", "link", "mode", "ranks", "mpirun_s", "wall_s", "render_s", "misses", "idle_s", "messages",
-              "bytes", "kernel_bytes", "status"]
+              "bytes", "kernel_bytes", "aggregated_s", "requests_sent", "status"]
+    link_rows = []
 
     for scene_name in scenes:
         scene = SCENES.get(scene_name, scene_name)
         stats, _ = common.render(scene, os.path.join(work, "s.exr"), base + ["--threads", "1"])
         rows.append({"scene": scene_name, "link": "-", "mode": "serial", "ranks": 1, "mpirun_s": "",
                      "wall_s": stats["wall_s"], "render_s": stats["render_s"], "misses": stats["records_computed"],
-                     "idle_s": 0.0, "messages": 0, "bytes": 0, "kernel_bytes": 0, "status": "ok"})
+                     "idle_s": 0.0, "messages": 0, "bytes": 0, "kernel_bytes": 0,
+                     "aggregated_s": stats["t_amb_s"] + stats["t_notamb_s"], "requests_sent": 0, "status": "ok"})
         print(f"{scene_name:>10} serial: {stats['records_computed']} misses, {stats['render_s']:.2f} s")
 
     started = time.monotonic()
     try:
         for link in links:
             up(max(ranks), link)
+            measured = measure_link(link)
+            if measured:
+                link_rows.append(measured)
             for scene_name in scenes:
                 scene = SCENES.get(scene_name, scene_name)
                 for mode in args.modes.split(","):
@@ -147,6 +173,14 @@ def main():
         w = csv.DictWriter(f, fieldnames=fields)
         w.writeheader()
         w.writerows(rows)
+    links_path = os.path.join(args.out, "cluster-links.csv")
+    with open(links_path, "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=["link", "latency_s", "bandwidth_bytes_per_s"])
+        w.writeheader()
+        w.writerows(link_rows)
+    settings_path = os.path.join(args.out, "cluster-bench.json")
+    with open(settings_path, "w") as f:
+        json.dump({"size": args.size, "options": args.options}, f)
 
     plt = common.ensure_module("matplotlib.pyplot", "matplotlib")
     metrics = [("wall_s", "wall time (s)"), ("misses", "aggregated cache misses"),
@@ -182,6 +216,13 @@ def main():
     fig.savefig(png, dpi=100, bbox_inches="tight")
     print(f"wrote {csv_path}")
     print(f"wrote {png}")
+
+    # The cluster-scale simulation fed with the measured message costs: its prediction error.
+    check, note = cluster_sim.validate(csv_path, links_path, settings_path, args.out)
+    validation = os.path.join(args.out, "cluster-validation.csv")
+    cluster_sim.write(check, validation)
+    print(note)
+    print(f"wrote {validation}")
 
 
 if __name__ == "__main__":

@@ -18,8 +18,10 @@ the renderer (src/irradiance/record.rs, Hessian metric). What a rank can see fol
   broadcast    its own, plus every record another rank broadcast (every --sync records), once the
                message has arrived (latency + size / bandwidth);
   component    PRs: the records the master had when they last asked for a tile; a PR's miss
-               becomes a request buffered until --send requests, then sent to a PA (round robin);
-               PAs: their own records plus the master's at their last sync (every 8 records);
+               becomes a request buffered until --send requests, then sent to the PA of its
+               tile (tile i to PA i mod n, src/parallel/component/pr.rs; flushed at tile end);
+               PAs: their own records plus the master's at their last sync (every 8 records; a PA
+               does not wait for the master's reply);
                when tiles run out, idle PRs take half the longest PA queue (load balancing).
 
 A miss at a point the serial run answered from the cache makes a record shaped like the one
@@ -38,6 +40,7 @@ from collections import defaultdict, deque
 
 RECORD_BYTES = 128  # src/irradiance/codec.rs
 REQUEST_BYTES = 100  # src/parallel/component/requests.rs
+PIXEL_BYTES = 52  # src/parallel/protocol.rs encode_pixels: four RGB layers and a record count
 MIN_SHARE = 2  # src/parallel/component/master.rs: smallest PA queue worth splitting
 
 NETWORKS = {
@@ -339,9 +342,10 @@ class Sim:
         while heap:
             now, w = heapq.heappop(heap)
             if state[w] is None or state[w][1] >= len(state[w][0]):
-                # Ask the master for a tile (the finished tile goes with the request).
+                # Ask the master for a tile (the finished tile's pixels go with the request).
                 t0 = clock[w]
-                arrive = t0 + self.msg(16) + self.wake / 2
+                finished = len(state[w][0]) if state[w] is not None else 0
+                arrive = t0 + self.msg(16 + PIXEL_BYTES * finished) + self.wake / 2
                 master_free = max(master_free, arrive)
                 back = master_free + self.msg(8) + self.wake / 2
                 res.busy[w] += 2 * c.message
@@ -417,7 +421,10 @@ class Sim:
         queue = {a: deque() for a in pas}  # (arrival time, entry)
         outbox = {a: [] for a in range(W)}
         buffer = {p: [] for p in prs}
-        next_pa = {p: i % len(pas) for i, p in enumerate(prs)}
+        # The PA each PR's current tile sends to: tile i goes to PA i mod n, so one PA sees all
+        # of a tile's neighbouring points (src/parallel/component/pr.rs).
+        tile_pa = {p: 0 for p in prs}
+        handed = 0  # tiles handed out so far; tiles are numbered in scanline order
         reported = {a: 0 for a in pas}  # queue length the master last heard of
         state = {p: None for p in prs}
         pr_done = set()
@@ -446,6 +453,10 @@ class Sim:
             return True
 
         def sync_master(w, arrive_extra=0.0):
+            """Records up, the records w lacks down. A PR waits for the reply (it needs the
+            records before its tile); a PA does not (src/parallel/component/pa.rs): it goes on
+            computing and takes the records in when they come (their arrival is approximated
+            here by the master's time, as for the PRs)."""
             t0 = clock[w]
             records = outbox[w]
             outbox[w] = []
@@ -455,8 +466,11 @@ class Sim:
             back = arrive + self.msg(16 + RECORD_BYTES * missing) + self.wake / 2
             self.seen_sync[w] = arrive
             res.busy[w] += 2 * c.message
-            res.idle[w] += back - t0
-            clock[w] = back + c.message
+            if w in queue:
+                clock[w] = t0 + 2 * c.message
+            else:
+                res.idle[w] += back - t0
+                clock[w] = back + c.message
             while w in queue and parked and dispatch(parked[0], arrive):
                 parked.popleft()
 
@@ -464,8 +478,7 @@ class Sim:
             nonlocal outstanding
             if not buffer[p]:
                 return
-            a = pas[next_pa[p]]
-            next_pa[p] = (next_pa[p] + 1) % len(pas)
+            a = pas[tile_pa[p]]
             arrive = clock[p] + self.msg(12 + REQUEST_BYTES * len(buffer[p])) + self.wake / 2
             clock[p] += c.message
             res.busy[p] += c.message
@@ -552,10 +565,14 @@ class Sim:
                     flush(w)
                 heapq.heappush(heap, (clock[w], w))
                 continue
-            # Needs work: a tile, with a sync of the PR's cache (records from the master).
+            # Needs work: the finished tile's requests go out, then a tile, with a sync of the
+            # PR's cache (records from the master).
+            flush(w)
             if self.tiles:
                 sync_master(w)
                 state[w] = (self.tiles.popleft(), 0)
+                tile_pa[w] = handed % len(pas)
+                handed += 1
                 heapq.heappush(heap, (clock[w], w))
                 continue
             flush(w)

@@ -39,6 +39,7 @@ import subprocess
 import sys
 import time
 
+import cluster_sim
 import common
 import icsim
 
@@ -454,7 +455,10 @@ def main():
             f"{r['real_aggregated_s']:.3f} s sim {r['sim_aggregated_s']:.3f} s ({r['time_err_pct']:+5.1f}%)")
 
     # -- the cluster test bed's runs (issue 10), if measured ------------------------------
-    cluster_rows, cluster_note = cluster_validation(args.cluster_csv, args, tw, th)
+    out_dir = os.path.dirname(args.cluster_csv)
+    cluster_rows, cluster_note = cluster_sim.validate(
+        args.cluster_csv, os.path.join(out_dir, "cluster-links.csv"), os.path.join(out_dir, "cluster-bench.json"),
+        args.out, say=say)
 
     # -- prediction ------------------------------------------------------------------------
     predict = [int(p) for p in args.predict.split(",")]
@@ -522,46 +526,6 @@ def _predict_one(task):
     res = icsim.simulate(_TRACE["trace"], mode, p, costs, network=network, tile=_TRACE["tile"], wake=wake)
     return {"misses": res.misses, "aggregated": res.aggregated, "makespan": res.makespan,
             "idle_fraction": res.idle_fraction, "messages": res.messages, "bytes": res.bytes}
-
-
-def cluster_validation(path, args, tw, th):
-    """Simulates the test bed's runs (bench/cluster_bench.py) at their size and link speed."""
-    if not os.path.exists(path):
-        note = f"{rel(path)} is absent (run `sudo python3 bench/cluster_bench.py` first): cluster check skipped."
-        say(note)
-        return [], note
-    with open(path) as f:
-        rows = [r for r in csv.DictReader(f) if r.get("status") == "ok"]
-    serial = {r["scene"]: r for r in rows if r["mode"] == "serial"}
-    # cluster_bench.py's defaults; the CSV does not record them.
-    size, opts = (192, 144), "-ab 1 -aa 0.2 -ad 256 -as 64 --tile 16x16"
-    out, work = [], common.scratch()
-    links = {"unshaped": "loopback", "1gbit": "1gbit", "100mbit": "100mbit"}
-    traces = {}
-    for name, s in serial.items():
-        if name not in SCENES:
-            continue
-        trace = os.path.join(args.out, f"trace-cluster-{name}.txt")
-        base = ["-x", str(size[0]), "-y", str(size[1])] + opts.split()
-        run_serial(SCENES[name][0], base, None, work, trace=trace)
-        st = run_serial(SCENES[name][0], base, None, work)
-        traces[name] = (icsim.Trace(trace, size[0], size[1], 0.2), sim_costs(st, size[0] * size[1]), st)
-    for r in rows:
-        if r["mode"] == "serial" or r["scene"] not in traces or r["link"] not in links:
-            continue
-        trace, costs, st = traces[r["scene"]]
-        workers = int(r["ranks"]) - 1
-        res = icsim.simulate(trace, r["mode"], workers, costs, network=links[r["link"]], tile=(16, 16),
-                             cores=os.cpu_count())
-        real_misses, real_bytes = float(r["misses"]), float(r["bytes"])
-        out.append({"scene": r["scene"], "link": r["link"], "mode": r["mode"], "processes": int(r["ranks"]),
-                    "real_misses": real_misses, "sim_misses": res.misses, "misses_err_pct": pct(res.misses, real_misses),
-                    "real_messages": int(r["messages"]), "sim_messages": res.messages,
-                    "real_bytes": real_bytes, "sim_bytes": res.bytes, "bytes_err_pct": pct(res.bytes, real_bytes)})
-        say(f"cluster {r['scene']:>10} {r['link']:>8} {r['mode']:<12} {r['ranks']} proc: misses real "
-            f"{real_misses:.0f} sim {res.misses} ({out[-1]['misses_err_pct']:+.1f}%), bytes real {real_bytes:.3g} "
-            f"sim {res.bytes:.3g} ({out[-1]['bytes_err_pct']:+.1f}%)")
-    return out, f"{len(out)} runs of {rel(path)} simulated at their link speed ({size[0]}x{size[1]}, {opts})."
 
 
 # -- outputs -------------------------------------------------------------------------------

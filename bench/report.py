@@ -244,12 +244,14 @@ def render(*, command, elapsed, runs, gains, rad_rows, sim_rows, cluster_rows, c
     if cluster_rows:
         rows = [[r["scene"], r["link"], r["mode"], r["processes"], f(r["real_misses"], "{:.0f}"), r["sim_misses"],
                  f(r["misses_err_pct"], "{:+.1f}%"), f(r["real_bytes"] / 1e6, "{:.2f}"), f(r["sim_bytes"] / 1e6, "{:.2f}"),
-                 f(r["bytes_err_pct"], "{:+.1f}%")] for r in cluster_rows]
+                 f(r["bytes_err_pct"], "{:+.1f}%"), f(r.get("time_err_pct", float("nan")), "{:+.1f}%"),
+                 f(r["render_err_pct"], "{:+.1f}%")] for r in cluster_rows]
         L.append(table(["scene", "link", "mode", "processes", "misses measured", "simulated", "error",
-                        "MB measured", "MB simulated", "error"], rows))
-        L.append("\nThe simulation's network is the link's (1 Gbit: 50 us, 125 MB/s; 100 Mbit: 100 us, 12.5 MB/s; "
-                 "unshaped: loopback). Bytes are what the ranks report sending; the simulation counts payloads the "
-                 "same way (128 bytes a record, 100 a request, plus the final image buffers in component mode).\n")
+                        "MB measured", "MB simulated", "error", "aggregated time error", "render time error"], rows))
+        L.append("\nEach run is simulated with its links' message costs as measured on the test bed (`icrender bench "
+                 "messages`, in bench/out/cluster-links.csv; nominal figures where a link was not measured). Bytes "
+                 "are what the ranks report sending; the simulation counts payloads the same way (128 bytes a "
+                 "record, 100 a request, plus the final image buffers in component mode).\n")
 
     L.append("## Cluster-scale prediction\n")
     if pred_rows:

@@ -297,6 +297,16 @@ pub enum BenchCommand {
         #[arg(long = "threads")]
         threads: Option<usize>,
     },
+    /// Message cost between two MPI ranks (run under `mpirun -np 2`): round trips at several
+    /// sizes, and the latency and bandwidth fitted to them, as JSON on rank 0. What the cluster
+    /// simulation (bench/icsim.py) takes as a link's cost.
+    Messages {
+        /// Message sizes in bytes, comma-separated. The default stays below Open MPI's eager
+        /// limit (64 KiB over TCP), where nearly all of the renderer's messages are: larger ones
+        /// go by rendezvous, whose extra round trips would be fitted as bandwidth.
+        #[arg(long = "sizes", default_value = "8,512,2048,8192,32768")]
+        sizes: String,
+    },
 }
 
 /// Parses "WxH" (or a single number for square tiles).

@@ -388,14 +388,16 @@ fn component_mode_matches_serial_and_computes_every_request_once() {
 fn load_balancing_resolves_a_forced_imbalance() {
     let dir = tempfile::tempdir().unwrap();
     let scene = project_dir().join("scenes/cornell.gltf");
-    // One PA for three PRs that send every miss at once: the PA's queue grows, and idle PRs
-    // must take shares of it for the run to end.
+    // One PA for three PRs that send every miss at once, with records four times dearer than
+    // elsewhere in these tests (-ad 1024): the PA's queue grows, and idle PRs must take shares of
+    // it for the run to end. (At -ad 256 a PA that no longer waits for the master's sync
+    // replies kept up with three PRs on this machine, and nothing needed forwarding.)
     let run = render(
         dir.path(),
         &scene,
         "imbalance",
         Some(5),
-        &["--mode", "component", "--pa", "1", "--send", "1", "-ad", "256"],
+        &["--mode", "component", "--pa", "1", "--send", "1", "-ad", "1024"],
     );
     let s = &run.stats;
     assert!(u(s, "requests_forwarded") > 0, "no request was forwarded: {s}");
@@ -416,7 +418,8 @@ fn load_balancing_resolves_a_forced_imbalance() {
 fn a_full_pa_queue_holds_the_prs_back() {
     let dir = tempfile::tempdir().unwrap();
     let scene = project_dir().join("scenes/cornell.gltf");
-    let common = ["--mode", "component", "--pa", "1", "--send", "4"];
+    // Dear records (-ad 1024) so that one PA falls behind two PRs, as in the imbalance test.
+    let common = ["--mode", "component", "--pa", "1", "--send", "4", "-ad", "1024"];
     let free = render(dir.path(), &scene, "unbounded", Some(4), &common);
     let (bound, send) = (16, 4);
     let mut args = common.to_vec();

@@ -1,13 +1,16 @@
 //! `icrender bench rays`: how fast Embree traces this scene's rays, outside the renderer, so the
-//! renderer's own throughput has a ceiling to be compared with.
+//! renderer's own throughput has a ceiling to be compared with. `icrender bench messages`: what
+//! a message costs between two MPI ranks (src/parallel/link_bench.rs).
 
-use super::CommandResult;
+use super::{CommandError, CommandResult};
 use crate::cli::{BenchArgs, BenchCommand};
+use crate::parallel::link_bench;
 use crate::sampling::Rng;
 use crate::scene::{LoadOptions, Scene};
 use crate::sys::embree::Coherence;
 use crate::tracer::Tracer;
 use glam::Vec3;
+use std::path::Path;
 use std::time::Instant;
 
 /// Traces `make_ray(i)` for i = 0, 1, ... on `threads` threads for about `seconds`; Mrays/s.
@@ -46,11 +49,40 @@ fn throughput(
 }
 
 pub fn run(args: &BenchArgs) -> CommandResult {
-    let BenchCommand::Rays {
-        scene: path,
-        seconds,
-        threads,
-    } = &args.which;
+    match &args.which {
+        BenchCommand::Rays {
+            scene,
+            seconds,
+            threads,
+        } => rays(scene, *seconds, *threads),
+        BenchCommand::Messages { sizes } => messages(sizes),
+    }
+}
+
+fn messages(sizes: &str) -> CommandResult {
+    let sizes = sizes
+        .split(',')
+        .map(|s| s.trim().parse::<usize>())
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(|e| CommandError(format!("--sizes {sizes:?}: {e} (bytes, comma-separated)")))?;
+    // 4 MiB in 32 KiB messages: past a capped link's burst allowance, under the eager limit.
+    let Some(measured) = link_bench::measure(&sizes, 32 << 10, 128).map_err(CommandError)? else {
+        return Ok(());
+    };
+    let fitted = link_bench::fit(&measured);
+    let report = serde_json::json!({
+        "stream_bytes": measured.stream_bytes,
+        "stream_s": measured.stream_s,
+        "samples": measured.samples.iter().map(|s| serde_json::json!({"bytes": s.bytes, "round_trip_s": s.round_trip_s}))
+            .collect::<Vec<_>>(),
+        "latency_s": fitted.map(|f| f.latency_s),
+        "bandwidth_bytes_per_s": fitted.map(|f| f.bandwidth),
+    });
+    println!("{report}");
+    Ok(())
+}
+
+fn rays(path: &Path, seconds: f64, threads: Option<usize>) -> CommandResult {
     let load_start = Instant::now();
     let scene = Scene::load(path, &LoadOptions::default())?;
     let load_s = load_start.elapsed().as_secs_f64();
@@ -79,8 +111,8 @@ pub fn run(args: &BenchArgs) -> CommandResult {
     println!("load         {load_s:.3} s");
     println!("bvh build    {build_s:.3} s");
     for t in [1, all] {
-        let (p, ph) = throughput(&tracer, t, *seconds, Coherence::Coherent, &primary);
-        let (r, rh) = throughput(&tracer, t, *seconds, Coherence::Incoherent, &incoherent);
+        let (p, ph) = throughput(&tracer, t, seconds, Coherence::Coherent, &primary);
+        let (r, rh) = throughput(&tracer, t, seconds, Coherence::Incoherent, &incoherent);
         println!(
             "{t} thread(s)  primary {p:.2} Mrays/s ({:.0}% hit)   incoherent {r:.2} Mrays/s ({:.0}% hit)",
             ph * 100.0,

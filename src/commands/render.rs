@@ -251,6 +251,7 @@ pub fn run(args: &RenderArgs) -> CommandResult {
     let wall = Instant::now();
     validate(args)?;
     let outputs = Outputs::check(args)?;
+    image_io::open_in_background();
     let reference = match &args.reference {
         Some(path) => {
             Some(image_io::read_image(path, &[]).map_err(|e| CommandError(format!("{}: {e}", path.display())))?)

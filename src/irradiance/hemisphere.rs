@@ -74,14 +74,17 @@ impl Hemisphere {
         (0..n * n)
             .map(|k| {
                 let (i, j) = (k / n, k % n);
-                let mut neighbours = vec![self.at(i, j + 1), self.at(i, j + n - 1)];
-                if i > 0 {
-                    neighbours.push(self.at(i - 1, j));
-                }
-                if i + 1 < n {
-                    neighbours.push(self.at(i + 1, j));
-                }
-                let values = neighbours.iter().map(|c| luminance(c.radiance));
+                // Sector neighbours always; ring neighbours where the ring exists. (No vector per
+                // cell: this runs for every cell of every record.)
+                let ring_inner = (i > 0).then(|| self.at(i - 1, j));
+                let ring_outer = (i + 1 < n).then(|| self.at(i + 1, j));
+                let neighbours = [
+                    Some(self.at(i, j + 1)),
+                    Some(self.at(i, j + n - 1)),
+                    ring_inner,
+                    ring_outer,
+                ];
+                let values = neighbours.iter().flatten().map(|c| luminance(c.radiance));
                 let (lo, hi) = values.fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), v| (lo.min(v), hi.max(v)));
                 hi - lo
             })

@@ -177,6 +177,12 @@ impl<'c> Comm<'c> {
             .collect()
     }
 
+    /// Waits until every rank has come here. A collective: every rank calls it.
+    pub fn barrier(&self) {
+        use mpi::collective::CommunicatorCollectives;
+        self.world.barrier();
+    }
+
     /// Every rank's flag, by rank. A collective: every rank calls it.
     pub fn all_flags(&self, flag: bool) -> Vec<bool> {
         use mpi::collective::CommunicatorCollectives;

@@ -5,6 +5,7 @@
 
 pub mod comm;
 pub mod component;
+pub mod link_bench;
 pub mod master;
 pub mod protocol;
 pub mod worker;
@@ -181,6 +182,17 @@ fn check_layout(args: &RenderArgs, mode: Mode, size: i32, tile_count: usize, thr
     Ok(())
 }
 
+/// Ends a job on a verdict every rank has reached alike: rank 0 alone says why, and the others
+/// stop quietly, but only once rank 0 has said it. A rank that exits with an error first makes
+/// mpirun kill the job, rank 0 included, before its line is out; so all meet at a barrier.
+fn stop_together(comm: &Comm<'_>, message: &str) -> CommandResult {
+    if comm.rank() == 0 {
+        eprintln!("icrender: error: {message}");
+    }
+    comm.barrier();
+    Err(CommandError(String::new()))
+}
+
 pub fn run(args: &RenderArgs, mode: Mode) -> CommandResult {
     let wall = Instant::now();
     // A rank never outlives its launcher (see sys::process).
@@ -191,14 +203,7 @@ pub fn run(args: &RenderArgs, mode: Mode) -> CommandResult {
     let counters = Counters::default();
     let comm = Comm::new(&counters);
     let (rank, size) = (comm.rank(), comm.size());
-    // Only rank 0 speaks; the others stop quietly with the same verdict.
-    let fail = |message: String| -> CommandResult {
-        if rank == 0 {
-            Err(CommandError(message))
-        } else {
-            Err(CommandError(String::new()))
-        }
-    };
+    let fail = |message: String| stop_together(&comm, &message);
     let threads = args.threads.unwrap_or(1);
     if mode == Mode::Component && threads != 1 {
         return fail(
@@ -225,6 +230,8 @@ pub fn run(args: &RenderArgs, mode: Mode) -> CommandResult {
     // From here on a failure may hit one rank only (its files, its file system): that rank says
     // why and ends the whole job, or the others would wait for it for ever.
     let outputs = if rank == 0 {
+        // Rank 0 alone writes images; the other ranks never open the image library.
+        crate::sys::image_io::open_in_background();
         Some(Outputs::check(args).unwrap_or_else(|e| fatal(&comm, &e.0)))
     } else {
         None
@@ -250,16 +257,19 @@ pub fn run(args: &RenderArgs, mode: Mode) -> CommandResult {
     let prepared = Job::prepare(&rank_args, crate::memory::Role::AnyRank);
     // Who could not prepare: if rank 0 could not, it alone says why (the others most likely
     // failed the same way on the same scene); else each failing rank says why. All then stop.
+    // The lines go out before a barrier, as in `fail`.
     let failed = comm.all_flags(prepared.is_err());
     let mut job = match prepared {
         Ok(job) if !failed.contains(&true) => job,
-        Ok(_) => return Err(CommandError(String::new())),
-        Err(e) if rank == 0 => return Err(e),
-        Err(e) if failed[0] => {
-            drop(e);
+        outcome => {
+            match outcome {
+                Err(e) if rank == 0 => eprintln!("icrender: error: {}", e.0),
+                Err(e) if !failed[0] => eprintln!("icrender: error: rank {rank}: {}", e.0),
+                _ => {}
+            }
+            comm.barrier();
             return Err(CommandError(String::new()));
         }
-        Err(e) => return Err(CommandError(format!("rank {rank}: {}", e.0))),
     };
     let resume = checkpoint.as_ref().map(|(journal, restored)| (journal, restored));
     if mode == Mode::Component {
@@ -373,8 +383,7 @@ fn run_component(
     // Every rank reaches the same verdict from the same scene and options.
     let roles = match component::Roles::choose(comm.size(), args.pa, needed) {
         Ok(roles) => roles,
-        Err(e) if rank == 0 => return Err(CommandError(e)),
-        Err(_) => return Err(CommandError(String::new())),
+        Err(e) => return stop_together(comm, &e),
     };
     if rank != 0 {
         if let Some(cache) = job.cache.as_mut() {

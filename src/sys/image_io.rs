@@ -1,11 +1,82 @@
 //! Safe wrapper over the OpenImageIO shim: multi-layer EXR and PNG writing, and reading an
 //! image back as named float planes.
+//!
+//! The shim is a shared library of its own (`libicrender_image.so`, built by build.rs), opened
+//! the first time an image is read or written: OpenImageIO drags in about 270 shared libraries
+//! whose symbol binding costs a process ~0.3 s of CPU, which worker ranks and commands that
+//! never touch an image should not pay.
 
-use super::abi_bindings as abi;
+use super::image_bindings as abi;
 use super::{ERR_LEN, buffer_message, owned_string, slice_or_empty};
 use std::ffi::CString;
 use std::os::raw::c_char;
-use std::path::Path;
+use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
+
+const LIBRARY_NAME: &str = "libicrender_image.so";
+
+/// Where the image library may be, in order: $ICRENDER_IMAGE_LIB, beside the executable (and
+/// one level up, for test binaries in target/<profile>/deps), and where build.rs made it.
+fn library_candidates() -> Vec<PathBuf> {
+    let mut paths = Vec::new();
+    if let Some(path) = std::env::var_os("ICRENDER_IMAGE_LIB") {
+        paths.push(PathBuf::from(path));
+    }
+    if let Some(dir) = std::env::current_exe()
+        .ok()
+        .and_then(|e| e.parent().map(Path::to_path_buf))
+    {
+        paths.push(dir.join(LIBRARY_NAME));
+        if let Some(up) = dir.parent() {
+            paths.push(up.join(LIBRARY_NAME));
+        }
+    }
+    paths.push(Path::new(env!("OUT_DIR")).join(LIBRARY_NAME));
+    paths
+}
+
+fn open_library() -> Result<abi::ImageLibrary, String> {
+    let candidates = library_candidates();
+    let mut failures = Vec::new();
+    for path in &candidates {
+        if !path.is_file() {
+            continue;
+        }
+        // SAFETY: the library is ours (cpp/image_io.cpp); loading it runs only the static
+        // constructors of OpenImageIO and its dependencies, and every symbol is checked.
+        match unsafe { abi::ImageLibrary::new(path) } {
+            Ok(library) => return Ok(library),
+            Err(e) => failures.push(format!("{}: {e}", path.display())),
+        }
+    }
+    if failures.is_empty() {
+        let looked: Vec<String> = candidates.iter().map(|p| p.display().to_string()).collect();
+        Err(format!(
+            "the image library {LIBRARY_NAME} was not found (looked in {}; set ICRENDER_IMAGE_LIB)",
+            looked.join(", ")
+        ))
+    } else {
+        Err(format!(
+            "the image library could not be opened: {}",
+            failures.join("; ")
+        ))
+    }
+}
+
+/// Opens the image library on a thread of its own, for a process that will write an image at
+/// the end: the opening (~0.3 s of CPU) then overlaps the scene load and the render instead of
+/// coming after them. A failure is reported by the first real use.
+pub fn open_in_background() {
+    std::thread::spawn(|| {
+        let _ = library();
+    });
+}
+
+/// The image library, opened on first use and kept for the life of the process.
+fn library() -> Result<&'static abi::ImageLibrary, String> {
+    static LIBRARY: OnceLock<Result<abi::ImageLibrary, String>> = OnceLock::new();
+    LIBRARY.get_or_init(open_library).as_ref().map_err(Clone::clone)
+}
 
 fn c_path(path: &Path) -> Result<CString, String> {
     CString::new(path.as_os_str().as_encoded_bytes()).map_err(|_| "path contains a NUL byte".to_string())
@@ -59,10 +130,11 @@ pub fn write_exr(
         })
         .collect();
     let path = c_path(path)?;
+    let lib = library()?;
     let mut err = vec![0 as c_char; ERR_LEN];
     // SAFETY: every pointer refers to data alive for the call; planes hold width*height values.
     let rc = unsafe {
-        abi::icr_exr_write(
+        lib.icr_exr_write(
             path.as_ptr(),
             width,
             height,
@@ -84,9 +156,10 @@ pub fn write_png(path: &Path, width: u32, height: u32, rgb: &[u8]) -> Result<(),
         return Err("PNG buffer size does not match the image size".into());
     }
     let path = c_path(path)?;
+    let lib = library()?;
     let mut err = vec![0 as c_char; ERR_LEN];
     // SAFETY: the buffer holds 3*width*height bytes, checked above.
-    let rc = unsafe { abi::icr_png_write(path.as_ptr(), width, height, rgb.as_ptr(), err.as_mut_ptr(), err.len()) };
+    let rc = unsafe { lib.icr_png_write(path.as_ptr(), width, height, rgb.as_ptr(), err.as_mut_ptr(), err.len()) };
     if rc == 0 { Ok(()) } else { Err(buffer_message(&err)) }
 }
 
@@ -107,42 +180,43 @@ impl ImageData {
     }
 }
 
-struct ImageHandle(*mut abi::icr_image);
+struct ImageHandle(&'static abi::ImageLibrary, *mut abi::icr_image);
 
 impl Drop for ImageHandle {
     fn drop(&mut self) {
         // SAFETY: the pointer came from icr_image_read and is freed once.
-        unsafe { abi::icr_image_free(self.0) };
+        unsafe { self.0.icr_image_free(self.1) };
     }
 }
 
 /// Reads every channel of an image file, plus the named header attributes where present.
 pub fn read_image(path: &Path, attribute_names: &[&str]) -> Result<ImageData, String> {
     let cpath = c_path(path)?;
+    let lib = library()?;
     let mut err = vec![0 as c_char; ERR_LEN];
     // SAFETY: valid path and error buffer.
-    let raw = unsafe { abi::icr_image_read(cpath.as_ptr(), err.as_mut_ptr(), err.len()) };
+    let raw = unsafe { lib.icr_image_read(cpath.as_ptr(), err.as_mut_ptr(), err.len()) };
     if raw.is_null() {
         return Err(buffer_message(&err));
     }
-    let handle = ImageHandle(raw);
+    let handle = ImageHandle(lib, raw);
     // SAFETY: the handle is live; planes hold width*height floats (the shim's contract) and are
     // copied before the handle is dropped.
     unsafe {
-        let width = abi::icr_image_width(handle.0);
-        let height = abi::icr_image_height(handle.0);
+        let width = lib.icr_image_width(handle.1);
+        let height = lib.icr_image_height(handle.1);
         let pixels = width as usize * height as usize;
-        let count = abi::icr_image_channel_count(handle.0);
+        let count = lib.icr_image_channel_count(handle.1);
         let mut channels = Vec::with_capacity(count);
         for i in 0..count {
-            let name = owned_string(abi::icr_image_channel_name(handle.0, i));
-            let data = slice_or_empty(abi::icr_image_channel_data(handle.0, i), pixels).to_vec();
+            let name = owned_string(lib.icr_image_channel_name(handle.1, i));
+            let data = slice_or_empty(lib.icr_image_channel_data(handle.1, i), pixels).to_vec();
             channels.push((name, data));
         }
         let mut attributes = Vec::new();
         for name in attribute_names {
             let cname = c_text(name);
-            let value = abi::icr_image_attribute(handle.0, cname.as_ptr());
+            let value = lib.icr_image_attribute(handle.1, cname.as_ptr());
             if !value.is_null() {
                 attributes.push((name.to_string(), owned_string(value)));
             }

@@ -18,6 +18,18 @@ mod abi_bindings {
     include!(concat!(env!("OUT_DIR"), "/abi_bindings.rs"));
 }
 
+#[allow(
+    non_upper_case_globals,
+    non_camel_case_types,
+    non_snake_case,
+    dead_code,
+    clippy::all,
+    unsafe_op_in_unsafe_fn
+)]
+mod image_bindings {
+    include!(concat!(env!("OUT_DIR"), "/image_bindings.rs"));
+}
+
 pub mod alloc;
 pub mod embree;
 pub mod image_io;

@@ -8,6 +8,7 @@
 use super::*;
 use crate::checkpoint::RequestResult;
 use crate::image::framebuffer::FrameBuffer;
+use crate::irradiance::IrradianceCache;
 use crate::parallel::comm::{Comm, Counters};
 use crate::parallel::protocol::TAG_INITIAL_RECORDS;
 use crate::parallel::{WorkerSetup, rank_report, send_report};
@@ -27,7 +28,40 @@ struct Queue {
     longest: usize,
 }
 
-/// The communicating thread: requests in, forward orders out, until FINISH.
+/// What the communicating thread counts for the PA's report: requests handed to helping PRs,
+/// and requests (or whole batches) refused as malformed.
+#[derive(Default)]
+struct Tallies {
+    forwarded: AtomicU64,
+    rejected: AtomicU64,
+}
+
+/// The master's replies to this PA's status messages: the records the PA lacks. The PA does not
+/// wait for them (a PA that waited for every reply spent its time polling MPI, as CPU outside
+/// L_a and as idle time): the communicating thread takes them in as they come, straight into
+/// the shared cache, and the computing thread takes in what is still owed at the end. Taking
+/// them in promptly matters: a large reply goes by rendezvous, and the master's send blocks
+/// until this rank receives it.
+struct Replies<'a> {
+    cache: Option<&'a IrradianceCache>,
+    /// Statuses sent whose reply has not been taken in.
+    pending: AtomicU64,
+    /// Records received from the master.
+    records: AtomicU64,
+}
+
+impl Replies<'_> {
+    fn take(&self, data: &[u8]) {
+        self.pending.fetch_sub(1, Ordering::AcqRel);
+        if let (Some(cache), Ok(batch)) = (self.cache, decode_batch(data)) {
+            self.records.fetch_add(batch.records.len() as u64, Ordering::Relaxed);
+            batch.records.into_iter().for_each(|r| cache.insert_shared(r));
+        }
+    }
+}
+
+/// The communicating thread: requests in, forward orders out, the master's replies into the
+/// cache, until FINISH.
 /// While the queue holds `bound` requests or more, no request batch is taken in: the PRs'
 /// synchronous sends then wait (back-pressure), so the queue stays below `bound` plus one batch.
 fn communicate(
@@ -35,12 +69,15 @@ fn communicate(
     queue: &Mutex<Queue>,
     ready: &Condvar,
     pixels: u32,
-    forwarded: &AtomicU64,
-    rejected: &AtomicU64,
+    tallies: &Tallies,
+    replies: &Replies<'_>,
     bound: usize,
 ) {
     let comm = Comm::new(counters);
+    // Replies before FINISH: the master sends FINISH after every reply it owed, so all of them
+    // are in before FINISH is taken.
     let filters = [
+        (Some(0), Some(TAG_PA_STATUS_REPLY)),
         (Some(0), Some(TAG_FINISH)),
         (Some(0), Some(TAG_FORWARD_ORDER)),
         (None, Some(TAG_REQUESTS)),
@@ -49,7 +86,7 @@ fn communicate(
         let full = queue.lock().unwrap_or_else(|e| e.into_inner()).requests.len() >= bound;
         // Full: only the master's messages, looking again at the queue every few milliseconds.
         let (accepted, wait) = if full {
-            (&filters[..2], Some(Duration::from_millis(2)))
+            (&filters[..3], Some(Duration::from_millis(2)))
         } else {
             (&filters[..], None)
         };
@@ -57,9 +94,10 @@ fn communicate(
             continue;
         };
         match msg.tag {
+            TAG_PA_STATUS_REPLY => replies.take(&msg.data),
             TAG_REQUESTS => match requests::decode(&msg.data, pixels) {
                 Ok(decoded) => {
-                    rejected.fetch_add(decoded.rejected as u64, Ordering::Relaxed);
+                    tallies.rejected.fetch_add(decoded.rejected as u64, Ordering::Relaxed);
                     // Refused requests still count as done, so the master's totals close.
                     let mut q = queue.lock().unwrap_or_else(|e| e.into_inner());
                     q.requests.extend(decoded.requests);
@@ -68,7 +106,7 @@ fn communicate(
                     ready.notify_one();
                 }
                 Err(_) => {
-                    rejected.fetch_add(1, Ordering::Relaxed);
+                    tallies.rejected.fetch_add(1, Ordering::Relaxed);
                 }
             },
             TAG_FORWARD_ORDER => {
@@ -86,7 +124,7 @@ fn communicate(
                     let keep = q.requests.len().saturating_sub(count as usize);
                     q.requests.split_off(keep).into()
                 };
-                forwarded.fetch_add(share.len() as u64, Ordering::Relaxed);
+                tallies.forwarded.fetch_add(share.len() as u64, Ordering::Relaxed);
                 comm.send(pr as i32, TAG_FORWARDED, &requests::encode(&share));
             }
             _ => {
@@ -109,9 +147,12 @@ pub fn run(setup: &WorkerSetup<'_>, sync: usize, seed: u64, journal: bool, bound
     let cache = setup.cache;
     let queue = Mutex::new(Queue::default());
     let ready = Condvar::new();
-    let forwarded = AtomicU64::new(0);
-    let rejected = AtomicU64::new(0);
-    let mut received = 0u64;
+    let tallies = Tallies::default();
+    let replies = Replies {
+        cache,
+        pending: AtomicU64::new(0),
+        records: AtomicU64::new(0),
+    };
 
     if let Some(initial) = comm.receive(Some(0), Some(TAG_INITIAL_RECORDS), None)
         && let (Some(cache), Ok(batch)) = (cache, decode_batch(&initial.data))
@@ -131,46 +172,39 @@ pub fn run(setup: &WorkerSetup<'_>, sync: usize, seed: u64, journal: bool, bound
                 &queue,
                 &ready,
                 width * height,
-                &forwarded,
-                &rejected,
+                &tallies,
+                &replies,
                 bound,
             )
         });
         let integrator = Integrator::new(setup.scene, setup.tracer, setup.shading, cache);
         let clock = ThreadClock::start();
         let mut reported = u64::MAX;
-        // Syncs with the master: new records up, records it lacks down, and the queue length
-        // and the count of computed requests, which the master's termination check relies on.
-        let sync_with_master = |left: usize,
-                                done: u64,
-                                received: &mut u64,
-                                samples: &mut Vec<(f64, u32)>,
-                                results: &mut Vec<RequestResult>| {
-            // The results first: the status counts them as done.
-            send_results(&comm, results);
-            let records = cache.map_or_else(Vec::new, |c| c.take_outbox());
-            // Refused requests count as done: the PR counted them as sent.
-            let finished = done + rejected.load(Ordering::Relaxed);
-            comm.send(
-                0,
-                TAG_PA_STATUS,
-                &encode_counts_and_records(&[left as u64, finished], &records),
-            );
-            samples.push((start.elapsed().as_secs_f64(), left as u32));
-            if let Some(reply) = comm.receive(Some(0), Some(TAG_PA_STATUS_REPLY), None)
-                && let (Some(cache), Ok(batch)) = (cache, decode_batch(&reply.data))
-            {
-                *received += batch.records.len() as u64;
-                batch.records.into_iter().for_each(|r| cache.insert_shared(r));
-            }
-        };
+        // Syncs with the master: new records up, and the queue length and the count of
+        // computed requests, which the master's termination check relies on. The reply is not
+        // waited for (see `Replies`).
+        let sync_with_master =
+            |left: usize, done: u64, samples: &mut Vec<(f64, u32)>, results: &mut Vec<RequestResult>| {
+                // The results first: the status counts them as done.
+                send_results(&comm, results);
+                let records = cache.map_or_else(Vec::new, |c| c.take_outbox());
+                // Refused requests count as done: the PR counted them as sent.
+                let finished = done + tallies.rejected.load(Ordering::Relaxed);
+                replies.pending.fetch_add(1, Ordering::AcqRel);
+                comm.send(
+                    0,
+                    TAG_PA_STATUS,
+                    &encode_counts_and_records(&[left as u64, finished], &records),
+                );
+                samples.push((start.elapsed().as_secs_f64(), left as u32));
+            };
         loop {
             let next = queue.lock().unwrap_or_else(|e| e.into_inner()).requests.pop_front();
             let Some(request) = next else {
                 // Going idle: the master must know everything done so far first (the queue
                 // may also have been emptied by a forward order while a request was computed).
                 if done != reported {
-                    sync_with_master(0, done, &mut received, &mut queue_samples, &mut results);
+                    sync_with_master(0, done, &mut queue_samples, &mut results);
                     reported = done;
                     continue;
                 }
@@ -201,13 +235,21 @@ pub fn run(setup: &WorkerSetup<'_>, sync: usize, seed: u64, journal: bool, bound
             done += 1;
             if cache.map_or(0, |c| c.outbox_len()) >= sync {
                 let left = queue.lock().unwrap_or_else(|e| e.into_inner()).requests.len();
-                sync_with_master(left, done, &mut received, &mut queue_samples, &mut results);
+                sync_with_master(left, done, &mut queue_samples, &mut results);
                 reported = done;
             }
         }
         clock.stop(&mut stats);
         let _ = comm_thread.join();
     });
+    // A status sent after FINISH (the last sync) still has its reply coming: the master answers
+    // every status, also after FINISH.
+    while replies.pending.load(Ordering::Acquire) > 0 {
+        match comm.receive(Some(0), Some(TAG_PA_STATUS_REPLY), None) {
+            Some(reply) => replies.take(&reply.data),
+            None => break,
+        }
+    }
 
     comm.send(
         0,
@@ -225,10 +267,10 @@ pub fn run(setup: &WorkerSetup<'_>, sync: usize, seed: u64, journal: bool, bound
         &[&counters, &comm_counters],
         counters.idle_s(),
     );
-    report.records_received = received;
-    report.records_rejected = rejected.load(Ordering::Relaxed);
+    report.records_received = replies.records.load(Ordering::Relaxed);
+    report.records_rejected = tallies.rejected.load(Ordering::Relaxed);
     report.requests_computed = done;
-    report.requests_forwarded = forwarded.load(Ordering::Relaxed);
+    report.requests_forwarded = tallies.forwarded.load(Ordering::Relaxed);
     report.queue_lengths = queue_samples;
     report.queue_max = queue.lock().unwrap_or_else(|e| e.into_inner()).longest as u64;
     report.wall_s = start.elapsed().as_secs_f64();
