@@ -23,6 +23,7 @@ import argparse
 import csv
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -114,6 +115,8 @@ def main():
                         help="render options shared by every run")
     parser.add_argument("--timeout", type=int, default=120, help="the master's --timeout, seconds")
     parser.add_argument("--out", default=os.path.join(common.ROOT, "bench", "out"))
+    parser.add_argument("--docs", default=os.path.join(common.ROOT, "docs", "cluster"),
+                        help="where the CSVs and the plot are kept in the repository (copies of --out's)")
     args = parser.parse_args()
     # A termination still tears the test bed down (the finally below).
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))
@@ -220,9 +223,14 @@ def main():
     # The cluster-scale simulation fed with the measured message costs: its prediction error.
     check, note = cluster_sim.validate(csv_path, links_path, settings_path, args.out)
     validation = os.path.join(args.out, "cluster-validation.csv")
-    cluster_sim.write(check, validation)
+    common.write_csv(validation, check)
     print(note)
     print(f"wrote {validation}")
+    os.makedirs(args.docs, exist_ok=True)
+    for path in (csv_path, png, links_path, validation):
+        if os.path.exists(path):
+            shutil.copy(path, args.docs)
+    print(f"copied the CSVs and the plot to {args.docs}")
 
 
 if __name__ == "__main__":

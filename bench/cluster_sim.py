@@ -157,21 +157,9 @@ def validate(csv_path, links_path, settings_path, out_dir, say=print):
     return out, note
 
 
-def write(rows, path):
-    if not rows:
-        return
-    keys = []
-    for r in rows:
-        keys += [k for k in r if k not in keys]
-    with open(path, "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=keys)
-        w.writeheader()
-        w.writerows(rows)
-
-
 if __name__ == "__main__":
     out_dir = os.path.join(common.ROOT, "bench", "out")
     checked, summary = validate(os.path.join(out_dir, "cluster-bench.csv"), os.path.join(out_dir, "cluster-links.csv"),
                                 os.path.join(out_dir, "cluster-bench.json"), out_dir)
-    write(checked, os.path.join(out_dir, "cluster-validation.csv"))
+    common.write_csv(os.path.join(out_dir, "cluster-validation.csv"), checked)
     print(summary)

@@ -3,6 +3,7 @@
 Benchmarks print figures and write CSVs and plots; they assert nothing (tests do that).
 """
 
+import csv
 import importlib
 import json
 import os
@@ -66,3 +67,17 @@ def reference(scene, out, options, noise=0.003, max_seconds=600):
 
 def scratch():
     return tempfile.mkdtemp(prefix="icrender-bench-")
+
+
+def write_csv(path, rows):
+    """Rows (dicts) as a CSV whose columns are every key in order of first appearance; nothing
+    is written for no rows."""
+    if not rows:
+        return
+    keys = []
+    for r in rows:
+        keys += [k for k in r if k not in keys]
+    with open(path, "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=keys)
+        w.writeheader()
+        w.writerows(rows)

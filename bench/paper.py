@@ -25,7 +25,6 @@ wall-clock speed-up is printed too but means little with more ranks than cores.
 """
 
 import argparse
-import csv
 import datetime
 import json
 import multiprocessing
@@ -531,16 +530,9 @@ def _predict_one(task):
 # -- outputs -------------------------------------------------------------------------------
 
 def write_csv(path, rows):
-    if not rows:
-        return
-    keys = []
-    for r in rows:
-        keys += [k for k in r if k not in keys]
-    with open(path, "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=keys)
-        w.writeheader()
-        w.writerows(rows)
-    say(f"wrote {rel(path)}")
+    if rows:
+        common.write_csv(path, rows)
+        say(f"wrote {rel(path)}")
 
 
 def write_outputs(args, runs, gains, rad_rows, sim_rows, cluster_rows, cluster_note, pred_rows, setups, scenes,

@@ -140,17 +140,26 @@ def icrender_view(scene, base, folder):
 
 def references(name, cfg, base, view, folder, args, scratch):
     """Both converged references, their agreement, and the mean of the two."""
+    width, height = cfg["size"]
+
+    def stale(path):
+        """A cached reference of another image size (the scene's size changed since) is made anew."""
+        if os.path.exists(path) and read_rgb(path).shape[:2] != (height, width):
+            log(f"{name}: {path} is not {width}x{height}: making it again")
+            os.remove(path)
+        return not os.path.exists(path)
+
     ours = os.path.join(folder, "reference-icrender.exr")
-    if not os.path.exists(ours):
+    if stale(ours):
         log(f"{name}: icrender reference (brute force, up to {cfg['reference_seconds']} s)")
         subprocess.run([common.BINARY, "reference", cfg["file"], "-o", ours, "-q", "--no-preview",
                         "--noise", str(args.reference_noise), "--max-seconds", str(cfg["reference_seconds"]),
                         "-ad", "16", "--spp", "4", "--light-samples", "4"] + base, check=True)
     spp = args.reference_spp or (4096 if name == "cornell" else 512)
     theirs = os.path.join(folder, f"reference-mitsuba-{spp}spp.exr")
-    if not os.path.exists(theirs):
+    if stale(theirs):
         log(f"{name}: Mitsuba reference at {spp} spp")
-        job = dict(scene=cfg["file"], view=view, width=cfg["size"][0], height=cfg["size"][1], ab=cfg["ab"],
+        job = dict(scene=cfg["file"], view=view, width=width, height=height, ab=cfg["ab"],
                    spp=[spp], out=folder, prefix="reference")
         [row] = run_peer("peer_mitsuba.py", job, folder)
         os.replace(row["exr"], theirs)

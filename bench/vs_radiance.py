@@ -19,11 +19,14 @@ What it does (all files go to --out, default target/vs_radiance/<scene>_<x>x<y>/
 
 Radiance comes from the PyPI package `pyradiance` (installed with pip when missing); its binaries
 are in the package's bin/ and need RAYPATH to point at its lib/. Standard library only otherwise.
-Times: "wall" is the whole process as the script sees it; "work" is what the ratios use: for
-icrender its own wall_s statistic (scene load, BVH, render; not writing the EXR nor comparing with
---reference afterwards), for rpict the whole process (octree read, render, writing the picture,
-all small next to the render); "cpu" is user + system time of the process, so a machine busy
-with other work shows as wall > cpu / threads.
+Times: "wall" is the whole process as the script sees it (start-up, scene, render, writing the
+image; the error is measured afterwards by `icrender compare`, for both renderers); "work" is, for
+icrender, its own wall_s statistic (scene load, BVH, render; not the start-up nor writing the EXR),
+for rpict the whole process (octree read, render, writing the picture, all small next to the
+render); "cpu" is user + system time of the process, so a machine busy with other work shows as
+wall > cpu / threads. The ratios are printed for all three. icrender runs on every core, on one
+thread, and on one thread pinned to one core (taskset -c 0), where also the image library's
+loading (OpenImageIO: ~0.3 s of CPU, done beside the render otherwise) takes its turn.
 """
 
 import argparse
@@ -225,30 +228,33 @@ def reference_image(args, icrender, out_dir, scene_args):
     return ref, f"FALLBACK brute force (icrender render -aa 0 -ad 4096 --spp 16 --light-samples 16), {wall:.0f} s"
 
 
-def icrender_run(args, icrender, scene_args, ambient, out_dir, ref, threads):
-    tag = f"icrender_t{threads}" if threads else "icrender"
+def icrender_run(args, icrender, scene_args, ambient, out_dir, ref, threads, pin=False):
+    """One icrender render, timed as a whole process like rpict (the error is measured after it,
+    with `icrender compare`, as for rpict). `pin`: on one core only (taskset -c 0), so nothing of
+    the process runs beside the render, not even the image library's background loading."""
+    tag = f"icrender_t{threads}{'_pinned' if pin else ''}" if threads else "icrender"
     exr, stats_path = out_dir / f"{tag}.exr", out_dir / f"{tag}.json"
     for stale in (exr, stats_path):  # icrender never replaces an existing output (no --overwrite here)
         stale.unlink(missing_ok=True)
     cmd = [icrender, "render", *scene_args, "-o", exr, "-x", args.x, "-y", args.y, *ambient, "--overwrite"]
-    cmd += ["--stats", stats_path, "--reference", ref, "--no-preview", "-q", *shlex.split(args.ic_args)]
+    cmd += ["--stats", stats_path, "--no-preview", "-q", *shlex.split(args.ic_args)]
     if threads:
         cmd += ["--threads", threads]
+    if pin:
+        cmd = ["taskset", "-c", "0", *cmd]
     result, wall, cpu = run(cmd)
     stats = json.loads(stats_path.read_text())
-    match = re.search(r"^error\s+composite\s+rmse\s+(\S+)\s+relmse\s+(\S+)\s+time\s+(\S+) s", result.stdout, re.M)
-    if not match:
-        sys.exit(f"vs_radiance: no 'error composite' line in icrender's output:\n{result.stdout}")
+    error = compare(icrender, exr, ref)
     return {
         "renderer": "icrender",
-        "threads": stats.get("threads", threads),
+        "threads": f"{stats.get('threads', threads)}{' pinned' if pin else ''}",
         "wall": wall,
         "work": stats.get("wall_s", wall),
         "cpu": cpu,
         "render": stats.get("render_s"),
         "records": stats.get("records_computed"),
-        "rmse": float(match.group(1)),
-        "relmse": float(match.group(2)),
+        "rmse": error["rmse"],
+        "relmse": error["rel_mse"],
         "exr": exr,
     }
 
@@ -321,6 +327,8 @@ def main():
 
     rows = [icrender_run(args, icrender, scene_args, ambient, out_dir, ref, None)]
     rows.append(icrender_run(args, icrender, scene_args, ambient, out_dir, ref, 1))
+    if shutil.which("taskset"):
+        rows.append(icrender_run(args, icrender, scene_args, ambient, out_dir, ref, 1, pin=True))
 
     # The view icrender used, as Radiance options; the reference must have used the same one.
     view = exr_attribute(rows[0]["exr"], "icrender/view")
@@ -448,8 +456,9 @@ def main():
     rp = rows[-1]
     for r in rows[:-1]:
         print(
-            f"icrender/rpict ({r['threads']} thread{'s' if r['threads'] != 1 else ''} vs 1): "
-            f"time (work) x{r['work'] / rp['work']:.3f}, relMSE x{r['relmse'] / rp['relmse']:.3f}, "
+            f"icrender/rpict ({r['threads']} thread(s) vs 1): "
+            f"time (work) x{r['work'] / rp['work']:.3f}, (process wall) x{r['wall'] / rp['wall']:.3f}, "
+            f"(process cpu) x{r['cpu'] / rp['cpu']:.3f}, relMSE x{r['relmse'] / rp['relmse']:.3f}, "
             f"RMSE x{r['rmse'] / rp['rmse']:.3f}, relMSE4x4 x{r['relmse4'] / rp['relmse4']:.3f}, "
             f"records x{r['records'] / max(rp['records'], 1):.3f}"
         )

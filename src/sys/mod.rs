@@ -1,6 +1,7 @@
 //! The FFI boundary. Generated bindings and the safe wrappers over them live here, and nowhere
 //! else in the crate may say `unsafe`.
 
+/// The code bindgen generated (build.rs), lints off: it is not ours to style.
 #[allow(
     non_upper_case_globals,
     non_camel_case_types,
@@ -9,26 +10,19 @@
     clippy::all,
     unsafe_op_in_unsafe_fn
 )]
-mod embree_bindings {
-    include!(concat!(env!("OUT_DIR"), "/embree_bindings.rs"));
+mod generated {
+    pub mod embree {
+        include!(concat!(env!("OUT_DIR"), "/embree_bindings.rs"));
+    }
+    pub mod abi {
+        include!(concat!(env!("OUT_DIR"), "/abi_bindings.rs"));
+    }
+    /// The image shim's functions as a table loaded at run time (see image_io.rs).
+    pub mod image {
+        include!(concat!(env!("OUT_DIR"), "/image_bindings.rs"));
+    }
 }
-
-#[allow(non_upper_case_globals, non_camel_case_types, non_snake_case, dead_code, clippy::all)]
-mod abi_bindings {
-    include!(concat!(env!("OUT_DIR"), "/abi_bindings.rs"));
-}
-
-#[allow(
-    non_upper_case_globals,
-    non_camel_case_types,
-    non_snake_case,
-    dead_code,
-    clippy::all,
-    unsafe_op_in_unsafe_fn
-)]
-mod image_bindings {
-    include!(concat!(env!("OUT_DIR"), "/image_bindings.rs"));
-}
+use generated::{abi as abi_bindings, embree as embree_bindings, image as image_bindings};
 
 pub mod alloc;
 pub mod embree;
