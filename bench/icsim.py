@@ -53,8 +53,11 @@ NETWORKS = {
 
 HORIZON_SECTORS = 8
 # Mean delay between a message's arrival and a polling rank noticing it, per round trip (the
-# master's and the waiting rank's): half of src/parallel/comm.rs's largest pause at each end.
-POLL_WAKE = 0.5e-3
+# master's and the waiting rank's), when nothing measured is given: about half of
+# src/parallel/comm.rs's largest pauses (0.1 ms at the master, 0.5 ms at a worker, where a wait
+# that began with the request is noticed within about twice its own age). bench/paper.py
+# measures it instead (the noshare runs' idle time per tile).
+POLL_WAKE = 0.15e-3
 
 
 def _norm(v):
@@ -594,6 +597,9 @@ class Sim:
 
     def run(self):
         if self.mode == "serial":
+            # One process with no master: no messages, no waits, nothing to pay for them.
+            self.c = Costs(record=self.c.record, pixel=self.c.pixel, hit=self.c.hit, message=0.0)
+            self.wake, self.lat, self.bw = 0.0, 0.0, math.inf
             self.mode, self.W = "noshare", 1
             self.res = Result("serial", 1)
             self.seen_sync = [-math.inf]

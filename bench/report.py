@@ -204,8 +204,8 @@ def render(*, command, elapsed, runs, gains, rad_rows, sim_rows, cluster_rows, c
              "costs. Messages cost 20 us of CPU at each end. A round trip to the master costs, beyond the network, "
              "what a waiting rank loses before it notices the answer: here, the noshare runs' idle time per tile "
              "request (" + ", ".join(f"{k} {v['wake'] * 1e3:.2f} ms" for k, v in setups.items() if "wake" in v) +
-             "; on oversubscribed cores mostly the wait for a core); on the predicted clusters 0.5 ms (the "
-             "renderer's polling back-off, 0.25 ms at each end). The measured runs had more worker ranks than "
+             "; on oversubscribed cores partly the wait for a core); the prediction takes the same measured "
+             "wait (an upper bound where every rank has a core of its own). The measured runs had more worker ranks than "
              f"cores, so their simulation shares {os.cpu_count()} cores among the ranks in 3 ms time slices (the "
              "order of Linux's scheduler slices; an assumption, not fitted): ranks taking turns make fewer "
              "records twice than ranks running at once, which matters most to component mode's PAs. The "
