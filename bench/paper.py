@@ -282,7 +282,7 @@ def main():
     parser.add_argument("--scenes", default=",".join(SCENES))
     parser.add_argument("--size", help="WxH for every scene (default 128x128; --full: the paper's)")
     parser.add_argument("--ranks", help="MPI process counts, master included (default 3,4,5; --full 3,5,9)")
-    parser.add_argument("--repeat", type=int, help="runs per configuration, median taken (default 2; --full 1)")
+    parser.add_argument("--repeat", type=int, help="runs per configuration, median taken (default 3; --full 1)")
     parser.add_argument("--ad", type=int, default=512)
     parser.add_argument("--as", dest="as_", type=int, default=128)
     parser.add_argument("--ar", type=int, default=64)
@@ -304,7 +304,7 @@ def main():
     started = time.perf_counter()
     command = "python3 bench/paper.py" + ("" if len(sys.argv) == 1 else " " + " ".join(shlex.quote(a) for a in sys.argv[1:]))
     ranks = [int(r) for r in (args.ranks or ("3,5,9" if args.full else "3,4,5")).split(",")]
-    repeat = args.repeat or (1 if args.full else 2)
+    repeat = args.repeat or (1 if args.full else 3)
     scenes = args.scenes.split(",")
     os.makedirs(args.out, exist_ok=True)
     results_dir = os.path.join(args.docs, "results")
@@ -335,7 +335,21 @@ def main():
         trace = os.path.join(args.out, f"trace-{name}-{w}x{h}.txt")
         # The traced run samples a record at every lookup (slow): its times are not used.
         traced = run_serial(path, base, None, sdir, trace=trace)
-        serial = [run_serial(path, base, ref, sdir) for _ in range(max(repeat, 3))]
+        # Every configuration's repeats are spread over the whole measurement, round after round
+        # (serial, then every mode at every count, then again), not run back to back: this
+        # machine's speed drifts by tens of percent over minutes, and the simulation's
+        # leave-one-out costs compare configurations measured at different times.
+        configs = [(mode, np) for mode in MODES for np in ranks if not (mode == "component" and np < 3)]
+        serial, reps = [], {c: [] for c in configs}
+        for _ in range(max(repeat, 1)):
+            serial.append(run_serial(path, base, ref, sdir))
+            for mode, np in configs:
+                try:
+                    reps[(mode, np)].append(run_mpi(path, mode, np, base, ref, sdir, args.timeout))
+                except (RuntimeError, subprocess.TimeoutExpired) as e:
+                    say(f"{name:>10} {mode:<12} {np} processes: FAILED: {e}")
+        while len(serial) < 3:  # the serial run is cheap: at least three for its median
+            serial.append(run_serial(path, base, ref, sdir))
         if any(r["misses"] != traced["misses"] for r in serial):
             say(f"{name}: WARNING: the traced run made {traced['misses']} records, the others "
                 f"{[r['misses'] for r in serial]}")
@@ -349,24 +363,15 @@ def main():
             f"relMSE {srow['relmse']:.3e}")
         setups[name] = {"path": path, "size": size, "aa": aa, "base": base, "ref": ref, "trace": trace,
                         "serial": srow, "ref_s": ref_s}
-        for mode in MODES:
-            for np in ranks:
-                if mode == "component" and np < 3:
-                    continue
-                reps = []
-                for _ in range(repeat):
-                    try:
-                        reps.append(run_mpi(path, mode, np, base, ref, sdir, args.timeout))
-                    except (RuntimeError, subprocess.TimeoutExpired) as e:
-                        say(f"{name:>10} {mode:<12} {np} processes: FAILED: {e}")
-                if not reps:
-                    continue
-                row = mean_row(reps)
-                row.update(scene=name, width=w, height=h)
-                runs.append(row)
-                say(f"{name:>10} {mode:<12} {np} proc: {row['misses']:7.1f} misses, {row['aggregated_s']:.3f} s CPU "
-                    f"({row['aggregated_s_min']:.3f}-{row['aggregated_s_max']:.3f}), idle {row['idle_s']:.3f} s, "
-                    f"relMSE {row['relmse']:.3e}")
+        for mode, np in configs:
+            if not reps[(mode, np)]:
+                continue
+            row = mean_row(reps[(mode, np)])
+            row.update(scene=name, width=w, height=h)
+            runs.append(row)
+            say(f"{name:>10} {mode:<12} {np} proc: {row['misses']:7.1f} misses, {row['aggregated_s']:.3f} s CPU "
+                f"({row['aggregated_s_min']:.3f}-{row['aggregated_s_max']:.3f}), idle {row['idle_s']:.3f} s, "
+                f"relMSE {row['relmse']:.3e}")
         write_csv(os.path.join(args.out, "runs.csv"), runs)  # so far (the final one is written at the end)
         if not args.no_radiance:
             rsize = size

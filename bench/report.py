@@ -106,7 +106,8 @@ def render(*, command, elapsed, runs, gains, rad_rows, sim_rows, cluster_rows, c
     L.append(table(["scene", "file", "size", "options", "reference (`icrender reference`, brute force, "
                     "pixel centres)"], rows))
     L.append(f"\nProcess counts {', '.join(map(str, ranks))} (the master controller is one of them, as the paper's "
-             f"additional node; workers = processes - 1); every MPI configuration ran {repeat} time(s) (median of each figure); "
+             f"additional node; workers = processes - 1); every MPI configuration ran {repeat} time(s) (median of each figure), the repeats spread over "
+             f"the measurement round after round rather than back to back (this machine's speed drifts); "
              "the serial run 3 times (median times). Component mode: half the workers are PAs, PAs sync every "
              "8 records, PRs send requests by 32; centralised and broadcast sync every 50 records (the paper's "
              "settings, the renderer's defaults). `--threads 1` everywhere.\n")
