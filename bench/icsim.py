@@ -494,6 +494,27 @@ class Sim:
                 heapq.heappush(heap, (max(clock[a], arrive), a))
 
         inheap = {w: True for w in range(W)}
+        pending = {p: None for p in prs}  # the tile a PR has asked for: (tile, index, reply time, master time)
+        out_of_tiles = set()
+
+        def request_tile(w):
+            """A PR asks the master for its next tile (and sends its own records, if it made
+            any while helping); it goes on working while the answer travels."""
+            nonlocal handed
+            t0 = clock[w]
+            records = outbox[w]
+            outbox[w] = []
+            arrive = t0 + self.msg(16 + RECORD_BYTES * len(records)) + self.wake / 2
+            self.to_master(records, arrive)
+            missing = self.missing_for(w, self.seen_sync[w], arrive)
+            back = arrive + self.msg(16 + RECORD_BYTES * missing) + self.wake / 2
+            res.busy[w] += 2 * c.message
+            clock[w] = t0 + c.message
+            tile, index = None, None
+            if self.tiles:
+                tile, index = self.tiles.popleft(), handed
+                handed += 1
+            pending[w] = (tile, index, back, arrive)
 
         def compute(w, entry):
             """A request computed on rank w (PA or helping PR) through w's cache."""
@@ -568,17 +589,27 @@ class Sim:
                     flush(w)
                 heapq.heappush(heap, (clock[w], w))
                 continue
-            # Needs work: the finished tile's requests go out, then a tile, with a sync of the
-            # PR's cache (records from the master).
+            # Needs work: the finished tile's requests go out, then the tile asked for when this
+            # one began (src/parallel/component/pr.rs: a PR asks for its next tile as it starts
+            # the current one), with the records the master sent with it.
             flush(w)
-            if self.tiles:
-                sync_master(w)
-                state[w] = (self.tiles.popleft(), 0)
-                tile_pa[w] = handed % len(pas)
-                handed += 1
-                heapq.heappush(heap, (clock[w], w))
-                continue
-            flush(w)
+            if w not in out_of_tiles:
+                if pending[w] is None:  # the first tile: nothing was asked for yet
+                    request_tile(w)
+                tile, index, back, arrive = pending[w]
+                pending[w] = None
+                if back > clock[w]:
+                    res.idle[w] += back - clock[w]
+                    clock[w] = back
+                clock[w] += c.message
+                self.seen_sync[w] = max(self.seen_sync[w], arrive)
+                if tile is not None:
+                    state[w] = (tile, 0)
+                    tile_pa[w] = index % len(pas)
+                    request_tile(w)
+                    heapq.heappush(heap, (clock[w], w))
+                    continue
+                out_of_tiles.add(w)
             pr_done.add(w)
             # Load balancing: half of the longest PA queue; otherwise the master keeps the PR
             # waiting until a PA reports a queue worth splitting (or everything is done).

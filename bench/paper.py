@@ -282,7 +282,7 @@ def main():
     parser.add_argument("--scenes", default=",".join(SCENES))
     parser.add_argument("--size", help="WxH for every scene (default 128x128; --full: the paper's)")
     parser.add_argument("--ranks", help="MPI process counts, master included (default 3,4,5; --full 3,5,9)")
-    parser.add_argument("--repeat", type=int, help="runs per configuration, median taken (default 3; --full 1)")
+    parser.add_argument("--repeat", type=int, help="runs per configuration, median taken (default 5; --full 1)")
     parser.add_argument("--ad", type=int, default=512)
     parser.add_argument("--as", dest="as_", type=int, default=128)
     parser.add_argument("--ar", type=int, default=64)
@@ -304,7 +304,7 @@ def main():
     started = time.perf_counter()
     command = "python3 bench/paper.py" + ("" if len(sys.argv) == 1 else " " + " ".join(shlex.quote(a) for a in sys.argv[1:]))
     ranks = [int(r) for r in (args.ranks or ("3,5,9" if args.full else "3,4,5")).split(",")]
-    repeat = args.repeat or (1 if args.full else 3)
+    repeat = args.repeat or (1 if args.full else 5)
     scenes = args.scenes.split(",")
     os.makedirs(args.out, exist_ok=True)
     results_dir = os.path.join(args.docs, "results")
