@@ -455,20 +455,26 @@ class Sim:
             heapq.heappush(heap, (clock[p], p))
             return True
 
+        def round_trip(w):
+            """w's new records to the master and the records w lacks back, starting at w's
+            clock: when the master has them (master time) and when the answer is back at w."""
+            records = outbox[w]
+            outbox[w] = []
+            arrive = clock[w] + self.msg(16 + RECORD_BYTES * len(records)) + self.wake / 2
+            self.to_master(records, arrive)
+            missing = self.missing_for(w, self.seen_sync[w], arrive)
+            back = arrive + self.msg(16 + RECORD_BYTES * missing) + self.wake / 2
+            res.busy[w] += 2 * c.message
+            return arrive, back
+
         def sync_master(w, arrive_extra=0.0):
             """Records up, the records w lacks down. A PR waits for the reply (it needs the
             records before its tile); a PA does not (src/parallel/component/pa.rs): it goes on
             computing and takes the records in when they come (their arrival is approximated
             here by the master's time, as for the PRs)."""
             t0 = clock[w]
-            records = outbox[w]
-            outbox[w] = []
-            arrive = t0 + self.msg(16 + RECORD_BYTES * len(records)) + self.wake / 2
-            self.to_master(records, arrive)
-            missing = self.missing_for(w, self.seen_sync[w], arrive)
-            back = arrive + self.msg(16 + RECORD_BYTES * missing) + self.wake / 2
+            arrive, back = round_trip(w)
             self.seen_sync[w] = arrive
-            res.busy[w] += 2 * c.message
             if w in queue:
                 clock[w] = t0 + 2 * c.message
             else:
@@ -502,13 +508,7 @@ class Sim:
             any while helping); it goes on working while the answer travels."""
             nonlocal handed
             t0 = clock[w]
-            records = outbox[w]
-            outbox[w] = []
-            arrive = t0 + self.msg(16 + RECORD_BYTES * len(records)) + self.wake / 2
-            self.to_master(records, arrive)
-            missing = self.missing_for(w, self.seen_sync[w], arrive)
-            back = arrive + self.msg(16 + RECORD_BYTES * missing) + self.wake / 2
-            res.busy[w] += 2 * c.message
+            arrive, back = round_trip(w)
             clock[w] = t0 + c.message
             tile, index = None, None
             if self.tiles:
