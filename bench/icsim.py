@@ -22,7 +22,7 @@ the renderer (src/irradiance/record.rs, Hessian metric). What a rank can see fol
                tile (tile i to PA i mod n, src/parallel/component/pr.rs; flushed at tile end);
                PAs: their own records plus the master's at their last sync (every 8 records; a PA
                does not wait for the master's reply);
-               when tiles run out, idle PRs take half the longest PA queue (load balancing).
+               when tiles run out, idle PRs take an eighth of the longest PA queue (load balancing).
 
 A miss at a point the serial run answered from the cache makes a record shaped like the one
 that answered it there (its radii, axis and horizon, at the new point and normal).
@@ -41,7 +41,8 @@ from collections import defaultdict, deque
 RECORD_BYTES = 128  # src/irradiance/codec.rs
 REQUEST_BYTES = 100  # src/parallel/component/requests.rs
 PIXEL_BYTES = 52  # src/parallel/protocol.rs encode_pixels: four RGB layers and a record count
-MIN_SHARE = 2  # src/parallel/component/master.rs: smallest PA queue worth splitting
+MIN_SHARE = 2  # src/parallel/component/master.rs: the smallest share worth forwarding
+SHARE_DIVISOR = 8  # src/parallel/component/master.rs: an idle PR takes 1/8 of the longest queue
 
 NETWORKS = {
     # name: (latency s, bandwidth bytes/s)
@@ -440,7 +441,7 @@ class Sim:
 
         def dispatch(p, now):
             best = max(pas, key=lambda a: len(queue[a]))
-            share = len(queue[best]) // 2
+            share = len(queue[best]) // SHARE_DIVISOR
             if share < MIN_SHARE:
                 return False
             taken = deque()
@@ -611,7 +612,7 @@ class Sim:
                     continue
                 out_of_tiles.add(w)
             pr_done.add(w)
-            # Load balancing: half of the longest PA queue; otherwise the master keeps the PR
+            # Load balancing: an eighth of the longest PA queue; otherwise the master keeps the PR
             # waiting until a PA reports a queue worth splitting (or everything is done).
             if dispatch(w, clock[w]):
                 continue

@@ -21,8 +21,13 @@ use crate::stats::RankReport;
 use std::collections::HashMap;
 use std::time::{Duration, Instant};
 
-/// A PA queue shorter than this is not worth splitting.
+/// A share smaller than this is not worth forwarding.
 const MIN_SHARE: u64 = 2;
+/// An idle PR takes this fraction (1/SHARE_DIVISOR) of the longest PA queue. Half, the first
+/// choice, left the PA with nothing to do while the PR worked through its half (the simulation,
+/// bench/icsim.py, put component mode's idle time on the Cornell box at 29-52 % at 4-16
+/// processors with halves, 9-26 % with eighths, which made it the fastest mode there).
+const SHARE_DIVISOR: u64 = 8;
 
 pub struct ComponentResult {
     pub frame: FrameBuffer,
@@ -116,10 +121,10 @@ pub fn run(
             let Some((&pa, longest)) = pas.iter_mut().max_by_key(|(_, s)| s.queue) else {
                 return false;
             };
-            if longest.queue < MIN_SHARE {
+            let share = longest.queue / SHARE_DIVISOR;
+            if share < MIN_SHARE {
                 return false;
             }
-            let share = longest.queue / 2;
             longest.queue -= share;
             let mut order = (pr as u32).to_le_bytes().to_vec();
             order.extend_from_slice(&(share as u32).to_le_bytes());
