@@ -36,7 +36,7 @@ fn main() -> ExitCode {
         Err(commands::CommandError(message)) => {
             // An empty message: another rank already said why.
             if !message.is_empty() {
-                eprintln!("icrender: error: {message}");
+                commands::error(&message);
             }
             ExitCode::FAILURE
         }

@@ -20,6 +20,11 @@ impl<T: std::fmt::Display> From<T> for CommandError {
 
 pub type CommandResult = Result<(), CommandError>;
 
+/// Says why the command failed, on stderr, as the user sees every error.
+pub fn error(message: &str) {
+    eprintln!("icrender: error: {message}");
+}
+
 pub fn warn(message: &str) {
     eprintln!("icrender: warning: {message}");
 }

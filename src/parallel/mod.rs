@@ -182,12 +182,13 @@ fn check_layout(args: &RenderArgs, mode: Mode, size: i32, tile_count: usize, thr
     Ok(())
 }
 
-/// Ends a job on a verdict every rank has reached alike: rank 0 alone says why, and the others
-/// stop quietly, but only once rank 0 has said it. A rank that exits with an error first makes
-/// mpirun kill the job, rank 0 included, before its line is out; so all meet at a barrier.
-fn stop_together(comm: &Comm<'_>, message: &str) -> CommandResult {
-    if comm.rank() == 0 {
-        eprintln!("icrender: error: {message}");
+/// Ends a job that every rank stops together: each rank says its `line` if it has one (for a
+/// verdict all ranks share, rank 0 alone has one), then all meet at a barrier before any exits.
+/// A rank that exits with an error first makes mpirun kill the job, rank 0 included, before its
+/// line is out.
+fn stop_together(comm: &Comm<'_>, line: Option<&str>) -> CommandResult {
+    if let Some(line) = line {
+        crate::commands::error(line);
     }
     comm.barrier();
     Err(CommandError(String::new()))
@@ -203,7 +204,7 @@ pub fn run(args: &RenderArgs, mode: Mode) -> CommandResult {
     let counters = Counters::default();
     let comm = Comm::new(&counters);
     let (rank, size) = (comm.rank(), comm.size());
-    let fail = |message: String| stop_together(&comm, &message);
+    let fail = |message: String| stop_together(&comm, (rank == 0).then_some(message.as_str()));
     let threads = args.threads.unwrap_or(1);
     if mode == Mode::Component && threads != 1 {
         return fail(
@@ -257,18 +258,16 @@ pub fn run(args: &RenderArgs, mode: Mode) -> CommandResult {
     let prepared = Job::prepare(&rank_args, crate::memory::Role::AnyRank);
     // Who could not prepare: if rank 0 could not, it alone says why (the others most likely
     // failed the same way on the same scene); else each failing rank says why. All then stop.
-    // The lines go out before a barrier, as in `fail`.
     let failed = comm.all_flags(prepared.is_err());
     let mut job = match prepared {
         Ok(job) if !failed.contains(&true) => job,
         outcome => {
-            match outcome {
-                Err(e) if rank == 0 => eprintln!("icrender: error: {}", e.0),
-                Err(e) if !failed[0] => eprintln!("icrender: error: rank {rank}: {}", e.0),
-                _ => {}
-            }
-            comm.barrier();
-            return Err(CommandError(String::new()));
+            let line = match outcome {
+                Err(e) if rank == 0 => Some(e.0),
+                Err(e) if !failed[0] => Some(format!("rank {rank}: {}", e.0)),
+                _ => None,
+            };
+            return stop_together(&comm, line.as_deref());
         }
     };
     let resume = checkpoint.as_ref().map(|(journal, restored)| (journal, restored));
@@ -309,7 +308,7 @@ pub fn run(args: &RenderArgs, mode: Mode) -> CommandResult {
             if let Some(cache) = &job.cache {
                 let _ = cache.finish();
             }
-            eprintln!("icrender: error: {}", e.0);
+            crate::commands::error(&e.0);
             comm.abort(1);
         }
     };
@@ -383,7 +382,7 @@ fn run_component(
     // Every rank reaches the same verdict from the same scene and options.
     let roles = match component::Roles::choose(comm.size(), args.pa, needed) {
         Ok(roles) => roles,
-        Err(e) => return stop_together(comm, &e),
+        Err(e) => return stop_together(comm, (rank == 0).then_some(e.as_str())),
     };
     if rank != 0 {
         if let Some(cache) = job.cache.as_mut() {
@@ -437,7 +436,7 @@ fn run_component(
             if let Some(cache) = &job.cache {
                 let _ = cache.finish();
             }
-            eprintln!("icrender: error: {e}");
+            crate::commands::error(&e.to_string());
             comm.abort(1);
         }
     };
@@ -461,9 +460,9 @@ fn run_component(
 /// Says why this rank cannot go on and ends every rank of the job.
 fn fatal(comm: &Comm<'_>, message: &str) -> ! {
     if comm.rank() == 0 {
-        eprintln!("icrender: error: {message}");
+        crate::commands::error(message);
     } else {
-        eprintln!("icrender: error: rank {}: {message}", comm.rank());
+        crate::commands::error(&format!("rank {}: {message}", comm.rank()));
     }
     comm.abort(1)
 }
