@@ -154,6 +154,12 @@ pub struct RenderArgs {
     /// are cheap next to the noise one ray leaves in penumbrae and with many emitters.
     #[arg(long = "light-samples", default_value_t = 16)]
     pub light_samples: u32,
+    /// How area lights are integrated. analytic: their unshadowed irradiance exactly (Lambert's
+    /// formula, in scenes with few emitting triangles) and the shadow rays only for how much of
+    /// it gets through, so fully lit and fully shadowed points have no noise (slightly biased
+    /// in penumbrae); sampled: plain shadow-ray sampling, unbiased (what `reference` uses).
+    #[arg(long = "direct", value_enum, default_value_t = DirectArg::Analytic)]
+    pub direct: DirectArg,
     /// Samples per pixel (stratified over the pixel's area).
     #[arg(long = "spp", default_value_t = 1)]
     pub spp: u32,
@@ -162,6 +168,12 @@ pub struct RenderArgs {
     /// edges over the pixel's area at the cost of one ray each, without shading.
     #[arg(long = "emission-samples", default_value_t = 16)]
     pub emission_samples: u32,
+    /// Before a tile's pixels, make the cache records that the first surfaces on a grid of
+    /// this spacing (pixels) need; the pixels then interpolate between records on all their
+    /// sides instead of extrapolating from the records earlier pixels made. 0: none. Default 3
+    /// in one process; 0 under mpirun (not yet part of the parallel modes).
+    #[arg(long = "overture")]
+    pub overture: Option<u32>,
     /// Random seed; the same seed gives the same image.
     #[arg(long = "seed", default_value_t = 1)]
     pub seed: u64,
@@ -224,6 +236,12 @@ pub enum ModeArg {
     Broadcast,
     /// PRs render all but indirect diffuse; PAs own the cache (Debattista et al.).
     Component,
+}
+
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum DirectArg {
+    Analytic,
+    Sampled,
 }
 
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]

@@ -29,6 +29,8 @@ pub struct RenderSettings {
     /// filter's error is largest, and these rays cost no shading. Used when it exceeds `spp`.
     pub emission_samples: u32,
     pub emission_footprint: Option<Arc<EmitterFootprint>>,
+    /// Spacing in pixels of the overture's grid (see `Integrator::prepare_records`); 0: none.
+    pub overture: u32,
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -187,15 +189,31 @@ pub fn render_tile(
     counts: &mut RayCounts,
     mut after_pixel: impl FnMut(&mut RayCounts),
 ) -> Vec<PixelValue> {
-    let mut values = Vec::with_capacity(((tile.x1 - tile.x0) * (tile.y1 - tile.y0)) as usize);
+    let width = (tile.x1 - tile.x0) as usize;
+    let mut values = vec![PixelValue::default(); width * (tile.y1 - tile.y0) as usize];
+    if settings.overture > 0 {
+        let stride = settings.overture;
+        for y in (tile.y0..tile.y1).skip((stride / 2) as usize).step_by(stride as usize) {
+            for x in (tile.x0..tile.x1).skip((stride / 2) as usize).step_by(stride as usize) {
+                let before = counts.records_level0;
+                let pixel_index = y as u64 * camera.width as u64 + x as u64;
+                // A stream of its own, after every stream the pixel's samples use.
+                let mut rng = Rng::for_sample(settings.seed, pixel_index, u32::MAX as u64 + 2);
+                let (origin, dir) = camera.ray(x as f32 + 0.5, y as f32 + 0.5);
+                counts.pixel = pixel_index as u32;
+                integrator.prepare_records(origin, dir, &mut rng, counts);
+                let index = (y - tile.y0) as usize * width + (x - tile.x0) as usize;
+                values[index].records += (counts.records_level0 - before) as f32;
+            }
+        }
+    }
     for y in tile.y0..tile.y1 {
         for x in tile.x0..tile.x1 {
             let before = counts.records_level0;
             let components = render_pixel(integrator, camera, settings, x, y, counts);
-            values.push(PixelValue {
-                components,
-                records: (counts.records_level0 - before) as f32,
-            });
+            let value = &mut values[(y - tile.y0) as usize * width + (x - tile.x0) as usize];
+            value.components = components;
+            value.records += (counts.records_level0 - before) as f32;
             after_pixel(counts);
         }
     }

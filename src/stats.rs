@@ -122,6 +122,8 @@ pub struct RenderStats {
     pub height: u32,
     pub spp: u32,
     pub threads: usize,
+    /// The overture's grid spacing in pixels (0: none).
+    pub overture: u32,
     pub triangles: usize,
     pub dropped_triangles: usize,
     pub load_s: f64,

@@ -112,15 +112,15 @@ fn diffuse_plane_under_a_point_light_matches_the_analytic_radiance() {
     assert!(worst < 0.01, "largest relative error {worst}");
 }
 
-/// A plane lit by a large emissive quad straight above it: the irradiance at the centre below
-/// a square of half-side a at height h is known in closed form; direct sampling must find it.
-#[test]
-fn area_light_irradiance_matches_the_closed_form() {
+/// A plane (albedo rho) lit by an emissive square of half-side a and radiance L at height h
+/// straight above it, optionally with an opaque square of half-side `blocker` halfway between;
+/// rendered through a tiny parallel view of the point under the light's centre, seen from below
+/// the light and from under the blocker, with the given extra options. Returns the direct layer's 64 pixel values.
+fn plane_under_square_light(rho: f32, radiance: f32, a: f32, h: f32, blocker: Option<f32>, extra: &[&str]) -> Vec<f32> {
     let dir = tempfile::tempdir().unwrap();
-    let (rho, radiance, a, h) = (0.5f64, 2.0f64, 0.5f64, 1.0f64);
     let mut b = GltfBuilder::new();
-    let plane = b.material(lambertian("plane", [rho as f32; 3]));
-    let light = b.material(emissive_lambertian("light", [0.0; 3], radiance as f32));
+    let plane = b.material(lambertian("plane", [rho; 3]));
+    let light = b.material(emissive_lambertian("light", [0.0; 3], radiance));
     b.quad(
         facing(
             [[-4.0, 0.0, -4.0], [4.0, 0.0, -4.0], [4.0, 0.0, 4.0], [-4.0, 0.0, 4.0]],
@@ -128,59 +128,117 @@ fn area_light_irradiance_matches_the_closed_form() {
         ),
         Some(plane),
     );
-    let (af, hf) = (a as f32, h as f32);
     b.quad(
-        facing(
-            [[-af, hf, -af], [af, hf, -af], [af, hf, af], [-af, hf, af]],
-            [0.0, 0.0, 0.0],
-        ),
+        facing([[-a, h, -a], [a, h, -a], [a, h, a], [-a, h, a]], [0.0, 0.0, 0.0]),
         Some(light),
     );
+    if let Some(s) = blocker {
+        let black = b.material(lambertian("blocker", [0.0; 3]));
+        let y = 0.5 * h;
+        b.quad(
+            facing([[-s, y, -s], [s, y, -s], [s, y, s], [-s, y, s]], [0.0, 0.0, 0.0]),
+            Some(black),
+        );
+    }
     let scene = b.write(dir.path(), "area");
     let out = dir.path().join("area.exr");
-    // A tiny parallel view of the point under the light's centre, seen from below the light.
-    run_ok(&[
-        "render",
-        scene.to_str().unwrap(),
-        "-o",
-        out.to_str().unwrap(),
-        "-q",
-        "-x",
-        "8",
-        "-y",
-        "8",
-        "-ab",
-        "0",
-        "--light-samples",
-        "256",
-        "--spp",
-        "16",
-        "-vtl",
-        "-vp",
-        "0",
-        "0.5",
-        "0",
-        "-vd",
-        "0",
-        "-1",
-        "0",
-        "-vu",
-        "0",
-        "0",
-        "-1",
-        "-vh",
-        "0.001",
-        "-vv",
-        "0.001",
+    let (scene, out) = (scene.to_str().unwrap(), out.to_str().unwrap());
+    let mut args = vec!["render", scene, "-o", out, "-q", "-x", "8", "-y", "8", "-ab", "0"];
+    args.extend_from_slice(&[
+        "-vtl", "-vp", "0", "0.1", "0", "-vd", "0", "-1", "0", "-vu", "0", "0", "-1", "-vh", "0.001", "-vv", "0.001",
     ]);
-    let image = read_exr(&out);
-    // Irradiance below the centre of a square: E = 4 L * (a / sqrt(a^2 + h^2)) * atan(a / sqrt(a^2 + h^2)).
+    args.extend_from_slice(extra);
+    run_ok(&args);
+    rgb(&read_exr(std::path::Path::new(out)), "direct")[0].clone()
+}
+
+/// Irradiance below the centre of a square of half-side a at height h, radiance L:
+/// E = 4 L * (a / sqrt(a^2 + h^2)) * atan(a / sqrt(a^2 + h^2)).
+fn irradiance_under_square(radiance: f64, a: f64, h: f64) -> f64 {
     let s = (a * a + h * h).sqrt();
-    let irradiance = 4.0 * radiance * (a / s) * (a / s).atan();
-    let expected = rho / std::f64::consts::PI * irradiance;
-    let got = mean(&rgb(&image, "direct")[0]);
+    4.0 * radiance * (a / s) * (a / s).atan()
+}
+
+/// A plane lit by a large emissive quad straight above it: the irradiance at the centre below
+/// a square of half-side a at height h is known in closed form; plain shadow-ray sampling
+/// (unbiased) must find it.
+#[test]
+fn area_light_irradiance_matches_the_closed_form() {
+    let (rho, radiance, a, h) = (0.5f64, 2.0f64, 0.5f64, 1.0f64);
+    let direct = plane_under_square_light(
+        rho as f32,
+        radiance as f32,
+        a as f32,
+        h as f32,
+        None,
+        &["--direct", "sampled", "--light-samples", "256", "--spp", "16"],
+    );
+    let expected = rho / std::f64::consts::PI * irradiance_under_square(radiance, a, h);
+    let got = mean(&direct);
     assert!(
         (got - expected).abs() / expected < 0.01,
         "got {got}, expected {expected}"
+    );
+}
+
+/// With the analytic estimate a fully lit point needs no sampling: one shadow ray gives the
+/// closed form in every pixel, where plain sampling with one ray scatters around it.
+#[test]
+fn analytic_direct_is_exact_where_the_light_is_wholly_visible() {
+    let (rho, radiance, a, h) = (0.5f64, 2.0f64, 0.5f64, 1.0f64);
+    let expected = rho / std::f64::consts::PI * irradiance_under_square(radiance, a, h);
+    let one_ray = ["--light-samples", "1", "--spp", "1"];
+    let analytic = plane_under_square_light(rho as f32, radiance as f32, a as f32, h as f32, None, &one_ray);
+    for (i, &v) in analytic.iter().enumerate() {
+        assert!(
+            (v as f64 - expected).abs() / expected < 1e-4,
+            "pixel {i}: {v}, expected {expected}"
+        );
+    }
+    let mut sampled_args = one_ray.to_vec();
+    sampled_args.extend_from_slice(&["--direct", "sampled"]);
+    let sampled = plane_under_square_light(rho as f32, radiance as f32, a as f32, h as f32, None, &sampled_args);
+    let worst = sampled
+        .iter()
+        .map(|&v| (v as f64 - expected).abs() / expected)
+        .fold(0.0, f64::max);
+    assert!(
+        worst > 1e-3,
+        "one plain shadow ray a pixel should scatter, worst {worst}"
+    );
+}
+
+/// An opaque square larger than the light's shadow cone from the point: the analytic estimate
+/// must not leak any of its exact irradiance past the blocker.
+#[test]
+fn analytic_direct_is_zero_in_the_umbra() {
+    let direct = plane_under_square_light(0.5, 2.0, 0.5, 1.0, Some(0.6), &["--light-samples", "4"]);
+    assert!(direct.iter().all(|&v| v == 0.0), "{direct:?}");
+}
+
+/// In a penumbra (a blocker hiding part of the light) the analytic estimate converges to the
+/// same value as plain sampling.
+#[test]
+fn analytic_direct_agrees_with_sampling_in_a_penumbra() {
+    let (rho, radiance, a, h) = (0.5, 2.0, 0.5, 1.0);
+    let render = |direct: &str| {
+        mean(&plane_under_square_light(
+            rho,
+            radiance,
+            a,
+            h,
+            Some(0.15),
+            &["--direct", direct, "--light-samples", "64", "--spp", "16"],
+        ))
+    };
+    let (analytic, sampled) = (render("analytic"), render("sampled"));
+    let unblocked = rho as f64 / std::f64::consts::PI * irradiance_under_square(radiance as f64, a as f64, h as f64);
+    assert!(
+        sampled > 0.1 * unblocked && sampled < 0.9 * unblocked,
+        "not a penumbra: {sampled} of {unblocked}"
+    );
+    assert!(
+        (analytic - sampled).abs() / sampled < 0.01,
+        "analytic {analytic}, sampled {sampled}"
     );
 }

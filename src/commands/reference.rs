@@ -36,6 +36,9 @@ pub fn run(args: &ReferenceArgs) -> CommandResult {
     let mut render_args = args.render.clone();
     render_args.ambient_accuracy = 0.0;
     render_args.ambient_file = None;
+    // The ratio estimator's penumbra bias does not average away over passes: a reference
+    // samples plainly.
+    render_args.direct = crate::cli::DirectArg::Sampled;
     validate(&render_args)?;
     if !(args.noise > 0.0 && args.max_seconds > 0.0) {
         return Err(CommandError("--noise and --max-seconds must be positive".into()));

@@ -44,7 +44,7 @@ pub fn options_line(args: &RenderArgs) -> String {
     let av = args.ambient_value.as_deref().unwrap_or(&[0.0, 0.0, 0.0]);
     format!(
         "-x {} -y {} -ab {} -aa {} -ad {} -as {} -ar {} -av {} {} {} -st {} -lr {} -lw {} --ic-metric {:?} \
-         --light-samples {} --spp {} --seed {}{}",
+         --light-samples {} --direct {} --spp {} --seed {}{}{}",
         args.width,
         args.height,
         args.ambient_bounces,
@@ -60,8 +60,13 @@ pub fn options_line(args: &RenderArgs) -> String {
         args.min_weight,
         args.ic_metric,
         args.light_samples,
+        match args.direct {
+            crate::cli::DirectArg::Analytic => "analytic",
+            crate::cli::DirectArg::Sampled => "sampled",
+        },
         args.spp,
         args.seed,
+        args.overture.map(|n| format!(" --overture {n}")).unwrap_or_default(),
         if args.lambertian { " --lambertian" } else { "" }
     )
 }
@@ -79,6 +84,7 @@ pub fn job_stats(args: &RenderArgs, job: &Job, mode: &'static str, ranks: usize,
         height: args.height,
         spp: args.spp,
         threads: job.settings.threads,
+        overture: job.settings.overture,
         triangles: job.scene.triangle_count(),
         dropped_triangles: job.scene.dropped_triangles,
         load_s: job.load_s,

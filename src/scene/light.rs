@@ -179,6 +179,25 @@ impl EmitterSet {
         self.triangles.is_empty()
     }
 
+    pub fn len(&self) -> usize {
+        self.triangles.len()
+    }
+
+    /// Irradiance at `point` on a surface with unit normal `normal` from every emitter, as if
+    /// nothing were in the way (exact, by Lambert's formula; O(emitters)). None when the point
+    /// sits on an emitter's corner or edge, where the formula has no finite answer.
+    pub fn unshadowed_irradiance(&self, point: Vec3, normal: Vec3) -> Option<Vec3> {
+        let (p, n) = (point.as_dvec3(), normal.as_dvec3());
+        let mut total = glam::DVec3::ZERO;
+        for t in &self.triangles {
+            let corners = [t.p0, t.p0 + t.e1, t.p0 + t.e2].map(|c| c.as_dvec3());
+            let factor = super::lambert::projected_solid_angle(p, n, corners, t.normal.as_dvec3())?;
+            total += t.radiance.as_dvec3() * factor;
+        }
+        let total = total.as_vec3();
+        total.is_finite().then_some(total)
+    }
+
     /// Probability of choosing triangle `index` by power alone (what the tree's estimate
     /// becomes far from every emitter).
     pub fn pick_probability(&self, index: usize) -> f64 {

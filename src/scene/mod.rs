@@ -3,6 +3,7 @@
 
 pub mod auto_view;
 pub mod footprint;
+pub mod lambert;
 pub mod light;
 pub mod light_tree;
 pub mod material;

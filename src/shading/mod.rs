@@ -41,6 +41,10 @@ pub struct ShadingOptions {
     pub min_weight: f32,
     /// Shadow rays to area emitters per shading point on the eye path.
     pub light_samples: u32,
+    /// Area lights' unshadowed irradiance computed exactly (Lambert's formula) and the shadow
+    /// rays used only for the share that gets through; false: plain sampling (unbiased, for
+    /// references).
+    pub analytic_direct: bool,
 }
 
 impl Default for ShadingOptions {
@@ -52,6 +56,7 @@ impl Default for ShadingOptions {
             max_specular_depth: 8,
             min_weight: 1e-3,
             light_samples: 1,
+            analytic_direct: true,
         }
     }
 }
@@ -203,6 +208,42 @@ impl<'a> Integrator<'a> {
         self.trace(origin, dir, state, Coherence::Coherent, rng, counts).0
     }
 
+    /// The overture of a tile: makes the records the first diffuse surface along a primary
+    /// ray needs, without shading anything. Run on a sparse grid over a tile before its pixels,
+    /// it lets every pixel interpolate between records on all its sides instead of
+    /// extrapolating from those its predecessors happened to make. Nothing to do without a
+    /// local cache (brute force, or a component-mode PR whose misses go to the PAs).
+    pub fn prepare_records(&self, origin: Vec3, dir: Vec3, rng: &mut Rng, counts: &mut RayCounts) {
+        if self.cache.is_none() || self.defer.is_some() || self.options.ambient_bounces == 0 {
+            return;
+        }
+        counts.primary += 1;
+        let mut origin = origin;
+        for _ in 0..MAX_MASKED_PASSES {
+            let Some(hit) = self.tracer.intersect(self.scene, origin, dir, Coherence::Coherent) else {
+                return;
+            };
+            let material = &self.scene.materials[hit.material as usize];
+            let surface = material.at(hit.uv, &self.scene.textures);
+            if surface.opacity <= 0.0 {
+                origin = self.tracer.spawn_point(&hit, dir);
+                continue;
+            }
+            if surface.diffuse.max_element() > 0.0 {
+                let state = PathState {
+                    level: 0,
+                    specular_depth: 0,
+                    weight: 1.0,
+                    count_emission: true,
+                    first_emission_elsewhere: false,
+                    throughput: Vec3::ONE,
+                };
+                self.ambient_radiance(&hit, state, rng, counts);
+            }
+            return;
+        }
+    }
+
     /// The emission of the first surface a primary ray stops at (times its opacity, as
     /// `trace` weighs it): one ray, no shading. What `primary_without_first_emission` leaves out.
     pub fn first_emission(&self, origin: Vec3, dir: Vec3, counts: &mut RayCounts) -> Vec3 {
@@ -325,9 +366,13 @@ impl<'a> Integrator<'a> {
                         total: counts.pixel_samples * count,
                         offset: counts.light_offset,
                         cell_offset: counts.light_cell_offset,
+                        eye_path: true,
                     }
                 } else {
-                    LightStrata::alone(count, rng)
+                    LightStrata {
+                        eye_path: true,
+                        ..LightStrata::alone(count, rng)
+                    }
                 }
             };
             c.direct = direct::direct_light(self, hit, wo, surface, strata, rng, counts);
