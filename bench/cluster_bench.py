@@ -135,7 +135,7 @@ def main():
 
     for scene_name in scenes:
         scene = SCENES.get(scene_name, scene_name)
-        stats, _ = common.render(scene, os.path.join(work, "s.exr"), base + ["--threads", "1"])
+        stats, _ = common.render(scene, os.path.join(work, "s.exr"), base + ["--threads", "1"] + common.SERIAL_AS_MPI)
         rows.append({"scene": scene_name, "link": "-", "mode": "serial", "ranks": 1, "mpirun_s": "",
                      "wall_s": stats["wall_s"], "render_s": stats["render_s"], "misses": stats["records_computed"],
                      "idle_s": 0.0, "messages": 0, "bytes": 0, "kernel_bytes": 0,

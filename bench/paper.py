@@ -86,7 +86,7 @@ def composite_error(exr, ref):
 
 def run_serial(scene, base, ref, work, trace=None):
     out = os.path.join(work, "serial.exr")
-    opts = base + ["--threads", "1"] + (["--trace-cache", trace] if trace else [])
+    opts = base + ["--threads", "1"] + common.SERIAL_AS_MPI + (["--trace-cache", trace] if trace else [])
     start = time.perf_counter()
     stats, _ = common.render(scene, out, opts)
     wall = time.perf_counter() - start
