@@ -228,11 +228,11 @@ def reference_image(args, icrender, out_dir, scene_args):
     return ref, f"FALLBACK brute force (icrender render -aa 0 -ad 4096 --spp 16 --light-samples 16), {wall:.0f} s"
 
 
-def icrender_run(args, icrender, scene_args, ambient, out_dir, ref, threads, pin=False):
+def icrender_run(args, icrender, scene_args, ambient, out_dir, ref, threads, pin=False, tag_suffix=""):
     """One icrender render, timed as a whole process like rpict (the error is measured after it,
     with `icrender compare`, as for rpict). `pin`: on one core only (taskset -c 0), so nothing of
     the process runs beside the render, not even the image library's background loading."""
-    tag = f"icrender_t{threads}{'_pinned' if pin else ''}" if threads else "icrender"
+    tag = (f"icrender_t{threads}{'_pinned' if pin else ''}" if threads else "icrender") + tag_suffix
     exr, stats_path = out_dir / f"{tag}.exr", out_dir / f"{tag}.json"
     for stale in (exr, stats_path):  # icrender never replaces an existing output (no --overwrite here)
         stale.unlink(missing_ok=True)
@@ -257,6 +257,68 @@ def icrender_run(args, icrender, scene_args, ambient, out_dir, ref, threads, pin
         "relmse": error["rel_mse"],
         "exr": exr,
     }
+
+
+def ladder_settings(args):
+    """-ad from the given one down by halves (four steps), -as scaled alike: the settings both
+    renderers are run at for the comparison at equal error; -ab -aa -ar stay as given."""
+    steps = []
+    for k in range(4):
+        ad = max(args.ad >> k, 16)
+        as_ = max(args.as_ >> k, 0)
+        if (ad, as_) not in steps:
+            steps.append((ad, as_))
+    return steps
+
+
+def equal_error(args, icrender, scene_args, out_dir, ref, ref_px, rpict_base, octree, bin_dir, rad_env):
+    """Both renderers on one core at each ladder setting; for every rpict run, the cheapest
+    icrender run whose relMSE, RMSE and 4x4 relMSE are all at most rpict's, and the ratio of
+    their process CPU times. The smallest ratio is the verdict (rpict at its best trade)."""
+    w, h = args.x, args.y
+    runs = []
+    for ad, as_ in ladder_settings(args):
+        ambient = ["-ab", args.ab, "-aa", args.aa, "-ad", ad, "-as", as_, "-ar", args.ar]
+        pin = shutil.which("taskset") is not None
+        r = icrender_run(args, icrender, scene_args, ambient, out_dir, ref, 1, pin=pin, tag_suffix=f"_ad{ad}")
+        r["relmse4"] = block_relmse(pixels(r["exr"], w, h, bin_dir, rad_env, out_dir), ref_px, w, h)
+        r["ad"], r["as"] = ad, as_
+        runs.append(r)
+        hdr, exr = out_dir / f"rpict_ad{ad}.hdr", out_dir / f"rpict_ad{ad}.exr"
+        with open(hdr, "wb") as f:
+            _, wall, cpu = run(rpict_base + [*ambient, *shlex.split(args.rpict_args), octree], env=rad_env, stdout=f)
+        run(["oiiotool", hdr, "-o", exr], quiet=True)
+        e = compare(icrender, exr, ref)
+        runs.append({"renderer": "rpict", "ad": ad, "as": as_, "cpu": cpu, "wall": wall, "rmse": e["rmse"],
+                     "relmse": e["rel_mse"],
+                     "relmse4": block_relmse(pixels(hdr, w, h, bin_dir, rad_env, out_dir), ref_px, w, h), "exr": exr})
+    print()
+    print("At equal error, one core (process CPU; icrender pinned to one core with taskset):")
+    header = f"{'renderer':<9} {'-ad':>5} {'-as':>5} {'cpu s':>7} {'relMSE':>10} {'RMSE':>10} {'relMSE4x4':>10}"
+    print(header)
+    print("-" * len(header))
+    for r in runs:
+        print(f"{r['renderer']:<9} {r['ad']:>5} {r['as']:>5} {r['cpu']:>7.3f} {r['relmse']:>10.3e} {r['rmse']:>10.3e} "
+              f"{r['relmse4']:>10.3e}")
+    metrics = ("relmse", "rmse", "relmse4")
+    ic = [r for r in runs if r["renderer"] == "icrender"]
+    verdicts = []
+    for rp in (r for r in runs if r["renderer"] == "rpict"):
+        good = [r for r in ic if all(r[m] <= rp[m] for m in metrics)]
+        if not good:
+            print(f"rpict -ad {rp['ad']}: no icrender run of the ladder reaches its error")
+            verdicts.append({"rpict_ad": rp["ad"], "icrender_ad": None, "ratio": None})
+            continue
+        best = min(good, key=lambda r: r["cpu"])
+        ratio = rp["cpu"] / best["cpu"]
+        print(f"rpict -ad {rp['ad']} ({rp['cpu']:.2f} s): icrender -ad {best['ad']} reaches its error in "
+              f"{best['cpu']:.2f} s: {ratio:.1f}x faster")
+        verdicts.append({"rpict_ad": rp["ad"], "icrender_ad": best["ad"], "ratio": ratio})
+    ratios = [v["ratio"] for v in verdicts if v["ratio"] is not None]
+    if ratios:
+        print(f"smallest ratio at equal or lower error (one core, process CPU): {min(ratios):.1f}x")
+    return {"runs": [{k: (str(v) if isinstance(v, Path) else v) for k, v in r.items()} for r in runs],
+            "verdicts": verdicts}
 
 
 def main():
@@ -295,6 +357,9 @@ def main():
     )
     parser.add_argument("--out", help="output folder (default target/vs_radiance/<scene>_<x>x<y>)")
     parser.add_argument("--no-build", action="store_true", help="use target/release/icrender as it is")
+    parser.add_argument("--equal-error", action="store_true",
+                        help="also run both renderers on one core at -ad halved three times (-as alike) and "
+                             "compare the time each needs for the same error")
     args = parser.parse_args()
 
     scene = Path(args.scene)
@@ -355,8 +420,8 @@ def main():
     # error are those of the same work. (--rpict-adaptive shows rpict as users run it.)
     # -pa 0 keeps -x -y exactly; the view's -vh -vv already give square pixels.
     pixel = [] if args.rpict_adaptive else ["-ps", "1", "-pj", "0"]
-    rpict = [bin_dir / "rpict", "-x", args.x, "-y", args.y, "-pa", "0", *pixel, *shlex.split(view)]
-    rpict += [*ambient, "-af", amb, *shlex.split(args.rpict_args), octree]
+    rpict_base = [bin_dir / "rpict", "-x", args.x, "-y", args.y, "-pa", "0", *pixel, *shlex.split(view)]
+    rpict = rpict_base + [*ambient, "-af", amb, *shlex.split(args.rpict_args), octree]
     with open(hdr, "wb") as f:
         _, rp_wall, rp_cpu = run(rpict, env=rad_env, stdout=f)
     lookamb = run([bin_dir / "lookamb", "-h", "-d", amb], env=rad_env, quiet=True)[0].stdout
@@ -467,6 +532,9 @@ def main():
     summary = {"scene": str(scene), "width": w, "height": h, "reference": str(ref), "reference_origin": ref_origin,
                "rows": [{k: (str(v) if isinstance(v, Path) else v) for k, v in r.items()} for r in rows],
                "indirect_means": indirect, "problems": problems}
+    if args.equal_error:
+        summary["equal_error"] = equal_error(args, icrender, scene_args, out_dir, ref, ref_px, rpict_base, octree,
+                                             bin_dir, rad_env)
     (out_dir / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     say(f"files in {out_dir}")
     return 1 if problems else 0
