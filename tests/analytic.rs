@@ -182,7 +182,8 @@ fn area_light_irradiance_matches_the_closed_form() {
 }
 
 /// With the analytic estimate a fully lit point needs no sampling: one shadow ray gives the
-/// closed form in every pixel, where plain sampling with one ray scatters around it.
+/// closed form in every pixel, where plain sampling with one ray scatters around it. (The
+/// square is two triangles: one ray a point is within the analytic estimate's emitter budget.)
 #[test]
 fn analytic_direct_is_exact_where_the_light_is_wholly_visible() {
     let (rho, radiance, a, h) = (0.5f64, 2.0f64, 0.5f64, 1.0f64);

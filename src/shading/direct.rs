@@ -62,8 +62,11 @@ impl LightStrata {
 }
 
 /// The exact unshadowed irradiance replaces the sampled one while the emitters number at most
-/// this many per shadow ray of the shading point.
-pub const ANALYTIC_EMITTERS_PER_RAY: usize = 8;
+/// this many per shadow ray of the shading point. Each emitter costs about a third of a shadow
+/// ray. Measured at -ab 1 -aa 0.2 with 16 rays a pixel: on the Cornell box (2 emitting
+/// triangles) it cut the direct layer's relMSE 3x for 5 % more render time; on the conference
+/// room (48) it cut it by a third for 0.35 s more, where 24 plain rays did as well for 0.17 s.
+pub const ANALYTIC_EMITTERS_PER_RAY: usize = 2;
 
 /// Channel-wise `passed / unblocked`, 0 where nothing unblocked was seen.
 fn ratio(passed: Vec3, unblocked: Vec3) -> Vec3 {
@@ -91,9 +94,9 @@ pub fn direct_light(
 
     if surface.diffuse.max_element() > 0.0 && !scene.emitters.is_empty() {
         let emitter_samples = strata.count.max(1);
-        // Lambert's formula costs about a shadow ray an emitter: worth it on the eye path,
-        // where a pixel's direct light is its few shadow rays, while the emitters are few next
-        // to those rays. At the hemisphere's hit points (not on the eye path) hundreds of rays
+        // Lambert's formula costs about a third of a shadow ray an emitter: worth it on the eye
+        // path, where a pixel's direct light is its few shadow rays, while the emitters are few
+        // next to those rays. At the hemisphere's hit points (not on the eye path) hundreds of rays
         // average the noise it would remove.
         let unshadowed = (strata.eye_path
             && integrator.options.analytic_direct
