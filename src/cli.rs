@@ -171,7 +171,8 @@ pub struct RenderArgs {
     /// Before a tile's pixels, make the cache records that the first surfaces on a grid of
     /// this spacing (pixels) need; the pixels then interpolate between records on all their
     /// sides instead of extrapolating from the records earlier pixels made. 0: none. Default 3
-    /// in one process; 0 under mpirun (not yet part of the parallel modes).
+    /// in one process; 0 under mpirun, where noshare, centralised and broadcast take it when
+    /// given and component mode cannot (a PR's misses go to the PAs).
     #[arg(long = "overture")]
     pub overture: Option<u32>,
     /// Random seed; the same seed gives the same image.

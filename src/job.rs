@@ -197,8 +197,9 @@ impl Job {
             overture: args.overture.unwrap_or(match role {
                 memory::Role::Single => DEFAULT_OVERTURE,
                 // Under mpirun a component-mode PR would have to send its overture's misses
-                // to the PAs and wait for the records; until that is built, no mode has one,
-                // so the modes compare like for like.
+                // to the PAs and wait for the records; until that is built no mode has one by
+                // default, so the modes compare like for like (--overture N still works in the
+                // others).
                 _ => 0,
             }),
             emission_footprint: (args.emission_samples > 0 && !scene.emitters.is_empty())

@@ -222,6 +222,10 @@ pub fn run(args: &RenderArgs, mode: Mode) -> CommandResult {
     if let Err(e) = validate(args) {
         return fail(e);
     }
+    if rank == 0 && mode == Mode::Component && args.overture.is_some_and(|n| n > 0) {
+        // A PR's misses go to the PAs, so it has no records to make before its pixels.
+        crate::commands::warn("--overture has no effect in --mode component");
+    }
     let (tile_width, tile_height) = crate::cli::parse_tile(&args.tile).map_err(CommandError)?;
     let all_tiles = tiles(args.width, args.height, tile_width, tile_height);
     if let Err(e) = check_layout(args, mode, size, all_tiles.len(), threads) {
