@@ -48,7 +48,9 @@ def machine():
         "python": platform.python_version(), "rustc": _cmd(["rustc", "--version"]),
         "mpirun": _cmd(["mpirun", "--version"]).splitlines()[0] if _cmd(["mpirun", "--version"]) else "?",
         "commit": _cmd(["git", "-C", common.ROOT, "rev-parse", "--short", "HEAD"]),
-        "dirty": bool(_cmd(["git", "-C", common.ROOT, "status", "--porcelain", "--untracked-files=no"])),
+        # The bench's own outputs (docs/) are rewritten before this is asked: they do not count.
+        "dirty": bool(_cmd(["git", "-C", common.ROOT, "status", "--porcelain", "--untracked-files=no", "--", ".",
+                            ":(exclude)docs"])),
         "load": open("/proc/loadavg").read().split()[:3] if os.path.exists("/proc/loadavg") else "?",
     }
 
