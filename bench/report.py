@@ -217,7 +217,14 @@ def render(*, command, elapsed, runs, gains, rad_rows, sim_rows, cluster_rows, c
              "order of Linux's scheduler slices; an assumption, not fitted): ranks taking turns make fewer "
              "records twice than ranks running at once, which matters most to component mode's PAs. The "
              "prediction gives every rank a processor. The prediction below uses the serial runs' "
-             "costs (a processor to itself) and the request cost of all component runs. "
+             "costs (a processor to itself) and a request's cost as the component runs timed it in the code "
+             "(a PR encoding and queueing its batches, a PA decoding and queueing them; the messages are "
+             "charged as messages): " + ", ".join(
+                 f"{k} {v['request_timed'] * 1e6:.2f} us" for k, v in setups.items() if v.get("request_timed")) +
+             " (the validation's residual, what those runs spent beyond records and pixels on these shared "
+             "cores: " + ", ".join(
+                 f"{k} {v['request_residual'] * 1e6:.1f} us" for k, v in setups.items()
+                 if v.get("request_residual") is not None) + "). "
              "Error = (simulated - measured) / measured.\n")
     worst = {}
     for name in scenes:

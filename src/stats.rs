@@ -106,6 +106,11 @@ pub struct RankReport {
     pub requests_computed: u64,
     #[serde(default)]
     pub requests_forwarded: u64,
+    /// Component mode: seconds this rank spent handling requests as messages, timed where it
+    /// happens: a PR encoding and queueing its batches, a PA decoding and queueing what arrives.
+    /// What a request costs beyond the indirect light it asks for.
+    #[serde(default)]
+    pub request_handling_s: f64,
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub queue_lengths: Vec<(f64, u32)>,
     /// PA: the longest its request queue ever was.
@@ -155,6 +160,8 @@ pub struct RenderStats {
     pub requests_sent: u64,
     pub requests_computed: u64,
     pub requests_forwarded: u64,
+    /// Component mode: seconds all ranks spent handling requests as messages.
+    pub request_handling_s: f64,
     pub rays: RayStats,
     pub mrays_per_s: f64,
     /// Contributions dropped for being NaN or infinite (should be 0).
@@ -219,6 +226,7 @@ impl RenderStats {
         self.requests_sent = ranks.iter().map(|r| r.requests_sent).sum();
         self.requests_computed = ranks.iter().map(|r| r.requests_computed).sum();
         self.requests_forwarded = ranks.iter().map(|r| r.requests_forwarded).sum();
+        self.request_handling_s = ranks.iter().map(|r| r.request_handling_s).sum();
         self.per_rank = ranks;
     }
 }

@@ -34,6 +34,8 @@ struct Queue {
 struct Tallies {
     forwarded: AtomicU64,
     rejected: AtomicU64,
+    /// Nanoseconds spent decoding arriving request batches and queueing them.
+    handling_ns: AtomicU64,
 }
 
 /// The master's replies to this PA's status messages: the records the PA lacks. The PA does not
@@ -95,20 +97,26 @@ fn communicate(
         };
         match msg.tag {
             TAG_PA_STATUS_REPLY => replies.take(&msg.data),
-            TAG_REQUESTS => match requests::decode(&msg.data, pixels) {
-                Ok(decoded) => {
-                    tallies.rejected.fetch_add(decoded.rejected as u64, Ordering::Relaxed);
-                    // Refused requests still count as done, so the master's totals close.
-                    let mut q = queue.lock().unwrap_or_else(|e| e.into_inner());
-                    q.requests.extend(decoded.requests);
-                    q.longest = q.longest.max(q.requests.len());
-                    drop(q);
-                    ready.notify_one();
+            TAG_REQUESTS => {
+                let handling = Instant::now();
+                match requests::decode(&msg.data, pixels) {
+                    Ok(decoded) => {
+                        tallies.rejected.fetch_add(decoded.rejected as u64, Ordering::Relaxed);
+                        // Refused requests still count as done, so the master's totals close.
+                        let mut q = queue.lock().unwrap_or_else(|e| e.into_inner());
+                        q.requests.extend(decoded.requests);
+                        q.longest = q.longest.max(q.requests.len());
+                        drop(q);
+                        ready.notify_one();
+                        tallies
+                            .handling_ns
+                            .fetch_add(handling.elapsed().as_nanos() as u64, Ordering::Relaxed);
+                    }
+                    Err(_) => {
+                        tallies.rejected.fetch_add(1, Ordering::Relaxed);
+                    }
                 }
-                Err(_) => {
-                    tallies.rejected.fetch_add(1, Ordering::Relaxed);
-                }
-            },
+            }
             TAG_FORWARD_ORDER => {
                 let word = |o: usize| {
                     msg.data
@@ -271,6 +279,7 @@ pub fn run(setup: &WorkerSetup<'_>, sync: usize, seed: u64, journal: bool, bound
     report.records_rejected = tallies.rejected.load(Ordering::Relaxed);
     report.requests_computed = done;
     report.requests_forwarded = tallies.forwarded.load(Ordering::Relaxed);
+    report.request_handling_s = tallies.handling_ns.load(Ordering::Relaxed) as f64 * 1e-9;
     report.queue_lengths = queue_samples;
     report.queue_max = queue.lock().unwrap_or_else(|e| e.into_inner()).longest as u64;
     report.wall_s = start.elapsed().as_secs_f64();

@@ -36,6 +36,9 @@ struct Sender<'c> {
     /// The PA of the tile being rendered.
     pa: usize,
     sent: u64,
+    /// Nanoseconds spent taking, encoding and queueing batches (waits for a full outbox not
+    /// included: those are idle time).
+    handling_ns: u64,
 }
 
 impl Sender<'_> {
@@ -46,6 +49,7 @@ impl Sender<'_> {
 
     /// Sends the buffered requests to the current tile's PA.
     fn send(&mut self, sink: &Mutex<Vec<AmbientRequest>>) {
+        let handling = Instant::now();
         let batch = std::mem::take(&mut *sink.lock().unwrap_or_else(|e| e.into_inner()));
         let Some(outbox) = &self.outbox else { return };
         if batch.is_empty() || self.pas.is_empty() {
@@ -54,7 +58,9 @@ impl Sender<'_> {
         let pa = self.pas[self.pa];
         self.sent += batch.len() as u64;
         let message = (pa, requests::encode(&batch));
-        if let Err(TrySendError::Full(message)) = outbox.try_send(message) {
+        let queued = outbox.try_send(message);
+        self.handling_ns += handling.elapsed().as_nanos() as u64;
+        if let Err(TrySendError::Full(message)) = queued {
             let waited = Instant::now();
             let _ = outbox.send(message);
             self.idle_ns
@@ -172,6 +178,7 @@ fn render_and_help(
         pas: &roles.pas,
         pa: 0,
         sent: 0,
+        handling_ns: 0,
     };
     let (mut received, mut rejected) = (0u64, 0u64);
 
@@ -308,6 +315,7 @@ fn render_and_help(
     report.records_received = received;
     report.records_rejected = rejected;
     report.requests_sent = sender.sent;
+    report.request_handling_s = sender.handling_ns as f64 * 1e-9;
     report.requests_computed = helped;
     report.wall_s = start.elapsed().as_secs_f64();
     send_report(&comm, report);
