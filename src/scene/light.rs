@@ -184,8 +184,8 @@ impl EmitterSet {
     }
 
     /// Irradiance at `point` on a surface with unit normal `normal` from every emitter, as if
-    /// nothing were in the way (exact, by Lambert's formula; O(emitters)). None when the point
-    /// sits on an emitter's corner or edge, where the formula has no finite answer.
+    /// nothing were in the way (exact, by Lambert's formula; O(emitters)). None where rounding
+    /// leaves the formula no finite answer (see `lambert::projected_solid_angle`).
     pub fn unshadowed_irradiance(&self, point: Vec3, normal: Vec3) -> Option<Vec3> {
         let (p, n) = (point.as_dvec3(), normal.as_dvec3());
         let mut total = glam::DVec3::ZERO;

@@ -135,6 +135,21 @@ pub struct PathState {
     throughput: Vec3,
 }
 
+impl PathState {
+    /// Where a primary ray starts: no bounce yet, full weight, emission counted (unless the
+    /// caller gathers the first hit's emission with rays of its own).
+    fn eye(first_emission_elsewhere: bool) -> PathState {
+        PathState {
+            level: 0,
+            specular_depth: 0,
+            weight: 1.0,
+            count_emission: true,
+            first_emission_elsewhere,
+            throughput: Vec3::ONE,
+        }
+    }
+}
+
 pub struct Integrator<'a> {
     pub scene: &'a Scene,
     pub tracer: &'a Tracer,
@@ -197,15 +212,15 @@ impl<'a> Integrator<'a> {
         counts: &mut RayCounts,
     ) -> Components {
         counts.primary += 1;
-        let state = PathState {
-            level: 0,
-            specular_depth: 0,
-            weight: 1.0,
-            count_emission: true,
-            first_emission_elsewhere,
-            throughput: Vec3::ONE,
-        };
-        self.trace(origin, dir, state, Coherence::Coherent, rng, counts).0
+        self.trace(
+            origin,
+            dir,
+            PathState::eye(first_emission_elsewhere),
+            Coherence::Coherent,
+            rng,
+            counts,
+        )
+        .0
     }
 
     /// The overture of a tile: makes the records the first diffuse surface along a primary
@@ -218,30 +233,31 @@ impl<'a> Integrator<'a> {
             return;
         }
         counts.primary += 1;
+        if let Some((hit, surface)) = self.first_surface(origin, dir, Coherence::Coherent)
+            && surface.diffuse.max_element() > 0.0
+        {
+            self.ambient_radiance(&hit, PathState::eye(false), rng, counts);
+        }
+    }
+
+    /// The first surface along a ray that is not fully transparent (alpha-masked points are
+    /// passed through), with its material there.
+    fn first_surface(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        coherence: Coherence,
+    ) -> Option<(SurfaceHit, crate::scene::material::SurfacePoint)> {
         let mut origin = origin;
         for _ in 0..MAX_MASKED_PASSES {
-            let Some(hit) = self.tracer.intersect(self.scene, origin, dir, Coherence::Coherent) else {
-                return;
-            };
-            let material = &self.scene.materials[hit.material as usize];
-            let surface = material.at(hit.uv, &self.scene.textures);
-            if surface.opacity <= 0.0 {
-                origin = self.tracer.spawn_point(&hit, dir);
-                continue;
+            let hit = self.tracer.intersect(self.scene, origin, dir, coherence)?;
+            let surface = self.scene.materials[hit.material as usize].at(hit.uv, &self.scene.textures);
+            if surface.opacity > 0.0 {
+                return Some((hit, surface));
             }
-            if surface.diffuse.max_element() > 0.0 {
-                let state = PathState {
-                    level: 0,
-                    specular_depth: 0,
-                    weight: 1.0,
-                    count_emission: true,
-                    first_emission_elsewhere: false,
-                    throughput: Vec3::ONE,
-                };
-                self.ambient_radiance(&hit, state, rng, counts);
-            }
-            return;
+            origin = self.tracer.spawn_point(&hit, dir);
         }
+        None
     }
 
     /// The emission of the first surface a primary ray stops at (times its opacity, as
@@ -284,25 +300,14 @@ impl<'a> Integrator<'a> {
         rng: &mut Rng,
         counts: &mut RayCounts,
     ) -> (Components, f32) {
-        let start = origin;
-        let mut origin = origin;
-        for _ in 0..MAX_MASKED_PASSES {
-            let Some(hit) = self.tracer.intersect(self.scene, origin, dir, coherence) else {
-                return (Components::default(), f32::INFINITY);
-            };
-            let material = &self.scene.materials[hit.material as usize];
-            let surface = material.at(hit.uv, &self.scene.textures);
-            if surface.opacity <= 0.0 {
-                origin = self.tracer.spawn_point(&hit, dir);
-                continue;
-            }
-            let mut c = self.shade(&hit, dir, &surface, state, rng, counts) * surface.opacity;
-            if surface.opacity < 1.0 {
-                c.specular += self.transmit(&hit, dir, 1.0 - surface.opacity, state, rng, counts);
-            }
-            return (c, (hit.position - start).length());
+        let Some((hit, surface)) = self.first_surface(origin, dir, coherence) else {
+            return (Components::default(), f32::INFINITY);
+        };
+        let mut c = self.shade(&hit, dir, &surface, state, rng, counts) * surface.opacity;
+        if surface.opacity < 1.0 {
+            c.specular += self.transmit(&hit, dir, 1.0 - surface.opacity, state, rng, counts);
         }
-        (Components::default(), f32::INFINITY)
+        (c, (hit.position - origin).length())
     }
 
     /// Light behind a partly transparent surface: a specular transmission with jT = 1 - opacity.
