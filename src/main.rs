@@ -31,6 +31,7 @@ fn main() -> ExitCode {
         cli::Command::Reference(args) => commands::reference::run(args),
         cli::Command::Export(args) => commands::export::run(args),
     };
+    icrender::sys::image_io::settle();
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(commands::CommandError(message)) => {
