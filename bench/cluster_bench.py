@@ -71,7 +71,7 @@ def run_mode(scene, mode, ranks, base, work, timeout):
     before = tx_bytes()
     start = time.monotonic()
     cmd = ["bash", TESTBED, "mpirun", "-np", str(ranks), common.BINARY, "render", scene, "-o", out, "--mode", mode,
-           "-q", "--no-preview", "--stats", stats_path, "--timeout", str(timeout)] + base
+           "-q", "--no-preview", "--stats", stats_path, "--timeout", str(timeout)] + base + common.RASTER_ORDER
     try:
         result = subprocess.run(cmd, env=ENV, capture_output=True, text=True, timeout=timeout + 60)
     except subprocess.TimeoutExpired:
@@ -135,7 +135,7 @@ def main():
 
     for scene_name in scenes:
         scene = SCENES.get(scene_name, scene_name)
-        stats, _ = common.render(scene, os.path.join(work, "s.exr"), base + ["--threads", "1"] + common.SERIAL_AS_MPI)
+        stats, _ = common.render(scene, os.path.join(work, "s.exr"), base + ["--threads", "1"] + common.RASTER_ORDER)
         rows.append({"scene": scene_name, "link": "-", "mode": "serial", "ranks": 1, "mpirun_s": "",
                      "wall_s": stats["wall_s"], "render_s": stats["render_s"], "misses": stats["records_computed"],
                      "idle_s": 0.0, "messages": 0, "bytes": 0, "kernel_bytes": 0,

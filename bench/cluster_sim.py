@@ -79,7 +79,7 @@ def validate(csv_path, links_path, settings_path, out_dir, say=print):
         if name not in SCENES:
             continue
         trace = os.path.join(out_dir, f"trace-cluster-{name}.txt")
-        base = ["-x", str(width), "-y", str(height)] + settings["options"].split() + ["--threads", "1"] + common.SERIAL_AS_MPI
+        base = ["-x", str(width), "-y", str(height)] + settings["options"].split() + ["--threads", "1"] + common.RASTER_ORDER
         common.render(SCENES[name], os.path.join(work, "t.exr"), base + ["--trace-cache", trace])
         stats, _ = common.render(SCENES[name], os.path.join(work, "s.exr"), base)
         accuracy = float(settings["options"].split("-aa")[1].split()[0]) if "-aa" in settings["options"] else 0.2

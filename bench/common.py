@@ -31,9 +31,12 @@ def ensure_module(name, package=None):
         return importlib.import_module(name)
 
 
-# The serial run a parallel one is measured against: the overture (made before a tile's pixels)
-# is not part of the MPI modes yet, so serial baselines go without it, like for like.
-SERIAL_AS_MPI = ["--overture", "0"]
+# Scanline order without the overture (--overture 0): how the paper's renderers computed, and the
+# order of the serial runs whose cache traces bench/icsim.py replays.
+RASTER_ORDER = ["--overture", "0"]
+# The renderer's default --overture (src/job.rs DEFAULT_OVERTURE); in component mode, the grid
+# whose requests a PA computes first (src/parallel/component/order.rs).
+DEFAULT_OVERTURE = 3
 
 
 def render(scene, out, options, reference=None):

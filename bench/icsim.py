@@ -24,6 +24,12 @@ the renderer (src/irradiance/record.rs, Hessian metric). What a rank can see fol
                does not wait for the master's reply);
                when tiles run out, idle PRs take an eighth of the longest PA queue (load balancing).
 
+With `overture` N > 0 (the renderer's --overture, default 3): in the serial run and the
+traditional modes a rank first looks up (and makes) the records of the first surfaces at the
+tile's N-pixel grid, then renders the tile's pixels (src/render.rs render_tile); in component
+mode a PA computes the requests of pixels on that grid first, in the image's coordinates
+(src/parallel/component/order.rs), and a helping PR is handed the newest off-grid ones first.
+
 A miss at a point the serial run answered from the cache makes a record shaped like the one
 that answered it there (its radii, axis and horizon, at the new point and normal).
 
@@ -206,6 +212,43 @@ class Costs:
                 f"{self.message * 1e6:.1f} us, request {self.request_pr * 1e6:.1f} + {self.request_pa * 1e6:.1f} us)")
 
 
+class PAQueue:
+    """A PA's queue (src/parallel/component/order.rs): requests at grid pixels first, each
+    group in arrival order; only requests that have arrived can be taken."""
+
+    def __init__(self, width, stride):
+        self.width, self.stride = width, stride
+        self.grid, self.rest = deque(), deque()  # (arrival time, entry)
+
+    def on_grid(self, pixel):
+        s = self.stride
+        return s > 1 and pixel % self.width % s == s // 2 and pixel // self.width % s == s // 2
+
+    def __len__(self):
+        return len(self.grid) + len(self.rest)
+
+    def append(self, arrival, pixel, entry):
+        (self.grid if self.on_grid(pixel) else self.rest).append((arrival, entry))
+
+    def pop_ready(self, now):
+        """The next request that has arrived by `now`, or None."""
+        for q in (self.grid, self.rest):
+            if q and q[0][0] <= now + 1e-15:
+                return q.popleft()[1]
+        return None
+
+    def next_arrival(self):
+        return min(q[0][0] for q in (self.grid, self.rest) if q)
+
+    def take_newest(self, count):
+        """Up to `count` requests for a helper, the newest off-grid ones first, in queue order."""
+        taken = deque()
+        for q in (self.rest, self.grid):
+            while q and len(taken) < count:
+                taken.appendleft(q.pop()[1])
+        return taken
+
+
 class Result:
     def __init__(self, mode, workers):
         self.mode, self.workers = mode, workers
@@ -244,8 +287,9 @@ class Sim:
     """One simulated render. `workers` excludes the master (paper: processors)."""
 
     def __init__(self, trace, mode, workers, costs, network="1gbit", tile=(16, 16), sync=None, send=32, pa=None,
-                 pa_sync=8, wake=POLL_WAKE, cores=None, quantum=3e-3):
+                 pa_sync=8, wake=POLL_WAKE, cores=None, quantum=3e-3, overture=0):
         self.t = trace
+        self.overture = overture
         self.mode = mode
         self.W = workers
         self.c = costs
@@ -335,6 +379,17 @@ class Sim:
         return sum(1 for r in self.master[lo:hi] if r.owner != rank)
 
     # -- traditional modes ------------------------------------------------------------------
+    def plan(self, tile):
+        """A tile's steps, (pixel, overture?): the overture's grid pixels first (their eye-path
+        lookup only), then every pixel (src/render.rs render_tile)."""
+        steps = [(p, False) for p in tile]
+        s, width = self.overture, self.t.width
+        if s <= 0 or not tile:
+            return steps
+        x0, y0 = min(p % width for p in tile), min(p // width for p in tile)
+        grid = [(p, True) for p in tile if (p % width - x0) % s == s // 2 and (p // width - y0) % s == s // 2]
+        return grid + steps
+
     def run_traditional(self):
         W, c, res = self.W, self.c, self.res
         clock = [0.0] * W
@@ -348,7 +403,7 @@ class Sim:
             if state[w] is None or state[w][1] >= len(state[w][0]):
                 # Ask the master for a tile (the finished tile's pixels go with the request).
                 t0 = clock[w]
-                finished = len(state[w][0]) if state[w] is not None else 0
+                finished = sum(1 for _, o in state[w][0] if not o) if state[w] is not None else 0
                 arrive = t0 + self.msg(16 + PIXEL_BYTES * finished) + self.wake / 2
                 master_free = max(master_free, arrive)
                 back = master_free + self.msg(8) + self.wake / 2
@@ -358,14 +413,15 @@ class Sim:
                 if not self.tiles:
                     self.finish_traditional(w, clock, outbox)
                     continue
-                state[w] = (self.tiles.popleft(), 0)
+                state[w] = (self.plan(self.tiles.popleft()), 0)
                 heapq.heappush(heap, (clock[w], w))
                 continue
-            pixels, i = state[w]
-            pixel = pixels[i]
-            state[w] = (pixels, i + 1)
-            spent = c.pixel
-            for entry in self.t.lookups.get(pixel, ()):
+            steps, i = state[w]
+            pixel, overture = steps[i]
+            state[w] = (steps, i + 1)
+            entries = self.t.lookups.get(pixel, ())
+            spent = 0.0 if overture else c.pixel
+            for entry in entries[:1] if overture else entries:
                 res.lookups += 1
                 if self.covered(entry[0], entry[1], entry[2], w, clock[w]):
                     spent += c.hit
@@ -422,7 +478,7 @@ class Sim:
         pas = list(range(self.npa))
         prs = list(range(self.npa, W))
         clock = [0.0] * W
-        queue = {a: deque() for a in pas}  # (arrival time, entry)
+        queue = {a: PAQueue(self.t.width, self.overture) for a in pas}
         outbox = {a: [] for a in range(W)}
         buffer = {p: [] for p in prs}
         # The PA each PR's current tile sends to: tile i goes to PA i mod n, so one PA sees all
@@ -444,15 +500,13 @@ class Sim:
             share = len(queue[best]) // SHARE_DIVISOR
             if share < MIN_SHARE:
                 return False
-            taken = deque()
-            for _ in range(share):
-                taken.appendleft(queue[best].pop())
+            taken = queue[best].take_newest(share)
             res.forwarded += share
             start = max(clock[p], now)
             back = start + self.msg(8) + self.msg(12 + REQUEST_BYTES * share) + self.lat + 1.5 * self.wake
             res.idle[p] += back - clock[p]
             clock[p] = back
-            helping[p] = deque(e for _, e in taken)
+            helping[p] = taken
             heapq.heappush(heap, (clock[p], p))
             return True
 
@@ -492,8 +546,8 @@ class Sim:
             arrive = clock[p] + self.msg(12 + REQUEST_BYTES * len(buffer[p])) + self.wake / 2
             clock[p] += c.message
             res.busy[p] += c.message
-            for e in buffer[p]:
-                queue[a].append((arrive, e))
+            for pixel, e in buffer[p]:
+                queue[a].append(arrive, pixel, e)
             outstanding += len(buffer[p])
             buffer[p] = []
             if not inheap[a]:
@@ -544,15 +598,15 @@ class Sim:
             if w in queue:  # a PA
                 inheap[w] = False
                 q = queue[w]
-                if q and q[0][0] <= clock[w] + 1e-15:
-                    _, e = q.popleft()
+                e = q.pop_ready(clock[w])
+                if e is not None:
                     compute(w, e)
                     reported[w] = len(q)
                     inheap[w] = True
                     heapq.heappush(heap, (clock[w], w))
                 elif q:
-                    res.idle[w] += q[0][0] - clock[w]
-                    clock[w] = q[0][0]
+                    res.idle[w] += q.next_arrival() - clock[w]
+                    clock[w] = q.next_arrival()
                     inheap[w] = True
                     heapq.heappush(heap, (clock[w], w))
                 else:
@@ -582,7 +636,7 @@ class Sim:
                     if self.covered(entry[0], entry[1], entry[2], w, clock[w]):
                         spent += c.hit
                     else:
-                        buffer[w].append(entry)
+                        buffer[w].append((pixel, entry))
                         spent += c.request_pr
                 clock[w] = self.cpu(w, clock[w], spent)
                 res.busy[w] += spent

@@ -54,7 +54,7 @@ def main():
     for scene_name in args.scenes.split(","):
         scene = SCENES.get(scene_name, scene_name)
         out = os.path.join(work, "s.exr")
-        stats, _ = common.render(scene, out, base + ["--threads", "1"] + common.SERIAL_AS_MPI)
+        stats, _ = common.render(scene, out, base + ["--threads", "1"])
         serial = stats
         rows.append((scene_name, "serial", 1, stats["render_s"], stats["records_computed"], stats["t_amb_s"],
                      stats["t_notamb_s"], 0.0, 0, 0))

@@ -170,9 +170,9 @@ pub struct RenderArgs {
     pub emission_samples: u32,
     /// Before a tile's pixels, make the cache records that the first surfaces on a grid of
     /// this spacing (pixels) need; the pixels then interpolate between records on all their
-    /// sides instead of extrapolating from the records earlier pixels made. 0: none. Default 3
-    /// in one process; 0 under mpirun, where noshare, centralised and broadcast take it when
-    /// given and component mode cannot (a PR's misses go to the PAs).
+    /// sides instead of extrapolating from the records earlier pixels made. 0: none. In
+    /// component mode a PA computes its queued requests at this grid's pixels first instead
+    /// (a PR's misses go to the PAs). Default 3.
     #[arg(long = "overture")]
     pub overture: Option<u32>,
     /// Random seed; the same seed gives the same image.

@@ -31,7 +31,7 @@ pub struct Job {
 /// Largest image side we accept: beyond it framebuffers stop fitting in memory sensibly.
 const MAX_IMAGE_SIDE: u32 = 65_536;
 
-/// The overture's grid spacing in one process. Measured at -ab 1 -aa 0.2 against converged
+/// The overture's grid spacing. Measured at -ab 1 -aa 0.2 against converged
 /// references: on the 256x256 Cornell box it cut the indirect layer's bias from +4.4 % to
 /// +2.4 %, its relMSE from 6.6e-4 to 4.7e-4 and the records from 1527 to 1333; on the 320x240
 /// conference room relMSE 1.6e-2 to 1.1e-2 and records 3345 to 3148. Spacings 2 and 4 did
@@ -194,14 +194,9 @@ impl Job {
             threads,
             jitter: false,
             emission_samples: args.emission_samples,
-            overture: args.overture.unwrap_or(match role {
-                memory::Role::Single => DEFAULT_OVERTURE,
-                // Under mpirun a component-mode PR would have to send its overture's misses
-                // to the PAs and wait for the records; until that is built no mode has one by
-                // default, so the modes compare like for like (--overture N still works in the
-                // others).
-                _ => 0,
-            }),
+            // In every mode; in component mode the grid orders each PA's queue instead
+            // (parallel::component::order).
+            overture: args.overture.unwrap_or(DEFAULT_OVERTURE),
             emission_footprint: (args.emission_samples > 0 && !scene.emitters.is_empty())
                 .then(|| std::sync::Arc::new(EmitterFootprint::new(&scene.emitters, &camera))),
         };

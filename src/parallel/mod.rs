@@ -222,10 +222,6 @@ pub fn run(args: &RenderArgs, mode: Mode) -> CommandResult {
     if let Err(e) = validate(args) {
         return fail(e);
     }
-    if rank == 0 && mode == Mode::Component && args.overture.is_some_and(|n| n > 0) {
-        // A PR's misses go to the PAs, so it has no records to make before its pixels.
-        crate::commands::warn("--overture has no effect in --mode component");
-    }
     let (tile_width, tile_height) = crate::cli::parse_tile(&args.tile).map_err(CommandError)?;
     let all_tiles = tiles(args.width, args.height, tile_width, tile_height);
     if let Err(e) = check_layout(args, mode, size, all_tiles.len(), threads) {
@@ -392,6 +388,10 @@ fn run_component(
         if let Some(cache) = job.cache.as_mut() {
             cache.keep_outbox();
         }
+        // The overture's grid orders each PA's queue (component::order). A PR makes no
+        // records before its pixels: its misses go to the PAs.
+        let grid = job.settings.overture;
+        job.settings.overture = 0;
         let setup = WorkerSetup::new(&job, all_tiles);
         if roles.pas.contains(&rank) {
             component::pa::run(
@@ -400,6 +400,7 @@ fn run_component(
                 args.seed,
                 args.checkpoint.is_some(),
                 args.pa_queue.max(1) as usize,
+                grid,
             );
         } else {
             component::pr::run(

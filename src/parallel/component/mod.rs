@@ -5,6 +5,7 @@
 //! every rank's image at the end.
 
 pub mod master;
+pub mod order;
 pub mod pa;
 pub mod pr;
 pub mod requests;

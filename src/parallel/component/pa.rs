@@ -1,10 +1,11 @@
 //! A PA rank: owns indirect diffuse work. A communicating thread (the paper's communicator
 //! process) receives request buffers from PRs into a queue and carries out the master's
-//! forward orders; the computing thread takes requests in order, answers each from the PA's
-//! cache or computes a new record, multiplies by the request's coefficient and adds it to the
-//! PA's own image. Every --sync new records, and whenever its queue runs dry, it syncs with the
+//! forward orders; the computing thread takes requests (those at the overture's grid pixels
+//! first, see `order`), answers each from the PA's cache or computes a new record, multiplies
+//! by the request's coefficient and adds it to the PA's own image. Every --sync new records, and whenever its queue runs dry, it syncs with the
 //! master, reporting its queue length and how many requests it has computed.
 
+use super::order::RequestQueue;
 use super::*;
 use crate::checkpoint::RequestResult;
 use crate::image::framebuffer::FrameBuffer;
@@ -15,14 +16,12 @@ use crate::parallel::{WorkerSetup, rank_report, send_report};
 use crate::render::{ThreadClock, ThreadStats};
 use crate::shading::Integrator;
 use crate::shading::request::AmbientRequest;
-use std::collections::VecDeque;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Condvar, Mutex};
 use std::time::{Duration, Instant};
 
-#[derive(Default)]
 struct Queue {
-    requests: VecDeque<AmbientRequest>,
+    requests: RequestQueue,
     finish: bool,
     /// The longest the queue has been.
     longest: usize,
@@ -126,12 +125,13 @@ fn communicate(
                 let (Some(pr), Some(count)) = (word(0), word(4)) else {
                     continue;
                 };
-                // The newest requests go: the PA keeps working through the oldest.
-                let share: Vec<AmbientRequest> = {
-                    let mut q = queue.lock().unwrap_or_else(|e| e.into_inner());
-                    let keep = q.requests.len().saturating_sub(count as usize);
-                    q.requests.split_off(keep).into()
-                };
+                // The newest requests go: the PA keeps working through the oldest (see
+                // RequestQueue::take_newest).
+                let share: Vec<AmbientRequest> = queue
+                    .lock()
+                    .unwrap_or_else(|e| e.into_inner())
+                    .requests
+                    .take_newest(count as usize);
                 tallies.forwarded.fetch_add(share.len() as u64, Ordering::Relaxed);
                 comm.send(pr as i32, TAG_FORWARDED, &requests::encode(&share));
             }
@@ -146,14 +146,19 @@ fn communicate(
 
 /// `journal`: --checkpoint is on, so computed requests are reported to the master.
 /// `bound`: the most requests the queue takes (see `communicate`).
-pub fn run(setup: &WorkerSetup<'_>, sync: usize, seed: u64, journal: bool, bound: usize) {
+/// `grid`: the spacing in pixels of the requests computed first (see `order`); 0: arrival order.
+pub fn run(setup: &WorkerSetup<'_>, sync: usize, seed: u64, journal: bool, bound: usize, grid: u32) {
     let counters = Counters::default();
     let comm_counters = Counters::default();
     let comm = Comm::new(&counters);
     let start = Instant::now();
     let (width, height) = (setup.camera.width, setup.camera.height);
     let cache = setup.cache;
-    let queue = Mutex::new(Queue::default());
+    let queue = Mutex::new(Queue {
+        requests: RequestQueue::new(width, grid),
+        finish: false,
+        longest: 0,
+    });
     let ready = Condvar::new();
     let tallies = Tallies::default();
     let replies = Replies {
@@ -207,7 +212,7 @@ pub fn run(setup: &WorkerSetup<'_>, sync: usize, seed: u64, journal: bool, bound
                 samples.push((start.elapsed().as_secs_f64(), left as u32));
             };
         loop {
-            let next = queue.lock().unwrap_or_else(|e| e.into_inner()).requests.pop_front();
+            let next = queue.lock().unwrap_or_else(|e| e.into_inner()).requests.pop();
             let Some(request) = next else {
                 // Going idle: the master must know everything done so far first (the queue
                 // may also have been emptied by a forward order while a request was computed).

@@ -120,26 +120,30 @@ pub fn decode(bytes: &[u8], pixels: u32) -> Result<Decoded, String> {
     Ok(Decoded { requests, rejected })
 }
 
+/// A request with every field set, for tests of code that moves requests around.
+#[cfg(test)]
+pub(crate) fn sample_request(pixel: u32) -> AmbientRequest {
+    AmbientRequest {
+        pixel,
+        layer: Layer::Specular,
+        specular_depth: 2,
+        position: Vec3::new(1.0, 2.0, 3.0),
+        geometric_normal: Vec3::Y,
+        normal: Vec3::Y,
+        facing_normal: -Vec3::Y,
+        coefficient: Vec3::new(0.1, 0.2, 0.3),
+        weight: 0.5,
+        direction: Vec3::X,
+        material: 7,
+        stream: 0xdead_beef_0000_0001,
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
 
-    fn request(pixel: u32) -> AmbientRequest {
-        AmbientRequest {
-            pixel,
-            layer: Layer::Specular,
-            specular_depth: 2,
-            position: Vec3::new(1.0, 2.0, 3.0),
-            geometric_normal: Vec3::Y,
-            normal: Vec3::Y,
-            facing_normal: -Vec3::Y,
-            coefficient: Vec3::new(0.1, 0.2, 0.3),
-            weight: 0.5,
-            direction: Vec3::X,
-            material: 7,
-            stream: 0xdead_beef_0000_0001,
-        }
-    }
+    use super::sample_request as request;
 
     #[test]
     fn the_empty_batch_is_an_encoded_batch_of_nothing() {
