@@ -271,52 +271,88 @@ def ladder_settings(args):
     return steps
 
 
+# Shadow rays a pixel icrender is also tried with at equal error (besides its default, 16).
+FEWER_LIGHT_SAMPLES = 8
+
+
+def icrender_ladder(args):
+    """icrender's settings for the comparison at equal error: rpict's ladder plus an -ad halfway
+    between its two cheapest steps, each with the default shadow rays and with
+    FEWER_LIGHT_SAMPLES (an icrender knob: rpict's direct light has no sampling noise to trade).
+    Items: (-ad, -as, --light-samples or None for the default)."""
+    ads = ladder_settings(args)
+    if len(ads) >= 2:
+        (a1, s1), (a0, s0) = ads[-2], ads[-1]
+        middle = ((a0 + a1) // 2, (s0 + s1) // 2)
+        if middle not in ads:
+            ads.insert(len(ads) - 1, middle)
+    return [(ad, as_, ls) for ad, as_ in ads for ls in (None, FEWER_LIGHT_SAMPLES)]
+
+
 def equal_error(args, icrender, scene_args, out_dir, ref, ref_px, rpict_base, octree, bin_dir, rad_env):
-    """Both renderers on one core at each ladder setting; for every rpict run, the cheapest
-    icrender run whose relMSE, RMSE and 4x4 relMSE are all at most rpict's, and the ratio of
-    their process CPU times. The smallest ratio is the verdict (rpict at its best trade)."""
+    """Both renderers at each ladder setting: icrender on one core and on every core, rpict (one
+    process); for every rpict run, the cheapest icrender run whose relMSE, RMSE and 4x4 relMSE
+    are all at most rpict's, and the ratio of the times: process CPU on one core, process wall
+    on every core. Printed for each rpict run: at rpict's defaults (-ad 512 -as 128, the first
+    step by default) and at its cheaper settings, where the fixed cost of a process weighs more."""
     w, h = args.x, args.y
     runs = []
+    pin = shutil.which("taskset") is not None
+    for ad, as_, ls in icrender_ladder(args):
+        options = ["-ab", args.ab, "-aa", args.aa, "-ad", ad, "-as", as_, "-ar", args.ar]
+        options += ["--light-samples", ls] if ls else []
+        for threads, pinned in ((1, pin), (0, False)):
+            # Same seed, same image: repeats differ in time only; the fastest is kept (the machine
+            # is shared, and slowed down runs say nothing about either renderer).
+            tries = [icrender_run(args, icrender, scene_args, options, out_dir, ref, threads, pin=pinned,
+                                  tag_suffix=f"_ad{ad}" + (f"_ls{ls}" if ls else "")) for _ in range(args.repeat)]
+            r = dict(tries[-1], cpu=min(t["cpu"] for t in tries), wall=min(t["wall"] for t in tries))
+            r["relmse4"] = block_relmse(pixels(r["exr"], w, h, bin_dir, rad_env, out_dir), ref_px, w, h)
+            r["ad"], r["as"], r["ls"], r["cores"] = ad, as_, ls or "", "one" if threads == 1 else "all"
+            runs.append(r)
     for ad, as_ in ladder_settings(args):
         ambient = ["-ab", args.ab, "-aa", args.aa, "-ad", ad, "-as", as_, "-ar", args.ar]
-        pin = shutil.which("taskset") is not None
-        r = icrender_run(args, icrender, scene_args, ambient, out_dir, ref, 1, pin=pin, tag_suffix=f"_ad{ad}")
-        r["relmse4"] = block_relmse(pixels(r["exr"], w, h, bin_dir, rad_env, out_dir), ref_px, w, h)
-        r["ad"], r["as"] = ad, as_
-        runs.append(r)
         hdr, exr = out_dir / f"rpict_ad{ad}.hdr", out_dir / f"rpict_ad{ad}.exr"
-        with open(hdr, "wb") as f:
-            _, wall, cpu = run(rpict_base + [*ambient, *shlex.split(args.rpict_args), octree], env=rad_env, stdout=f)
+        times = []
+        for _ in range(args.repeat):  # -pj 0: every repeat makes the same picture
+            with open(hdr, "wb") as f:
+                _, wall, cpu = run(rpict_base + [*ambient, *shlex.split(args.rpict_args), octree], env=rad_env,
+                                   stdout=f)
+            times.append((wall, cpu))
+        wall, cpu = min(t[0] for t in times), min(t[1] for t in times)
         run(["oiiotool", hdr, "-o", exr], quiet=True)
         e = compare(icrender, exr, ref)
-        runs.append({"renderer": "rpict", "ad": ad, "as": as_, "cpu": cpu, "wall": wall, "rmse": e["rmse"],
+        runs.append({"renderer": "rpict", "cores": "one", "ad": ad, "as": as_, "ls": "", "cpu": cpu, "wall": wall,
+                     "rmse": e["rmse"],
                      "relmse": e["rel_mse"],
                      "relmse4": block_relmse(pixels(hdr, w, h, bin_dir, rad_env, out_dir), ref_px, w, h), "exr": exr})
     print()
-    print("At equal error, one core (process CPU; icrender pinned to one core with taskset):")
-    header = f"{'renderer':<9} {'-ad':>5} {'-as':>5} {'cpu s':>7} {'relMSE':>10} {'RMSE':>10} {'relMSE4x4':>10}"
+    print("At equal error (icrender on one core: pinned with taskset, process CPU; on every core: "
+          "process wall; rpict: one process):")
+    header = (f"{'renderer':<9} {'cores':>5} {'-ad':>5} {'-as':>5} {'ls':>3} {'cpu s':>7} {'wall s':>7} "
+              f"{'relMSE':>10} {'RMSE':>10} {'relMSE4x4':>10}")
     print(header)
     print("-" * len(header))
     for r in runs:
-        print(f"{r['renderer']:<9} {r['ad']:>5} {r['as']:>5} {r['cpu']:>7.3f} {r['relmse']:>10.3e} {r['rmse']:>10.3e} "
-              f"{r['relmse4']:>10.3e}")
+        print(f"{r['renderer']:<9} {r['cores']:>5} {r['ad']:>5} {r['as']:>5} {r['ls']:>3} {r['cpu']:>7.3f} {r['wall']:>7.3f} "
+              f"{r['relmse']:>10.3e} {r['rmse']:>10.3e} {r['relmse4']:>10.3e}")
     metrics = ("relmse", "rmse", "relmse4")
-    ic = [r for r in runs if r["renderer"] == "icrender"]
     verdicts = []
-    for rp in (r for r in runs if r["renderer"] == "rpict"):
-        good = [r for r in ic if all(r[m] <= rp[m] for m in metrics)]
-        if not good:
-            print(f"rpict -ad {rp['ad']}: no icrender run of the ladder reaches its error")
-            verdicts.append({"rpict_ad": rp["ad"], "icrender_ad": None, "ratio": None})
-            continue
-        best = min(good, key=lambda r: r["cpu"])
-        ratio = rp["cpu"] / best["cpu"]
-        print(f"rpict -ad {rp['ad']} ({rp['cpu']:.2f} s): icrender -ad {best['ad']} reaches its error in "
-              f"{best['cpu']:.2f} s: {ratio:.1f}x faster")
-        verdicts.append({"rpict_ad": rp["ad"], "icrender_ad": best["ad"], "ratio": ratio})
-    ratios = [v["ratio"] for v in verdicts if v["ratio"] is not None]
-    if ratios:
-        print(f"smallest ratio at equal or lower error (one core, process CPU): {min(ratios):.1f}x")
+    for cores, clock in (("one", "cpu"), ("all", "wall")):
+        ic = [r for r in runs if r["renderer"] == "icrender" and r["cores"] == cores]
+        for rp in (r for r in runs if r["renderer"] == "rpict"):
+            good = [r for r in ic if all(r[m] <= rp[m] for m in metrics)]
+            if not good:
+                print(f"{cores} core(s): rpict -ad {rp['ad']}: no icrender run of the ladder reaches its error")
+                verdicts.append({"cores": cores, "rpict_ad": rp["ad"], "icrender_ad": None, "ratio": None})
+                continue
+            best = min(good, key=lambda r: r[clock])
+            ratio = rp[clock] / best[clock]
+            shadow = f" --light-samples {best['ls']}" if best["ls"] else ""
+            print(f"{cores} core(s), process {clock}: rpict -ad {rp['ad']} ({rp[clock]:.2f} s): icrender -ad "
+                  f"{best['ad']}{shadow} reaches its error in {best[clock]:.2f} s: {ratio:.1f}x faster")
+            verdicts.append({"cores": cores, "rpict_ad": rp["ad"], "icrender_ad": best["ad"],
+                             "icrender_light_samples": best["ls"] or None, "ratio": ratio})
     return {"runs": [{k: (str(v) if isinstance(v, Path) else v) for k, v in r.items()} for r in runs],
             "verdicts": verdicts}
 
@@ -357,6 +393,8 @@ def main():
     )
     parser.add_argument("--out", help="output folder (default target/vs_radiance/<scene>_<x>x<y>)")
     parser.add_argument("--no-build", action="store_true", help="use target/release/icrender as it is")
+    parser.add_argument("--repeat", type=int, default=1,
+                        help="with --equal-error: run every setting this many times, keeping the fastest")
     parser.add_argument("--equal-error", action="store_true",
                         help="also run both renderers on one core at -ad halved three times (-as alike) and "
                              "compare the time each needs for the same error")
