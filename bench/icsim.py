@@ -22,7 +22,8 @@ the renderer (src/irradiance/record.rs, Hessian metric). What a rank can see fol
                tile (tile i to PA i mod n, src/parallel/component/pr.rs; flushed at tile end);
                PAs: their own records plus the master's at their last sync (every 8 records; a PA
                does not wait for the master's reply);
-               when tiles run out, idle PRs take an eighth of the longest PA queue (load balancing).
+               when tiles run out, idle PRs take an eighth of the longest PA queue (load balancing),
+               and so does a PA that runs dry (an eighth of the longest other queue).
 
 With `overture` N > 0 (the renderer's --overture, default 3): in the serial run and the
 traditional modes a rank first looks up (and makes) the records of the first surfaces at the
@@ -218,7 +219,7 @@ class PAQueue:
 
     def __init__(self, width, stride):
         self.width, self.stride = width, stride
-        self.grid, self.rest = deque(), deque()  # (arrival time, entry)
+        self.grid, self.rest = deque(), deque()  # (arrival time, pixel, entry)
 
     def on_grid(self, pixel):
         s = self.stride
@@ -228,24 +229,25 @@ class PAQueue:
         return len(self.grid) + len(self.rest)
 
     def append(self, arrival, pixel, entry):
-        (self.grid if self.on_grid(pixel) else self.rest).append((arrival, entry))
+        (self.grid if self.on_grid(pixel) else self.rest).append((arrival, pixel, entry))
 
     def pop_ready(self, now):
         """The next request that has arrived by `now`, or None."""
         for q in (self.grid, self.rest):
             if q and q[0][0] <= now + 1e-15:
-                return q.popleft()[1]
+                return q.popleft()[2]
         return None
 
     def next_arrival(self):
         return min(q[0][0] for q in (self.grid, self.rest) if q)
 
     def take_newest(self, count):
-        """Up to `count` requests for a helper, the newest off-grid ones first, in queue order."""
+        """Up to `count` requests for a helper, the newest off-grid ones first, in queue order:
+        (pixel, entry) pairs."""
         taken = deque()
         for q in (self.rest, self.grid):
             while q and len(taken) < count:
-                taken.appendleft(q.pop()[1])
+                taken.appendleft(q.pop()[1:])
         return taken
 
 
@@ -494,6 +496,26 @@ class Sim:
         outstanding = 0  # requests sent but not computed
 
         parked = deque()
+        dry = deque()  # PAs that ran dry after the last tile went out, waiting for a share
+
+        def feed_pa(a, now):
+            """A PA that ran dry gets a share of the longest other queue (src/parallel/component/
+            master.rs feed_pa): its status to the master, the master's order, the share."""
+            best = max((o for o in pas if o != a), key=lambda o: len(queue[o]), default=None)
+            share = len(queue[best]) // SHARE_DIVISOR if best is not None else 0
+            if share < MIN_SHARE:
+                return False
+            taken = queue[best].take_newest(share)
+            res.forwarded += share
+            arrive = max(clock[a], now) + self.msg(16) + self.msg(8) + self.msg(12 + REQUEST_BYTES * share) \
+                + 1.5 * self.wake
+            res.busy[best] += c.message
+            for pixel, e in taken:
+                queue[a].append(arrive, pixel, e)
+            if not inheap[a]:
+                inheap[a] = True
+                heapq.heappush(heap, (max(clock[a], arrive), a))
+            return True
 
         def dispatch(p, now):
             best = max(pas, key=lambda a: len(queue[a]))
@@ -506,7 +528,7 @@ class Sim:
             back = start + self.msg(8) + self.msg(12 + REQUEST_BYTES * share) + self.lat + 1.5 * self.wake
             res.idle[p] += back - clock[p]
             clock[p] = back
-            helping[p] = taken
+            helping[p] = deque(e for _, e in taken)
             heapq.heappush(heap, (clock[p], p))
             return True
 
@@ -537,6 +559,8 @@ class Sim:
                 clock[w] = back + c.message
             while w in queue and parked and dispatch(parked[0], arrive):
                 parked.popleft()
+            while w in queue and dry and feed_pa(dry[0], arrive):
+                dry.popleft()
 
         def flush(p):
             nonlocal outstanding
@@ -614,7 +638,10 @@ class Sim:
                         sync_master(w)
                     reported[w] = 0
                     res.end[w] = clock[w]
-                    # Woken again by flush() when requests arrive.
+                    # Woken again by flush() when requests arrive, or, once every tile is out,
+                    # by a share of another PA's queue.
+                    if not self.tiles and w not in dry and not feed_pa(w, clock[w]):
+                        dry.append(w)
                 continue
             # A PR.
             if w in helping:

@@ -429,6 +429,32 @@ fn load_balancing_resolves_a_forced_imbalance() {
     assert_eq!(helped, u(s, "requests_forwarded"));
 }
 
+/// A PA that runs dry once every tile is out gets a share of another PA's queue, as an idle PR
+/// does. Three tiles for two PAs (tile i goes to PA i mod 2): the first PA gets twice the
+/// second's work, so the second runs dry while the first still has a long queue.
+#[test]
+fn a_pa_that_runs_dry_takes_a_share_of_another_pas_queue() {
+    let _one_job = one_job_at_a_time();
+    let dir = tempfile::tempdir().unwrap();
+    let scene = project_dir().join("scenes/cornell.gltf");
+    // Dear records (-ad 4096), so that the busy PA's queue stays long enough to split.
+    let run = render(
+        dir.path(),
+        &scene,
+        "dry",
+        Some(4),
+        &["--mode", "component", "--pa", "2", "--tile", "48x16", "-ad", "4096"],
+    );
+    let s = &run.stats;
+    let ranks = s["per_rank"].as_array().unwrap();
+    let total = |role: &str, key: &str| -> u64 { ranks.iter().filter(|r| r["role"] == role).map(|r| u(r, key)).sum() };
+    // Whatever the PAs forwarded and the PR did not compute went to the other PA.
+    let to_pas = total("pa", "requests_forwarded") - total("pr", "requests_computed");
+    assert!(to_pas > 0, "no PA was given a share of another's queue: {s}");
+    assert_eq!(u(s, "requests_sent"), u(s, "requests_computed"));
+    assert!(rgb(&run.image, "").iter().flatten().all(|v| v.is_finite()));
+}
+
 /// A PA whose queue is full takes no more requests in; the PRs wait (their synchronous sends do
 /// not complete) instead of the queue growing without bound, and the render still ends right.
 #[test]

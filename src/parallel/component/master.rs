@@ -39,6 +39,8 @@ pub struct ComponentResult {
 struct PaState {
     queue: u64,
     done: u64,
+    /// Ran dry after the last tile went out, and waits for a share of another PA's queue.
+    waiting: bool,
     samples: Vec<(f64, u32)>,
     /// When it last reported (seconds since the start).
     last_report: f64,
@@ -115,25 +117,44 @@ pub fn run(
         seen[rank] = store.len();
         encode_batch(&missing, 0)
     };
+    // Orders the PA with the longest queue (other than `to`) to send a share of it to `to`, an
+    // idle PR or a PA that ran dry, if one is worth splitting; the share's size.
+    let order_share = |comm: &Comm<'_>, pas: &mut HashMap<i32, PaState>, to: i32, orders: &mut u64| {
+        let (&pa, longest) = pas.iter_mut().filter(|(r, _)| **r != to).max_by_key(|(_, s)| s.queue)?;
+        let share = longest.queue / SHARE_DIVISOR;
+        if share < MIN_SHARE {
+            return None;
+        }
+        longest.queue -= share;
+        let mut order = (to as u32).to_le_bytes().to_vec();
+        order.extend_from_slice(&(share as u32).to_le_bytes());
+        comm.send(pa, TAG_FORWARD_ORDER, &order);
+        *orders += 1;
+        Some(share)
+    };
     // Gives an idle PR a share of the longest PA queue, if one is worth splitting.
     let dispatch =
         |comm: &Comm<'_>, pas: &mut HashMap<i32, PaState>, pr: i32, state: &mut PrState, orders: &mut u64| {
-            let Some((&pa, longest)) = pas.iter_mut().max_by_key(|(_, s)| s.queue) else {
-                return false;
-            };
-            let share = longest.queue / SHARE_DIVISOR;
-            if share < MIN_SHARE {
+            if order_share(comm, pas, pr, orders).is_none() {
                 return false;
             }
-            longest.queue -= share;
-            let mut order = (pr as u32).to_le_bytes().to_vec();
-            order.extend_from_slice(&(share as u32).to_le_bytes());
-            comm.send(pa, TAG_FORWARD_ORDER, &order);
             state.awaiting_forward = true;
             state.waiting = false;
-            *orders += 1;
             true
         };
+    // Gives a PA that ran dry a share of another's queue (not in the paper, where only PRs
+    // help): without it, once the tiles were out, PAs whose queues emptied sat idle while the
+    // last shares were worked through elsewhere (bench/icsim.py: 7-24 ms of a 74 ms render at 16
+    // workers on the Cornell box).
+    let feed_pa = |comm: &Comm<'_>, pas: &mut HashMap<i32, PaState>, pa: i32, orders: &mut u64| {
+        let Some(share) = order_share(comm, pas, pa, orders) else {
+            return false;
+        };
+        let state = pas.get_mut(&pa).expect("a PA");
+        state.queue += share;
+        state.waiting = false;
+        true
+    };
 
     let finished = |prs: &HashMap<i32, PrState>, pas: &HashMap<i32, PaState>| {
         let sent: u64 = prs.values().map(|p| p.sent).sum();
@@ -253,10 +274,20 @@ pub fn run(
                 pa.done = counts[1];
                 pa.last_report = start.elapsed().as_secs_f64();
                 pa.samples.push((start.elapsed().as_secs_f64(), counts[0] as u32));
+                // A PA reports an empty queue when it runs dry; once every tile is out, no new
+                // requests are coming its way but forwarded ones.
+                pa.waiting = counts[0] == 0 && next_tile >= todo.len();
                 let waiting: Vec<i32> = prs.iter().filter(|(_, p)| p.waiting).map(|(&r, _)| r).collect();
                 for pr in waiting {
                     let state = prs.get_mut(&pr).expect("listed");
                     if !dispatch(comm, &mut pas, pr, state, &mut forwarded_orders) {
+                        break;
+                    }
+                }
+                let mut dry: Vec<i32> = pas.iter().filter(|(_, p)| p.waiting).map(|(&r, _)| r).collect();
+                dry.sort();
+                for pa in dry {
+                    if !feed_pa(comm, &mut pas, pa, &mut forwarded_orders) {
                         break;
                     }
                 }

@@ -82,6 +82,8 @@ fn communicate(
         (Some(0), Some(TAG_FINISH)),
         (Some(0), Some(TAG_FORWARD_ORDER)),
         (None, Some(TAG_REQUESTS)),
+        // A share of another PA's queue, when this one ran dry (see component::master).
+        (None, Some(TAG_FORWARDED)),
     ];
     loop {
         let full = queue.lock().unwrap_or_else(|e| e.into_inner()).requests.len() >= bound;
@@ -96,7 +98,7 @@ fn communicate(
         };
         match msg.tag {
             TAG_PA_STATUS_REPLY => replies.take(&msg.data),
-            TAG_REQUESTS => {
+            TAG_REQUESTS | TAG_FORWARDED => {
                 let handling = Instant::now();
                 match requests::decode(&msg.data, pixels) {
                     Ok(decoded) => {
