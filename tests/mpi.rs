@@ -89,6 +89,17 @@ fn u(v: &Value, key: &str) -> u64 {
     v[key].as_u64().unwrap_or_else(|| panic!("{key} missing in {v}"))
 }
 
+/// A statistic summed over the ranks of one role.
+fn role_total(stats: &Value, role: &str, key: &str) -> u64 {
+    stats["per_rank"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|r| r["role"] == role)
+        .map(|r| u(r, key))
+        .sum()
+}
+
 fn scenes() -> Vec<PathBuf> {
     vec![
         project_dir().join("scenes/cornell.gltf"),
@@ -419,14 +430,7 @@ fn load_balancing_resolves_a_forced_imbalance() {
     let s = &run.stats;
     assert!(u(s, "requests_forwarded") > 0, "no request was forwarded: {s}");
     assert_eq!(u(s, "requests_sent"), u(s, "requests_computed"));
-    let helped: u64 = s["per_rank"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .filter(|r| r["role"] == "pr")
-        .map(|r| u(r, "requests_computed"))
-        .sum();
-    assert_eq!(helped, u(s, "requests_forwarded"));
+    assert_eq!(role_total(s, "pr", "requests_computed"), u(s, "requests_forwarded"));
 }
 
 /// A PA that runs dry once every tile is out gets a share of another PA's queue, as an idle PR
@@ -446,10 +450,8 @@ fn a_pa_that_runs_dry_takes_a_share_of_another_pas_queue() {
         &["--mode", "component", "--pa", "2", "--tile", "48x16", "-ad", "4096"],
     );
     let s = &run.stats;
-    let ranks = s["per_rank"].as_array().unwrap();
-    let total = |role: &str, key: &str| -> u64 { ranks.iter().filter(|r| r["role"] == role).map(|r| u(r, key)).sum() };
     // Whatever the PAs forwarded and the PR did not compute went to the other PA.
-    let to_pas = total("pa", "requests_forwarded") - total("pr", "requests_computed");
+    let to_pas = role_total(s, "pa", "requests_forwarded") - role_total(s, "pr", "requests_computed");
     assert!(to_pas > 0, "no PA was given a share of another's queue: {s}");
     assert_eq!(u(s, "requests_sent"), u(s, "requests_computed"));
     assert!(rgb(&run.image, "").iter().flatten().all(|v| v.is_finite()));

@@ -120,6 +120,7 @@ pub fn run(
     // Orders the PA with the longest queue (other than `to`) to send a share of it to `to`, an
     // idle PR or a PA that ran dry, if one is worth splitting; the share's size.
     let order_share = |comm: &Comm<'_>, pas: &mut HashMap<i32, PaState>, to: i32, orders: &mut u64| {
+        let to_a_pa = pas.contains_key(&to);
         let (&pa, longest) = pas.iter_mut().filter(|(r, _)| **r != to).max_by_key(|(_, s)| s.queue)?;
         let share = longest.queue / SHARE_DIVISOR;
         if share < MIN_SHARE {
@@ -128,6 +129,9 @@ pub fn run(
         longest.queue -= share;
         let mut order = (to as u32).to_le_bytes().to_vec();
         order.extend_from_slice(&(share as u32).to_le_bytes());
+        if to_a_pa {
+            order.extend_from_slice(&FORWARD_TO_PA.to_le_bytes());
+        }
         comm.send(pa, TAG_FORWARD_ORDER, &order);
         *orders += 1;
         Some(share)

@@ -34,8 +34,10 @@ pub const TAG_PR_IDLE: Tag = 23;
 /// PA -> MC: queue length, totals, new records; the MC answers with records the PA lacks.
 pub const TAG_PA_STATUS: Tag = 24;
 pub const TAG_PA_STATUS_REPLY: Tag = 25;
-/// MC -> PA: hand this many queued requests to that PR.
+/// MC -> PA: hand this many queued requests to that PR (or PA, with FORWARD_TO_PA after them).
 pub const TAG_FORWARD_ORDER: Tag = 26;
+/// The third word of a forward order whose receiver is a PA: an empty share is not sent.
+pub const FORWARD_TO_PA: u32 = 1;
 /// PA -> PR: the forwarded requests (possibly none).
 pub const TAG_FORWARDED: Tag = 27;
 /// MC -> every worker: all requests are computed; send your image and statistics.

@@ -124,9 +124,12 @@ fn communicate(
                         .get(o..o + 4)
                         .map(|b| u32::from_le_bytes(b.try_into().expect("4 bytes")))
                 };
-                let (Some(pr), Some(count)) = (word(0), word(4)) else {
+                let (Some(to), Some(count)) = (word(0), word(4)) else {
                     continue;
                 };
+                // A PR waits for its share, empty or not; a PA that ran dry does not (see
+                // master::feed_pa), and an empty share sent to it could arrive after FINISH.
+                let to_a_pa = word(8) == Some(FORWARD_TO_PA);
                 // The newest requests go: the PA keeps working through the oldest (see
                 // RequestQueue::take_newest).
                 let share: Vec<AmbientRequest> = queue
@@ -135,7 +138,9 @@ fn communicate(
                     .requests
                     .take_newest(count as usize);
                 tallies.forwarded.fetch_add(share.len() as u64, Ordering::Relaxed);
-                comm.send(pr as i32, TAG_FORWARDED, &requests::encode(&share));
+                if !(to_a_pa && share.is_empty()) {
+                    comm.send(to as i32, TAG_FORWARDED, &requests::encode(&share));
+                }
             }
             _ => {
                 queue.lock().unwrap_or_else(|e| e.into_inner()).finish = true;
