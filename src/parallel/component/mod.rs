@@ -1,8 +1,8 @@
 //! The component-based parallel irradiance cache (Debattista, Santos & Chalmers 2006, section
 //! 5): PR ranks render everything except indirect diffuse light and send the cache misses as
 //! requests to PA ranks, which own the indirect diffuse work; the master hands out tiles,
-//! relays records, balances load by giving idle PRs a share of the longest PA queue, and sums
-//! every rank's image at the end.
+//! relays records, balances load by giving idle PRs (and PAs that ran dry, beyond the paper) a
+//! share of the longest PA queue, and sums every rank's image at the end.
 
 pub mod master;
 pub mod order;
