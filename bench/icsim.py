@@ -498,15 +498,25 @@ class Sim:
         parked = deque()
         dry = deque()  # PAs that ran dry after the last tile went out, waiting for a share
 
+        def take_share(to):
+            """An eighth of the longest PA queue other than `to`'s, if worth forwarding (src/
+            parallel/component/master.rs order_share): (that PA, its share as (pixel, entry)
+            pairs), or None."""
+            best = max((o for o in pas if o != to), key=lambda o: len(queue[o]), default=None)
+            if best is None or len(queue[best]) // SHARE_DIVISOR < MIN_SHARE:
+                return None
+            taken = queue[best].take_newest(len(queue[best]) // SHARE_DIVISOR)
+            res.forwarded += len(taken)
+            return best, taken
+
         def feed_pa(a, now):
-            """A PA that ran dry gets a share of the longest other queue (src/parallel/component/
-            master.rs feed_pa): its status to the master, the master's order, the share."""
-            best = max((o for o in pas if o != a), key=lambda o: len(queue[o]), default=None)
-            share = len(queue[best]) // SHARE_DIVISOR if best is not None else 0
-            if share < MIN_SHARE:
+            """A PA that ran dry gets a share of the longest other queue (master.rs feed_pa): its
+            status to the master, the master's order, the share."""
+            shared = take_share(a)
+            if shared is None:
                 return False
-            taken = queue[best].take_newest(share)
-            res.forwarded += share
+            best, taken = shared
+            share = len(taken)
             arrive = max(clock[a], now) + self.msg(16) + self.msg(8) + self.msg(12 + REQUEST_BYTES * share) \
                 + 1.5 * self.wake
             res.busy[best] += c.message
@@ -518,12 +528,11 @@ class Sim:
             return True
 
         def dispatch(p, now):
-            best = max(pas, key=lambda a: len(queue[a]))
-            share = len(queue[best]) // SHARE_DIVISOR
-            if share < MIN_SHARE:
+            shared = take_share(p)
+            if shared is None:
                 return False
-            taken = queue[best].take_newest(share)
-            res.forwarded += share
+            taken = shared[1]
+            share = len(taken)
             start = max(clock[p], now)
             back = start + self.msg(8) + self.msg(12 + REQUEST_BYTES * share) + self.lat + 1.5 * self.wake
             res.idle[p] += back - clock[p]

@@ -99,15 +99,11 @@ def run_serial(scene, base, ref, work, trace=None, order=common.RASTER_ORDER):
             "wall_s": wall, "messages": 0, "bytes": 0, "rmse": rmse, "relmse": relmse}
 
 
-def order_options(mode):
-    """The paper's setting: the serial run and the traditional modes compute in scanline order;
-    component mode's PAs reorder their queues (the paper's section 6 credits the reordering for
-    its fewer misses than the serial run; here, deliberately, the overture's grid first)."""
-    return [] if mode == "component" else common.RASTER_ORDER
-
-
-def sim_overture(mode):
-    """What bench/icsim.py is to model of the --overture each mode ran with (order_options)."""
+def mode_overture(mode):
+    """The --overture a mode runs with here, and bench/icsim.py models it with. The paper's
+    setting: the serial run and the traditional modes compute in scanline order (0); component
+    mode's PAs reorder their queues (the paper's section 6 credits the reordering for its fewer
+    misses than the serial run; here, deliberately, the default grid's requests first)."""
     return common.DEFAULT_OVERTURE if mode == "component" else 0
 
 
@@ -117,7 +113,7 @@ def run_mpi(scene, mode, np, base, ref, work, timeout):
         if os.path.exists(p):
             os.remove(p)
     cmd = ["mpirun", "--oversubscribe", "-np", str(np), common.BINARY, "render", scene, "-o", out, "--mode", mode,
-           "-q", "--no-preview", "--overwrite", "--stats", stats_path] + base + order_options(mode)
+           "-q", "--no-preview", "--overwrite", "--stats", stats_path] + base + ["--overture", str(mode_overture(mode))]
     start = time.perf_counter()
     result = subprocess.run(cmd, capture_output=True, text=True, env=MPI_ENV, timeout=timeout)
     wall = time.perf_counter() - start
@@ -505,7 +501,7 @@ def main():
         for r in mine:
             costs, how = validation_costs(r, mine, st["serial"], w * h)
             res = icsim.simulate(trace, r["mode"], r["workers"], costs, network="loopback", tile=(tw, th),
-                                 wake=max(wake, 1e-6), cores=os.cpu_count(), overture=sim_overture(r["mode"]))
+                                 wake=max(wake, 1e-6), cores=os.cpu_count(), overture=mode_overture(r["mode"]))
             say(f"{name:>10} {r['mode']:<12} {r['processes']} proc: {costs} from {how}")
             sim_rows.append({"scene": name, "mode": r["mode"], "processes": r["processes"], "workers": r["workers"],
                              "costs_from": how,
@@ -599,7 +595,7 @@ def _load_trace(path, width, height, accuracy, tile):
 def _predict_one(task):
     _, mode, p, costs, wake, network = task
     res = icsim.simulate(_TRACE["trace"], mode, p, costs, network=network, tile=_TRACE["tile"], wake=wake,
-                         overture=sim_overture(mode))
+                         overture=mode_overture(mode))
     return {"misses": res.misses, "aggregated": res.aggregated, "makespan": res.makespan,
             "idle_fraction": res.idle_fraction, "messages": res.messages, "bytes": res.bytes}
 

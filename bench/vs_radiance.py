@@ -305,7 +305,7 @@ def equal_error(args, icrender, scene_args, out_dir, ref, ref_px, rpict_base, oc
             # Same seed, same image: repeats differ in time only; the fastest is kept (the machine
             # is shared, and slowed down runs say nothing about either renderer).
             tries = [icrender_run(args, icrender, scene_args, options, out_dir, ref, threads, pin=pinned,
-                                  tag_suffix=f"_ad{ad}" + (f"_ls{ls}" if ls else "")) for _ in range(args.repeat)]
+                                  tag_suffix=f"_ad{ad}" + (f"_ls{ls}" if ls else "")) for _ in range(max(args.repeat, 1))]
             r = dict(tries[-1], cpu=min(t["cpu"] for t in tries), wall=min(t["wall"] for t in tries))
             r["relmse4"] = block_relmse(pixels(r["exr"], w, h, bin_dir, rad_env, out_dir), ref_px, w, h)
             r["ad"], r["as"], r["ls"], r["cores"] = ad, as_, ls or "", "one" if threads == 1 else "all"
@@ -314,7 +314,7 @@ def equal_error(args, icrender, scene_args, out_dir, ref, ref_px, rpict_base, oc
         ambient = ["-ab", args.ab, "-aa", args.aa, "-ad", ad, "-as", as_, "-ar", args.ar]
         hdr, exr = out_dir / f"rpict_ad{ad}.hdr", out_dir / f"rpict_ad{ad}.exr"
         times = []
-        for _ in range(args.repeat):  # -pj 0: every repeat makes the same picture
+        for _ in range(max(args.repeat, 1)):  # -pj 0: every repeat makes the same picture
             with open(hdr, "wb") as f:
                 _, wall, cpu = run(rpict_base + [*ambient, *shlex.split(args.rpict_args), octree], env=rad_env,
                                    stdout=f)
@@ -394,10 +394,11 @@ def main():
     parser.add_argument("--out", help="output folder (default target/vs_radiance/<scene>_<x>x<y>)")
     parser.add_argument("--no-build", action="store_true", help="use target/release/icrender as it is")
     parser.add_argument("--repeat", type=int, default=1,
-                        help="with --equal-error: run every setting this many times, keeping the fastest")
+                        help="with --equal-error: run every setting this many times (at least once), keeping "
+                             "the fastest")
     parser.add_argument("--equal-error", action="store_true",
-                        help="also run both renderers on one core at -ad halved three times (-as alike) and "
-                             "compare the time each needs for the same error")
+                        help="also run both renderers at -ad halved three times (-as alike), icrender on one "
+                             "core and on every core, and compare the time each needs for the same error")
     args = parser.parse_args()
 
     scene = Path(args.scene)

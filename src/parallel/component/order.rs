@@ -32,8 +32,9 @@ impl RequestQueue {
         }
     }
 
-    /// Whether the pixel is one of the grid's: the centre of its stride x stride block, as the
-    /// serial overture picks them.
+    /// Whether the pixel is one of the grid's: the centre of its stride x stride block of the
+    /// image (the serial overture counts its blocks from each tile's corner instead; a PA's
+    /// queue mixes tiles, so here the image's own grid).
     fn on_grid(&self, pixel: u32) -> bool {
         if self.stride <= 1 {
             return false;
@@ -66,9 +67,9 @@ impl RequestQueue {
         self.grid.pop_front().or_else(|| self.rest.pop_front())
     }
 
-    /// Up to `count` requests for a helping PR: the newest, and of those the off-grid ones
-    /// first, so that the PA keeps making the grid's records (which the helper's cache, fresh
-    /// from the master, then answers the others from).
+    /// Up to `count` requests for a helper (an idle PR or a PA that ran dry): the newest, and of
+    /// those the off-grid ones first, so that the PA keeps making the grid's records (which the
+    /// helper's cache, fresh from the master, then answers the others from).
     pub fn take_newest(&mut self, count: usize) -> Vec<AmbientRequest> {
         let from_rest = count.min(self.rest.len());
         let mut taken: Vec<AmbientRequest> = self.rest.split_off(self.rest.len() - from_rest).into();
