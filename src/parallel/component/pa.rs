@@ -65,6 +65,10 @@ impl Replies<'_> {
 /// cache, until FINISH.
 /// While the queue holds `bound` requests or more, no request batch is taken in: the PRs'
 /// synchronous sends then wait (back-pressure), so the queue stays below `bound` plus one batch.
+/// A share goes out on a thread of its own, so that this thread never waits in a send: a share
+/// too large to go eagerly waits until its receiver takes it, and two PAs ordered to feed each
+/// other (each ran dry in turn) each waited in its send for the other, which was not receiving
+/// (seen once in the paper bench: conference room, 4 workers, the job hung).
 fn communicate(
     counters: &Counters,
     queue: &Mutex<Queue>,
@@ -85,70 +89,76 @@ fn communicate(
         // A share of another PA's queue, when this one ran dry (see component::master).
         (None, Some(TAG_FORWARDED)),
     ];
-    loop {
-        let full = queue.lock().unwrap_or_else(|e| e.into_inner()).requests.len() >= bound;
-        // Full: only the master's messages, looking again at the queue every few milliseconds.
-        let (accepted, wait) = if full {
-            (&filters[..3], Some(Duration::from_millis(2)))
-        } else {
-            (&filters[..], None)
-        };
-        let Some(msg) = comm.receive_one_of(accepted, wait) else {
-            continue;
-        };
-        match msg.tag {
-            TAG_PA_STATUS_REPLY => replies.take(&msg.data),
-            TAG_REQUESTS | TAG_FORWARDED => {
-                let handling = Instant::now();
-                match requests::decode(&msg.data, pixels) {
-                    Ok(decoded) => {
-                        tallies.rejected.fetch_add(decoded.rejected as u64, Ordering::Relaxed);
-                        // Refused requests still count as done, so the master's totals close.
-                        let mut q = queue.lock().unwrap_or_else(|e| e.into_inner());
-                        q.requests.extend(decoded.requests);
-                        q.longest = q.longest.max(q.requests.len());
-                        drop(q);
-                        ready.notify_one();
-                        tallies
-                            .handling_ns
-                            .fetch_add(handling.elapsed().as_nanos() as u64, Ordering::Relaxed);
-                    }
-                    Err(_) => {
-                        tallies.rejected.fetch_add(1, Ordering::Relaxed);
+    std::thread::scope(|senders| {
+        loop {
+            let full = queue.lock().unwrap_or_else(|e| e.into_inner()).requests.len() >= bound;
+            // Full: only the master's messages, looking again at the queue every few milliseconds.
+            let (accepted, wait) = if full {
+                (&filters[..3], Some(Duration::from_millis(2)))
+            } else {
+                (&filters[..], None)
+            };
+            let Some(msg) = comm.receive_one_of(accepted, wait) else {
+                continue;
+            };
+            match msg.tag {
+                TAG_PA_STATUS_REPLY => replies.take(&msg.data),
+                TAG_REQUESTS | TAG_FORWARDED => {
+                    let handling = Instant::now();
+                    match requests::decode(&msg.data, pixels) {
+                        Ok(decoded) => {
+                            tallies.rejected.fetch_add(decoded.rejected as u64, Ordering::Relaxed);
+                            // Refused requests still count as done, so the master's totals close.
+                            let mut q = queue.lock().unwrap_or_else(|e| e.into_inner());
+                            q.requests.extend(decoded.requests);
+                            q.longest = q.longest.max(q.requests.len());
+                            drop(q);
+                            ready.notify_one();
+                            tallies
+                                .handling_ns
+                                .fetch_add(handling.elapsed().as_nanos() as u64, Ordering::Relaxed);
+                        }
+                        Err(_) => {
+                            tallies.rejected.fetch_add(1, Ordering::Relaxed);
+                        }
                     }
                 }
-            }
-            TAG_FORWARD_ORDER => {
-                let word = |o: usize| {
-                    msg.data
-                        .get(o..o + 4)
-                        .map(|b| u32::from_le_bytes(b.try_into().expect("4 bytes")))
-                };
-                let (Some(to), Some(count)) = (word(0), word(4)) else {
-                    continue;
-                };
-                // A PR waits for its share, empty or not; a PA that ran dry does not (see
-                // master::feed_pa), and an empty share sent to it could arrive after FINISH.
-                let to_a_pa = word(8) == Some(FORWARD_TO_PA);
-                // The newest requests go: the PA keeps working through the oldest (see
-                // RequestQueue::take_newest).
-                let share: Vec<AmbientRequest> = queue
-                    .lock()
-                    .unwrap_or_else(|e| e.into_inner())
-                    .requests
-                    .take_newest(count as usize);
-                tallies.forwarded.fetch_add(share.len() as u64, Ordering::Relaxed);
-                if !(to_a_pa && share.is_empty()) {
-                    comm.send(to as i32, TAG_FORWARDED, &requests::encode(&share));
+                TAG_FORWARD_ORDER => {
+                    let word = |o: usize| {
+                        msg.data
+                            .get(o..o + 4)
+                            .map(|b| u32::from_le_bytes(b.try_into().expect("4 bytes")))
+                    };
+                    let (Some(to), Some(count)) = (word(0), word(4)) else {
+                        continue;
+                    };
+                    // A PR waits for its share, empty or not; a PA that ran dry does not (see
+                    // master::feed_pa), and an empty share sent to it could arrive after FINISH.
+                    let to_a_pa = word(8) == Some(FORWARD_TO_PA);
+                    // The newest requests go: the PA keeps working through the oldest (see
+                    // RequestQueue::take_newest).
+                    let share: Vec<AmbientRequest> = queue
+                        .lock()
+                        .unwrap_or_else(|e| e.into_inner())
+                        .requests
+                        .take_newest(count as usize);
+                    tallies.forwarded.fetch_add(share.len() as u64, Ordering::Relaxed);
+                    if !(to_a_pa && share.is_empty()) {
+                        // Every share is received before the job ends (a PR waits for its own, and
+                        // a PA's are requests the master waits to see computed), so the scope's
+                        // end, after FINISH, never waits on one.
+                        let data = requests::encode(&share);
+                        senders.spawn(move || Comm::new(counters).send(to as i32, TAG_FORWARDED, &data));
+                    }
                 }
-            }
-            _ => {
-                queue.lock().unwrap_or_else(|e| e.into_inner()).finish = true;
-                ready.notify_all();
-                break;
+                _ => {
+                    queue.lock().unwrap_or_else(|e| e.into_inner()).finish = true;
+                    ready.notify_all();
+                    break;
+                }
             }
         }
-    }
+    });
 }
 
 /// `journal`: --checkpoint is on, so computed requests are reported to the master.
