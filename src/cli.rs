@@ -132,7 +132,8 @@ pub struct RenderArgs {
     /// Ranks that act as PAs in component mode (default: half the workers).
     #[arg(long = "pa")]
     pub pa: Option<u32>,
-    /// Seconds the master controller waits for any message before it gives up on the job.
+    /// Seconds the master controller waits for any message, or for a rank to take one of its
+    /// messages, before it gives up on the job.
     #[arg(long = "timeout", default_value_t = 600.0)]
     pub timeout: f64,
     /// Add a debug layer `ic_records` counting the records each pixel made.

@@ -7,6 +7,7 @@ use mpi::Tag;
 use mpi::point_to_point::{Destination, MatchedReceiveVec, Source};
 use mpi::request::{Request, StaticScope};
 use mpi::topology::{Communicator, SimpleCommunicator};
+use std::convert::Infallible;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
@@ -75,6 +76,34 @@ impl<'c> Comm<'c> {
 
     pub fn send(&self, dest: i32, tag: Tag, data: &[u8]) {
         self.world.process_at_rank(dest).send_with_tag(data, tag);
+        self.counters.messages_sent.fetch_add(1, Ordering::Relaxed);
+        self.counters.bytes_sent.fetch_add(data.len() as u64, Ordering::Relaxed);
+    }
+
+    /// Sends like `send`, but waits at most `limit` for the message to leave: one too large to
+    /// go eagerly waits until its receiver takes it, and a receiver whose host is gone never
+    /// does. Past the limit `stalled` is called, which ends the job (it cannot return): the send is still in
+    /// flight and MPI owns `data` until it completes (leaving this call would free it).
+    pub fn send_within(&self, dest: i32, tag: Tag, data: &[u8], limit: Duration, stalled: impl FnOnce() -> Infallible) {
+        mpi::request::scope(|scope| {
+            let mut request = self
+                .world
+                .process_at_rank(dest)
+                .immediate_send_with_tag(scope, data, tag);
+            let start = Instant::now();
+            let mut pause = Duration::from_micros(5);
+            loop {
+                match request.test() {
+                    Ok(_) => break,
+                    Err(pending) => request = pending,
+                }
+                if start.elapsed() >= limit {
+                    match stalled() {}
+                }
+                std::thread::sleep(pause);
+                pause = (pause * 2).min(self.max_pause);
+            }
+        });
         self.counters.messages_sent.fetch_add(1, Ordering::Relaxed);
         self.counters.bytes_sent.fetch_add(data.len() as u64, Ordering::Relaxed);
     }

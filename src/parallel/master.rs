@@ -4,6 +4,7 @@
 
 use super::Mode;
 use super::comm::{Comm, Counters};
+use super::master_sends::MasterSends;
 use super::protocol::*;
 use crate::checkpoint::{Checkpoint, Restored};
 use crate::image::framebuffer::FrameBuffer;
@@ -53,6 +54,12 @@ pub fn run(comm: &Comm<'_>, plan: &Plan<'_>) -> Result<MasterResult, MasterError
         resume,
     } = *plan;
     let start = Instant::now();
+    let sends = MasterSends {
+        comm,
+        limit: timeout,
+        hosts,
+        cache,
+    };
     let size = comm.size() as usize;
     let workers = size - 1;
     let (mut frame, mut tiles_done, todo) = match resume {
@@ -68,7 +75,7 @@ pub fn run(comm: &Comm<'_>, plan: &Plan<'_>) -> Result<MasterResult, MasterError
     let initial: Vec<Record> = cache.map_or_else(Vec::new, |c| c.records());
     let initial_batch = encode_batch(&initial, 0);
     for w in 1..size {
-        comm.send(w as i32, TAG_INITIAL_RECORDS, &initial_batch);
+        sends.send(w as i32, TAG_INITIAL_RECORDS, &initial_batch);
     }
 
     let mut next_tile = 0usize;
@@ -133,7 +140,7 @@ pub fn run(comm: &Comm<'_>, plan: &Plan<'_>) -> Result<MasterResult, MasterError
                 } else {
                     finished_requesters += 1;
                 }
-                comm.send(msg.source, TAG_WORK_BASE + thread as i32, &encode_work(assignment));
+                sends.send(msg.source, TAG_WORK_BASE + thread as i32, &encode_work(assignment));
             }
             TAG_RECORDS_UP => {
                 let thread = msg
@@ -153,7 +160,7 @@ pub fn run(comm: &Comm<'_>, plan: &Plan<'_>) -> Result<MasterResult, MasterError
                     .map(|(_, r)| r.clone())
                     .collect();
                 seen[source] = store.len();
-                comm.send(
+                sends.send(
                     msg.source,
                     TAG_RECORDS_DOWN_BASE + thread as i32,
                     &encode_batch(&missing, 0),

@@ -7,6 +7,7 @@ pub mod comm;
 pub mod component;
 pub mod link_bench;
 pub mod master;
+pub mod master_sends;
 pub mod protocol;
 pub mod worker;
 
@@ -303,14 +304,7 @@ pub fn run(args: &RenderArgs, mode: Mode) -> CommandResult {
     let result = master::run(&comm, &plan);
     let result = match result {
         Ok(r) => r,
-        Err(e) => {
-            // Keep what the file already has, then stop every rank.
-            if let Some(cache) = &job.cache {
-                let _ = cache.finish();
-            }
-            crate::commands::error(&e.0);
-            comm.abort(1);
-        }
+        Err(e) => end_job(&comm, job.cache.as_ref(), &e.0),
     };
     finish_master(
         args,
@@ -437,13 +431,7 @@ fn run_component(
     );
     let result = match result {
         Ok(r) => r,
-        Err(e) => {
-            if let Some(cache) = &job.cache {
-                let _ = cache.finish();
-            }
-            crate::commands::error(&e.to_string());
-            comm.abort(1);
-        }
+        Err(e) => end_job(comm, job.cache.as_ref(), &e),
     };
     finish_master(
         args,
@@ -460,6 +448,16 @@ fn run_component(
     )?;
     drop(universe);
     Ok(())
+}
+
+/// The master's end of a failed job: keeps what the cache file already has, says why, and
+/// stops every rank.
+pub(crate) fn end_job(comm: &Comm<'_>, cache: Option<&IrradianceCache>, message: &str) -> ! {
+    if let Some(cache) = cache {
+        let _ = cache.finish();
+    }
+    crate::commands::error(message);
+    comm.abort(1)
 }
 
 /// Says why this rank cannot go on and ends every rank of the job.

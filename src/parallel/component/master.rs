@@ -15,6 +15,7 @@ use crate::checkpoint::{Checkpoint, Restored, decode_results};
 use crate::image::framebuffer::FrameBuffer;
 use crate::irradiance::IrradianceCache;
 use crate::parallel::comm::Comm;
+use crate::parallel::master_sends::MasterSends;
 use crate::parallel::protocol::{TAG_STATS, encode_work};
 use crate::render::Tile;
 use crate::stats::RankReport;
@@ -70,6 +71,12 @@ pub fn run(
 ) -> Result<ComponentResult, String> {
     let host = |rank: i32| hosts.get(rank as usize).map_or("?", String::as_str).to_string();
     let start = Instant::now();
+    let sends = MasterSends {
+        comm,
+        limit: timeout,
+        hosts,
+        cache,
+    };
     let size = comm.size() as usize;
     // Tiles an earlier run finished (--checkpoint) are not handed out again.
     let todo: Vec<usize> = match resume {
@@ -98,7 +105,7 @@ pub fn run(
     // PAs start from the cache file's records; PRs get them with their first tile.
     let initial = encode_batch(&store.iter().map(|(_, r)| r.clone()).collect::<Vec<_>>(), 0);
     for &pa in &roles.pas {
-        comm.send(pa, crate::parallel::protocol::TAG_INITIAL_RECORDS, &initial);
+        sends.send(pa, crate::parallel::protocol::TAG_INITIAL_RECORDS, &initial);
         seen[pa as usize] = store.len();
     }
 
@@ -119,7 +126,7 @@ pub fn run(
     };
     // Orders the PA with the longest queue (other than `to`) to send a share of it to `to`, an
     // idle PR or a PA that ran dry, if one is worth splitting; the share's size.
-    let order_share = |comm: &Comm<'_>, pas: &mut HashMap<i32, PaState>, to: i32, orders: &mut u64| {
+    let order_share = |sends: &MasterSends<'_, '_>, pas: &mut HashMap<i32, PaState>, to: i32, orders: &mut u64| {
         let to_a_pa = pas.contains_key(&to);
         let (&pa, longest) = pas.iter_mut().filter(|(r, _)| **r != to).max_by_key(|(_, s)| s.queue)?;
         let share = longest.queue / SHARE_DIVISOR;
@@ -132,26 +139,29 @@ pub fn run(
         if to_a_pa {
             order.extend_from_slice(&FORWARD_TO_PA.to_le_bytes());
         }
-        comm.send(pa, TAG_FORWARD_ORDER, &order);
+        sends.send(pa, TAG_FORWARD_ORDER, &order);
         *orders += 1;
         Some(share)
     };
     // Gives an idle PR a share of the longest PA queue, if one is worth splitting.
-    let dispatch =
-        |comm: &Comm<'_>, pas: &mut HashMap<i32, PaState>, pr: i32, state: &mut PrState, orders: &mut u64| {
-            if order_share(comm, pas, pr, orders).is_none() {
-                return false;
-            }
-            state.awaiting_forward = true;
-            state.waiting = false;
-            true
-        };
+    let dispatch = |sends: &MasterSends<'_, '_>,
+                    pas: &mut HashMap<i32, PaState>,
+                    pr: i32,
+                    state: &mut PrState,
+                    orders: &mut u64| {
+        if order_share(sends, pas, pr, orders).is_none() {
+            return false;
+        }
+        state.awaiting_forward = true;
+        state.waiting = false;
+        true
+    };
     // Gives a PA that ran dry a share of another's queue (not in the paper, where only PRs
     // help): without it, once the tiles were out, PAs whose queues emptied sat idle while the
     // last shares were worked through elsewhere (bench/icsim.py: 7-24 ms of a 74 ms render at 16
     // workers on the Cornell box).
-    let feed_pa = |comm: &Comm<'_>, pas: &mut HashMap<i32, PaState>, pa: i32, orders: &mut u64| {
-        let Some(share) = order_share(comm, pas, pa, orders) else {
+    let feed_pa = |sends: &MasterSends<'_, '_>, pas: &mut HashMap<i32, PaState>, pa: i32, orders: &mut u64| {
+        let Some(share) = order_share(sends, pas, pa, orders) else {
             return false;
         };
         let state = pas.get_mut(&pa).expect("a PA");
@@ -234,7 +244,7 @@ pub fn run(
                 let mut reply = (work.len() as u32).to_le_bytes().to_vec();
                 reply.extend(work);
                 reply.extend(catch_up(&store, &mut seen, source as usize));
-                comm.send(source, TAG_PR_WORK, &reply);
+                sends.send(source, TAG_PR_WORK, &reply);
             }
             TAG_PR_IDLE => {
                 let (counts, batch) =
@@ -250,7 +260,7 @@ pub fn run(
                 state.sent = counts[0];
                 state.helped = counts[1];
                 state.awaiting_forward = false;
-                if !dispatch(comm, &mut pas, source, state, &mut forwarded_orders) {
+                if !dispatch(&sends, &mut pas, source, state, &mut forwarded_orders) {
                     state.waiting = true;
                 }
             }
@@ -261,7 +271,7 @@ pub fn run(
                 records_rejected += batch.rejected as u64;
                 persist(&batch.records);
                 store.extend(batch.records.into_iter().map(|r| (source as usize, r)));
-                comm.send(source, TAG_PR_CATCH_UP, &catch_up(&store, &mut seen, source as usize));
+                sends.send(source, TAG_PR_CATCH_UP, &catch_up(&store, &mut seen, source as usize));
             }
             TAG_PA_STATUS => {
                 let (counts, batch) = decode_counts_and_records(&msg.data, 2).map_err(|e| malformed("status", e))?;
@@ -270,7 +280,7 @@ pub fn run(
                 persist(&batch.records);
                 store.extend(batch.records.into_iter().map(|r| (source as usize, r)));
                 let reply = catch_up(&store, &mut seen, source as usize);
-                comm.send(source, TAG_PA_STATUS_REPLY, &reply);
+                sends.send(source, TAG_PA_STATUS_REPLY, &reply);
                 let pa = pas
                     .get_mut(&source)
                     .ok_or_else(|| format!("rank {source} is not a PA but reported as one"))?;
@@ -284,14 +294,14 @@ pub fn run(
                 let waiting: Vec<i32> = prs.iter().filter(|(_, p)| p.waiting).map(|(&r, _)| r).collect();
                 for pr in waiting {
                     let state = prs.get_mut(&pr).expect("listed");
-                    if !dispatch(comm, &mut pas, pr, state, &mut forwarded_orders) {
+                    if !dispatch(&sends, &mut pas, pr, state, &mut forwarded_orders) {
                         break;
                     }
                 }
                 let mut dry: Vec<i32> = pas.iter().filter(|(_, p)| p.waiting).map(|(&r, _)| r).collect();
                 dry.sort();
                 for pa in dry {
-                    if !feed_pa(comm, &mut pas, pa, &mut forwarded_orders) {
+                    if !feed_pa(&sends, &mut pas, pa, &mut forwarded_orders) {
                         break;
                     }
                 }
@@ -307,7 +317,7 @@ pub fn run(
     // Everything is computed: collect the images and statistics. A PA may still send a status
     // (its last sync) after FINISH; it gets its answer so it can stop.
     for rank in 1..size as i32 {
-        comm.send(rank, TAG_FINISH, &[]);
+        sends.send(rank, TAG_FINISH, &[]);
     }
     let mut frame = match resume {
         Some((_, restored)) => restored.frame.clone(),
@@ -349,7 +359,7 @@ pub fn run(
             TAG_PA_STATUS => {
                 let (_, batch) = decode_counts_and_records(&msg.data, 2).map_err(|e| e.0)?;
                 persist(&batch.records);
-                comm.send(msg.source, TAG_PA_STATUS_REPLY, &encode_batch(&[], 0));
+                sends.send(msg.source, TAG_PA_STATUS_REPLY, &encode_batch(&[], 0));
             }
             other => {
                 return Err(format!(
