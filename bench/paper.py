@@ -200,6 +200,12 @@ def radiance(scene_name, scene, size, ambient, view, ref, ranks, work):
            *shlex.split(view), *amb_opts, "-af", amb, octree]
     wall, cpu = timed(cmd, hdr, env)
     finish("rpict", 1, hdr, amb, wall, cpu)
+    # The same without indirect light (-ab 0): what rpict spends on everything else, which splits
+    # its time into a cost per pixel and a cost per record (the prediction's `1gbit-rpict`).
+    hdr0 = os.path.join(work, "rpict-ab0.hdr")
+    cmd0 = [os.path.join(bin_dir, "rpict"), "-x", str(w), "-y", str(h), "-pa", "0", "-ps", "1", "-pj", "0",
+            *shlex.split(view), "-ab", "0", octree]
+    _, rows[-1]["cpu_ab0_s"] = timed(cmd0, hdr0, env)
     # rtrace -n N: Radiance's own multi-process rendering, sharing one ambient file.
     vw = [os.path.join(bin_dir, "vwrays"), "-ff", "-x", str(w), "-y", str(h), "-pa", "0", "-pj", "0",
           *shlex.split(view)]
@@ -242,6 +248,15 @@ def sim_costs(serial, pixels, component=None):
         extra = component["aggregated_s"] - component["misses"] * record - pixels * pixel
         request = max(extra, 0.0) / component["requests_sent"]
     return icsim.Costs(record=record, pixel=pixel, message=20e-6, request_pr=request / 2, request_pa=request / 2)
+
+
+def rpict_costs(row, pixels):
+    """rpict's CPU seconds per record and per pixel on this machine, from its run with indirect
+    light (-ab 1, records counted in its ambient file) and without (-ab 0): per pixel the
+    latter over the pixels, per record the difference over the records. None when unknown."""
+    if not row.get("records") or row.get("cpu_ab0_s") is None or row["cpu_s"] <= row["cpu_ab0_s"]:
+        return None
+    return (row["cpu_s"] - row["cpu_ab0_s"]) / row["records"], row["cpu_ab0_s"] / pixels
 
 
 def mode_costs(runs, processes, pixels, serial):
@@ -490,6 +505,7 @@ def main():
             rows, rad_version = radiance(name, path, rsize, ambient, view, rref, counts, rdir)
             for r in rows:
                 r.update(width=rsize[0], height=rsize[1])
+            setups[name]["rpict_costs"] = rpict_costs(rows[0], rsize[0] * rsize[1])
             rad_rows += rows
             setups[name]["radiance_icrender"] = icr
             setups[name]["radiance_size"] = rsize
@@ -611,13 +627,26 @@ def main():
                            request_pa=1e-6)
         scenarios = {"1gbit": (costs, wake, "1gbit"), "100gbit": (costs, wake, "100gbit"),
                      "1gbit-lean": (lean, 1e-6, "1gbit")}
+        # What if every record and pixel cost what rpict's cost here (the paper's renderer was
+        # Radiance), communication staying as measured: the paper's balance of work to messages.
+        if st.get("rpict_costs"):
+            record, pixel = st["rpict_costs"]
+            scenarios["1gbit-rpict"] = (icsim.Costs(record=record, pixel=pixel, message=costs.message,
+                                                    request_pr=costs.request_pr, request_pa=costs.request_pa),
+                                        wake, "1gbit")
+            say(f"{name}: rpict's costs here: record {record * 1e3:.3f} ms, pixel {pixel * 1e6:.2f} us")
         tasks = [(net, mode, p, c, wake, network) for net, (c, wake, network) in scenarios.items() for p in predict
                  for mode in MODES if not (mode == "component" and p < 2)]
         # The simulations are independent and deterministic: one process per core.
         with multiprocessing.Pool(os.cpu_count() or 1, initializer=_load_trace,
                                   initargs=(ptrace_path, pw, ph, st["aa"], (tw, th))) as pool:
             results = pool.map(_predict_one, tasks)
+        # Each scenario's speed-up is against the serial run at its own costs.
+        serial_by = {net: serial_res if c is costs else
+                     icsim.simulate(ptrace, "serial", 1, c, network=network, tile=(tw, th))
+                     for net, (c, _, network) in scenarios.items()}
         for (net, mode, p, _, _, _), res in zip(tasks, results):
+            serial_res = serial_by[net]
             pred_rows.append({"scene": name, "network": net, "mode": mode, "workers": p,
                               "width": pw, "height": ph, "misses": res["misses"],
                               "serial_misses": serial_res.misses,
