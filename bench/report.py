@@ -88,7 +88,10 @@ def render(*, command, elapsed, runs, gains, rad_rows, sim_rows, cluster_rows, c
     ]))
     L.append("\nThe cores are shared with other work and every mpirun runs more ranks than cores "
              "(`--oversubscribe`), so wall-clock times are unreliable here. Aggregated time is CPU time: "
-             "T_amb + T_notamb summed over the worker ranks (the master controller excluded) from `--stats`. "
+             "T_amb + T_notamb summed over the worker ranks (the master controller excluded) from `--stats`, "
+             "of the fastest of a configuration's repeats (interference from other work on shared cores only "
+             "ever adds CPU time, so the fastest run is the closest to processors of one's own, which is what "
+             "the prediction is for; Python's timeit takes the same rule); its median and slowest are beside it. "
              "The **work speed-up** is P x T_serial / aggregated time (P = workers, the paper's processors): what "
              "P dedicated processors would reach with no idle time; efficiency = T_serial / aggregated time. "
              "Wall-clock speed-ups (render time) are plotted dotted for completeness. Idle time is the ranks' own "
@@ -108,9 +111,9 @@ def render(*, command, elapsed, runs, gains, rad_rows, sim_rows, cluster_rows, c
     L.append(table(["scene", "file", "size", "options", "reference (`icrender reference`, brute force, "
                     "pixel centres)"], rows))
     L.append(f"\nProcess counts {', '.join(map(str, ranks))} (the master controller is one of them, as the paper's "
-             f"additional node; workers = processes - 1); every MPI configuration ran {repeat} time(s) (median of each figure), the repeats spread over "
+             f"additional node; workers = processes - 1); every MPI configuration ran {repeat} time(s) (CPU times from the fastest, every other figure the median), the repeats spread over "
              f"the measurement round after round rather than back to back (this machine's speed drifts); "
-             "the serial run 3 times (median times). Component mode: half the workers are PAs, PAs sync every "
+             "the serial run as often (at least 3 times). Component mode: half the workers are PAs, PAs sync every "
              "8 records, PRs send requests by 32; centralised and broadcast sync every 50 records (the paper's "
              "settings, the renderer's defaults). `--threads 1` everywhere. Order of computation as in the paper: "
              "the serial run and the traditional modes in scanline order (`--overture 0`); component mode at the "
@@ -124,12 +127,12 @@ def render(*, command, elapsed, runs, gains, rad_rows, sim_rows, cluster_rows, c
         rows = []
         for r in [r for r in runs if r["scene"] == name]:
             rows.append([r["mode"], r["processes"], r["workers"], f(r["misses"], "{:.0f}"), f(r["aggregated_s"]),
-                         f(r.get("aggregated_s_min")) + "-" + f(r.get("aggregated_s_max")),
+                         f(r.get("aggregated_s_median")) + " / " + f(r.get("aggregated_s_max")),
                          f(r["work_speedup"], "{:.2f}"), f(r["efficiency_pct"], "{:.1f}"),
                          f(r["wall_speedup"], "{:.2f}"), f(r["idle_pct"], "{:.1f}"), f(r["relmse"], "{:.3e}"),
                          f(r["messages"], "{:.0f}"), f(r["bytes"] / 1e6, "{:.2f}")])
         L.append(f"### {name}\n")
-        L.append(table(["mode", "processes", "workers", "misses", "aggregated CPU s", "range", "work speed-up",
+        L.append(table(["mode", "processes", "workers", "misses", "aggregated CPU s (fastest)", "median / slowest", "work speed-up",
                         "efficiency %", "wall speed-up", "idle %", "relMSE vs reference", "messages", "MB sent"],
                        rows))
         d = setups[name].get("serial_default")
@@ -332,7 +335,7 @@ def render(*, command, elapsed, runs, gains, rad_rows, sim_rows, cluster_rows, c
             L.append(paper_checks(pred_rows, scenes, "1gbit-rpict"))
     L.append("\n## Files\n")
     L.append("CSVs (also in `bench/out/paper/` with the traces and references): `results/runs.csv` (every measured "
-             "configuration), `results/gains.csv`, `results/radiance.csv`, `results/validation.csv`, "
+             "configuration), `results/runs-all.csv` (every run of every configuration), `results/gains.csv`, `results/radiance.csv`, `results/validation.csv`, "
              "`results/cluster-validation.csv` (when the test bed's CSV exists), `results/prediction.csv`.\n")
     return "\n".join(L) + "\n"
 
