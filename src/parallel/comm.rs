@@ -82,8 +82,8 @@ impl<'c> Comm<'c> {
 
     /// Sends like `send`, but waits at most `limit` for the message to leave: one too large to
     /// go eagerly waits until its receiver takes it, and a receiver whose host is gone never
-    /// does. Past the limit `stalled` is called, which ends the job (it cannot return): the send is still in
-    /// flight and MPI owns `data` until it completes (leaving this call would free it).
+    /// does. Past the limit `stalled` is called, which ends the job (it cannot return): the
+    /// send is still in flight and MPI owns `data` until it completes.
     pub fn send_within(&self, dest: i32, tag: Tag, data: &[u8], limit: Duration, stalled: impl FnOnce() -> Infallible) {
         mpi::request::scope(|scope| {
             let mut request = self
