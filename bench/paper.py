@@ -249,18 +249,11 @@ def timed(cmd, out_path, env, stdin=None):
 
 # -- simulation ----------------------------------------------------------------------------
 
-def sim_costs(serial, pixels, component=None):
-    """Per-record and per-pixel costs measured from the scene's serial runs (CPU seconds); the
-    cost of a component-mode request (made, sent, received, handled: split evenly between the PR
-    and the rank that computes it) from a real component-mode run's aggregated time beyond its
-    records and pixels, when one is given (the calibration run)."""
+def sim_costs(serial, pixels):
+    """Per-record and per-pixel costs measured from the scene's serial runs (CPU seconds)."""
     record = serial["t_amb_s"] / max(serial["misses"], 1)
     pixel = serial["t_notamb_s"] / pixels
-    request = 0.0
-    if component and component.get("requests_sent"):
-        extra = component["aggregated_s"] - component["misses"] * record - pixels * pixel
-        request = max(extra, 0.0) / component["requests_sent"]
-    return icsim.Costs(record=record, pixel=pixel, message=20e-6, request_pr=request / 2, request_pa=request / 2)
+    return icsim.Costs(record=record, pixel=pixel, message=20e-6)
 
 
 def rpict_costs(row, pixels):

@@ -5,7 +5,7 @@
 
 use mpi::Tag;
 use mpi::point_to_point::{Destination, MatchedReceiveVec, Source};
-use mpi::request::{Request, StaticScope};
+use mpi::request::{Request, Scope, StaticScope};
 use mpi::topology::{Communicator, SimpleCommunicator};
 use std::convert::Infallible;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -18,6 +18,18 @@ const MAX_PAUSE: Duration = Duration::from_micros(500);
 /// added ~0.25 ms to each, about half of a PR's time on a 16x16 tile. The master renders
 /// nothing, so polling more often costs only its own processor.
 const MASTER_MAX_PAUSE: Duration = Duration::from_micros(100);
+
+/// Whether the request in `pending` has completed (it is then gone); a request still in flight
+/// stays there.
+fn completed<'a, S: Scope<'a>>(pending: &mut Option<Request<'a, [u8], S>>) -> Option<()> {
+    match pending.take()?.test() {
+        Ok(_) => Some(()),
+        Err(still) => {
+            *pending = Some(still);
+            None
+        }
+    }
+}
 
 /// A synchronous send in flight (see `Comm::send_marker`); it must be waited for.
 pub struct Marker(Request<'static, [u8], StaticScope>);
@@ -86,22 +98,14 @@ impl<'c> Comm<'c> {
     /// send is still in flight and MPI owns `data` until it completes.
     pub fn send_within(&self, dest: i32, tag: Tag, data: &[u8], limit: Duration, stalled: impl FnOnce() -> Infallible) {
         mpi::request::scope(|scope| {
-            let mut request = self
+            let request = self
                 .world
                 .process_at_rank(dest)
                 .immediate_send_with_tag(scope, data, tag);
-            let start = Instant::now();
-            let mut pause = Duration::from_micros(5);
-            loop {
-                match request.test() {
-                    Ok(_) => break,
-                    Err(pending) => request = pending,
-                }
-                if start.elapsed() >= limit {
-                    match stalled() {}
-                }
-                std::thread::sleep(pause);
-                pause = (pause * 2).min(self.max_pause);
+            let mut pending = Some(request);
+            let sent = self.poll_with_pauses(Some(limit), || completed(&mut pending));
+            if sent.is_none() {
+                match stalled() {}
             }
         });
         self.counters.messages_sent.fetch_add(1, Ordering::Relaxed);
@@ -126,12 +130,22 @@ impl<'c> Comm<'c> {
     /// Waits until the marker's receiver has taken it in, polling with pauses like `receive`
     /// rather than spinning in MPI.
     pub fn wait_marker(&self, marker: Marker) {
-        let mut request = marker.0;
+        let mut pending = Some(marker.0);
+        self.poll_with_pauses(None, || completed(&mut pending));
+    }
+
+    /// Polls until `poll` gives a value or `limit` (None: never) has passed, sleeping between
+    /// polls with pauses that double up to this rank's longest: a waiting rank neither spins
+    /// (Open MPI's blocking calls do) nor sleeps long past what it waits for.
+    fn poll_with_pauses<T>(&self, limit: Option<Duration>, mut poll: impl FnMut() -> Option<T>) -> Option<T> {
+        let start = Instant::now();
         let mut pause = Duration::from_micros(5);
         loop {
-            match request.test() {
-                Ok(_) => return,
-                Err(pending) => request = pending,
+            if let Some(value) = poll() {
+                return Some(value);
+            }
+            if limit.is_some_and(|l| start.elapsed() >= l) {
+                return None;
             }
             std::thread::sleep(pause);
             pause = (pause * 2).min(self.max_pause);
@@ -183,17 +197,7 @@ impl<'c> Comm<'c> {
             return Some(r);
         }
         let start = Instant::now();
-        let mut pause = Duration::from_micros(5);
-        let result = loop {
-            if let Some(r) = poll() {
-                break Some(r);
-            }
-            if timeout.is_some_and(|t| start.elapsed() >= t) {
-                break None;
-            }
-            std::thread::sleep(pause);
-            pause = (pause * 2).min(self.max_pause);
-        };
+        let result = self.poll_with_pauses(timeout, poll);
         self.counters
             .idle_ns
             .fetch_add(start.elapsed().as_nanos() as u64, Ordering::Relaxed);
