@@ -48,7 +48,8 @@ def main():
     os.makedirs(args.out, exist_ok=True)
     common.build()
     width, height = args.size.split("x")
-    base = ["-x", width, "-y", height] + args.options.split()
+    # The modes as the paper has them: records made as tiles render.
+    base = ["-x", width, "-y", height] + common.PAPER_BUILD + args.options.split()
     work = common.scratch()
     rows = []
     for scene_name in args.scenes.split(","):

@@ -94,7 +94,7 @@ def run_serial(scene, base, ref, work, trace=None, order=common.RASTER_ORDER):
     """One process, one thread; by default in scanline order like the paper's serial runs (and
     the traces the simulation replays); order=[]: the renderer's default overture."""
     out = os.path.join(work, "serial.exr")
-    opts = base + ["--threads", "1"] + order + (["--trace-cache", trace] if trace else [])
+    opts = base + ["--threads", "1"] + common.PAPER_BUILD + order + (["--trace-cache", trace] if trace else [])
     start = time.perf_counter()
     stats, _ = common.render(scene, out, opts)
     wall = time.perf_counter() - start
@@ -119,7 +119,8 @@ def run_mpi(scene, mode, np, base, ref, work, timeout):
         if os.path.exists(p):
             os.remove(p)
     cmd = ["mpirun", "--oversubscribe", "-np", str(np), common.BINARY, "render", scene, "-o", out, "--mode", mode,
-           "-q", "--no-preview", "--overwrite", "--stats", stats_path] + base + ["--overture", str(mode_overture(mode))]
+           "-q", "--no-preview", "--overwrite", "--stats", stats_path] + base + common.PAPER_BUILD + [
+               "--overture", str(mode_overture(mode))]
     start = time.perf_counter()
     result = subprocess.run(cmd, capture_output=True, text=True, env=MPI_ENV, timeout=timeout)
     wall = time.perf_counter() - start

@@ -40,6 +40,8 @@ pub enum Command {
     Info(InfoArgs),
     /// Error of one EXR against another (RMSE and relative MSE per layer).
     Compare(CompareArgs),
+    /// Tile seams of an EXR layer: mean step across tile borders over the mean step within.
+    Seams(SeamsArgs),
     /// Benchmarks (print figures; not tests).
     Bench(BenchArgs),
     /// Render a converged reference: brute force, progressive, with its own noise estimate.
@@ -116,6 +118,18 @@ pub struct RenderArgs {
     /// Record weighting: Radiance's Hessian-based error control, or Ward's 1988 split sphere.
     #[arg(long = "ic-metric", value_enum, default_value_t = MetricArg::Hessian)]
     pub ic_metric: MetricArg,
+    /// How the irradiance cache is filled. prepass: every record the image needs is placed
+    /// before any pixel is shaded, coarse to fine over the whole image, and the pixels only
+    /// interpolate (the image does not depend on threads, tiles or timing, and has no tile
+    /// seams); progressive: records are made as the pixels render, in tile order (the paper's
+    /// setting, and what the MPI modes do).
+    #[arg(long = "ic-build", value_enum)]
+    pub ic_build: Option<CacheBuildArg>,
+    /// Indirect light beyond a record's own bounce (-ab 2 and more). paths: each of a record's
+    /// hemisphere rays continues as one path (unbiased, no deeper records); records: deeper
+    /// bounces are cached records too, as in Radiance.
+    #[arg(long = "ic-deep", value_enum, default_value_t = DeepArg::Paths)]
+    pub ic_deep: DeepArg,
     /// How ranks share the work under mpirun (serial without mpirun).
     #[arg(long = "mode", value_enum)]
     pub mode: Option<ModeArg>,
@@ -241,6 +255,18 @@ pub enum ModeArg {
 }
 
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CacheBuildArg {
+    Prepass,
+    Progressive,
+}
+
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum DeepArg {
+    Paths,
+    Records,
+}
+
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
 pub enum DirectArg {
     Analytic,
     Sampled,
@@ -295,6 +321,24 @@ pub struct CompareArgs {
     /// The reference it is judged against.
     pub reference: PathBuf,
     /// Print the errors as JSON.
+    #[arg(long = "json")]
+    pub json: bool,
+}
+
+#[derive(Args, Debug)]
+pub struct SeamsArgs {
+    /// The image (an icrender EXR, or any RGB EXR).
+    pub image: PathBuf,
+    /// The tile grid to measure against, WxH (the render's own is in its header).
+    #[arg(long = "tile", default_value = "32x32")]
+    pub tile: String,
+    /// The layer: indirect, direct, specular, emission, or composite.
+    #[arg(long = "layer", default_value = "indirect")]
+    pub layer: String,
+    /// Only pixels in x0,y0,x1,y1 (a surface of interest, say a ceiling).
+    #[arg(long = "region")]
+    pub region: Option<String>,
+    /// Print the report as JSON.
     #[arg(long = "json")]
     pub json: bool,
 }

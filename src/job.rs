@@ -2,7 +2,7 @@
 //! BVH, the shading options, the view, and the irradiance cache (with its file). Every way of
 //! rendering (serial now, the MPI modes later) starts from a Job.
 
-use crate::cli::{MetricArg, RenderArgs, parse_tile};
+use crate::cli::{CacheBuildArg, MetricArg, RenderArgs, parse_tile};
 use crate::commands::{CommandError, warn};
 use crate::irradiance::record::Metric;
 use crate::irradiance::{CacheSettings, IrradianceCache};
@@ -26,6 +26,8 @@ pub struct Job {
     pub cache: Option<IrradianceCache>,
     pub load_s: f64,
     pub build_s: f64,
+    /// What each thread did in an MPI prepass (see `parallel::prepass`), for the rank's report.
+    pub prepass_threads: Vec<crate::render::ThreadStats>,
 }
 
 /// Largest image side we accept: beyond it framebuffers stop fitting in memory sensibly.
@@ -37,6 +39,13 @@ const MAX_IMAGE_SIDE: u32 = 65_536;
 /// conference room relMSE 1.6e-2 to 1.1e-2 and records 3345 to 3148. Spacings 2 and 4 did
 /// about as well; 1 (every pixel twice) made no fewer records.
 const DEFAULT_OVERTURE: u32 = 3;
+
+/// How the cache is filled: `--ic-build`, by default the prepass in every mode (the image then
+/// depends neither on tiles, threads nor timing, and has no tile seams); `progressive` makes
+/// records as pixels render, as the paper's modes do.
+pub fn cache_build(args: &RenderArgs) -> CacheBuildArg {
+    args.ic_build.unwrap_or(CacheBuildArg::Prepass)
+}
 
 /// Refuses option values that cannot work, before anything is loaded.
 pub fn validate(args: &RenderArgs) -> Result<(), String> {
@@ -72,6 +81,11 @@ pub fn validate(args: &RenderArgs) -> Result<(), String> {
     if args.ambient_file.is_some() && args.ambient_accuracy == 0.0 {
         return Err("-af needs the irradiance cache, which -aa 0 turns off".into());
     }
+    if args.trace_cache.is_some() && cache_build(args) == CacheBuildArg::Prepass {
+        return Err(
+            "--trace-cache traces the lookups of records made as pixels render: add --ic-build progressive".into(),
+        );
+    }
     parse_tile(&args.tile)?;
     Ok(())
 }
@@ -88,6 +102,7 @@ fn shading_options(args: &RenderArgs) -> ShadingOptions {
         min_weight: args.min_weight,
         light_samples: args.light_samples.max(1),
         analytic_direct: args.direct == crate::cli::DirectArg::Analytic,
+        deep_paths: args.ic_deep == crate::cli::DeepArg::Paths,
     }
 }
 
@@ -96,7 +111,7 @@ fn shading_options(args: &RenderArgs) -> ShadingOptions {
 pub fn cache_settings_line(args: &RenderArgs, scene: &Scene) -> String {
     let av = args.ambient_value.as_deref().unwrap_or(&[0.0, 0.0, 0.0]);
     format!(
-        "scene {} size {:.6e}; -ab {} -aa {} -ad {} -as {} -ar {} -av {} {} {}; -st {}; metric {:?}; lambertian {}",
+        "scene {} size {:.6e}; -ab {} -aa {} -ad {} -as {} -ar {} -av {} {} {}; -st {}; metric {:?}; lambertian {}{}",
         scene
             .path
             .file_name()
@@ -113,7 +128,14 @@ pub fn cache_settings_line(args: &RenderArgs, scene: &Scene) -> String {
         av[2],
         args.specular_threshold,
         args.ic_metric,
-        args.lambertian
+        args.lambertian,
+        // Deeper bounces by paths change what a record holds; the default keeps the line that
+        // files made before the option had.
+        if args.ic_deep == crate::cli::DeepArg::Paths && args.ambient_bounces > 1 {
+            "; deep paths"
+        } else {
+            ""
+        }
     )
 }
 
@@ -186,6 +208,7 @@ impl Job {
         let threads = args
             .threads
             .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+        let prepass = cache_build(args) == CacheBuildArg::Prepass;
         let settings = RenderSettings {
             spp: args.spp,
             seed: args.seed,
@@ -195,8 +218,14 @@ impl Job {
             jitter: false,
             emission_samples: args.emission_samples,
             // In every mode; in component mode the grid orders each PA's queue instead
-            // (parallel::component::order).
-            overture: args.overture.unwrap_or(DEFAULT_OVERTURE),
+            // (parallel::component::order). The prepass places every record before the
+            // pixels, which leaves an overture nothing to do.
+            overture: if prepass {
+                0
+            } else {
+                args.overture.unwrap_or(DEFAULT_OVERTURE)
+            },
+            prepass,
             emission_footprint: (args.emission_samples > 0 && !scene.emitters.is_empty())
                 .then(|| std::sync::Arc::new(EmitterFootprint::new(&scene.emitters, &camera))),
         };
@@ -249,6 +278,7 @@ impl Job {
             cache,
             load_s,
             build_s,
+            prepass_threads: Vec::new(),
         })
     }
 }

@@ -10,6 +10,7 @@ pub mod irradiance;
 pub mod job;
 pub mod memory;
 pub mod parallel;
+pub mod prepass;
 pub mod progress;
 pub mod render;
 pub mod sampling;

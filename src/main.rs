@@ -27,6 +27,7 @@ fn main() -> ExitCode {
         cli::Command::Render(args) => commands::render::run(args),
         cli::Command::Info(args) => commands::info::run(args),
         cli::Command::Compare(args) => commands::compare::run(args),
+        cli::Command::Seams(args) => commands::seams::run(args),
         cli::Command::Bench(args) => commands::bench::run(args),
         cli::Command::Reference(args) => commands::reference::run(args),
         cli::Command::Export(args) => commands::export::run(args),

@@ -4,6 +4,7 @@
 
 use crate::checkpoint::{Checkpoint, Restored};
 use crate::image::framebuffer::FrameBuffer;
+use crate::prepass::{self, PrepassOutcome};
 use crate::progress::Progress;
 use crate::sampling::Rng;
 use crate::scene::footprint::EmitterFootprint;
@@ -31,6 +32,9 @@ pub struct RenderSettings {
     pub emission_footprint: Option<Arc<EmitterFootprint>>,
     /// Spacing in pixels of the overture's grid (see `Integrator::prepare_records`); 0: none.
     pub overture: u32,
+    /// Place every cache record before shading (`prepass`); the pixels then only read the
+    /// cache. False: records are made as pixels render (with the overture, if any).
+    pub prepass: bool,
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -233,13 +237,21 @@ pub fn store_tile(frame: &mut FrameBuffer, tile: &Tile, values: &[PixelValue]) {
     }
 }
 
+/// What a one-process render made: the image, each thread's work (the prepass's included)
+/// and the prepass's own account, when there was one.
+pub struct Rendered {
+    pub frame: FrameBuffer,
+    pub threads: Vec<ThreadStats>,
+    pub prepass: Option<PrepassOutcome>,
+}
+
 /// Renders the whole image on `settings.threads` threads in one process.
 pub fn render(
     integrator: &Integrator<'_>,
     camera: &Camera,
     settings: &RenderSettings,
     progress: &Progress,
-) -> (FrameBuffer, Vec<ThreadStats>) {
+) -> Rendered {
     render_resumable(integrator, camera, settings, progress, None)
 }
 
@@ -251,7 +263,14 @@ pub fn render_resumable(
     settings: &RenderSettings,
     progress: &Progress,
     checkpoint: Option<(&Checkpoint, Restored)>,
-) -> (FrameBuffer, Vec<ThreadStats>) {
+) -> Rendered {
+    let prepass = (settings.prepass && integrator.cache.is_some()).then(|| prepass::run(integrator, camera, settings));
+    // After the prepass the pixels only read the cache (see `Integrator::frozen`).
+    let reading = Integrator {
+        frozen: prepass.is_some(),
+        ..*integrator
+    };
+    let integrator = &reading;
     let all = tiles(camera.width, camera.height, settings.tile_width, settings.tile_height);
     let (journal, todo, start) = match checkpoint {
         Some((journal, restored)) => (Some(journal), restored.unfinished(), restored.frame),
@@ -289,7 +308,48 @@ pub fn render_resumable(
         workers.into_iter().map(|w| w.join().unwrap_or_default()).collect()
     });
     progress.finish();
-    (frame.into_inner().unwrap_or_else(|e| e.into_inner()), stats)
+    let mut frame = frame.into_inner().unwrap_or_else(|e| e.into_inner());
+    let mut stats = stats;
+    if let Some(prepass) = &prepass {
+        add_prepass(&mut frame, &mut stats, prepass);
+    }
+    Rendered {
+        frame,
+        threads: stats,
+        prepass,
+    }
+}
+
+/// Counts the prepass's records in the `ic_records` layer and its work in the threads'.
+fn add_prepass(frame: &mut FrameBuffer, threads: &mut Vec<ThreadStats>, prepass: &PrepassOutcome) {
+    add_prepass_records(frame, prepass);
+    add_prepass_work(threads, &prepass.threads);
+}
+
+/// Counts the records the prepass made for each pixel in the frame's `ic_records` layer.
+pub fn add_prepass_records(frame: &mut FrameBuffer, prepass: &PrepassOutcome) {
+    for (pixel, &count) in prepass.records_per_pixel.iter().enumerate() {
+        if count > 0 {
+            let (x, y) = (
+                (pixel % frame.width as usize) as u32,
+                (pixel / frame.width as usize) as u32,
+            );
+            let before = frame.records()[pixel];
+            frame.set_records(x, y, before + count as f32);
+        }
+    }
+}
+
+/// Adds the prepass's work, thread by thread, to the threads that rendered afterwards.
+pub fn add_prepass_work(threads: &mut Vec<ThreadStats>, prepass: &[ThreadStats]) {
+    if threads.len() < prepass.len() {
+        threads.resize(prepass.len(), ThreadStats::default());
+    }
+    for (thread, before) in threads.iter_mut().zip(prepass) {
+        thread.rays.add(&before.rays);
+        thread.busy_s += before.busy_s;
+        thread.cpu_s += before.cpu_s;
+    }
 }
 
 #[cfg(test)]

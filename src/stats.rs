@@ -37,6 +37,7 @@ pub struct ThreadReport {
     pub lookups: u64,
     pub hits: u64,
     pub duplicates: u64,
+    pub gap_records: u64,
     /// Time computing indirect diffuse light (the paper's T_amb) and the rest (T_notamb).
     pub t_amb_s: f64,
     pub t_notamb_s: f64,
@@ -61,6 +62,7 @@ impl ThreadReport {
             lookups: c.lookups,
             hits: c.hits,
             duplicates: c.duplicates,
+            gap_records: c.gap_records,
             t_amb_s,
             t_notamb_s: (t.cpu_s - t_amb_s).max(0.0),
             rays: RayStats::from(c),
@@ -83,6 +85,9 @@ pub struct RankReport {
     pub threads: usize,
     pub tiles: usize,
     pub records_computed: u64,
+    /// Records made after a prepass for one pixel's own use (see `RenderStats::gap_records`).
+    #[serde(default)]
+    pub gap_records: u64,
     pub lookups: u64,
     pub hits: u64,
     pub t_amb_s: f64,
@@ -129,6 +134,16 @@ pub struct RenderStats {
     pub threads: usize,
     /// The overture's grid spacing in pixels (0: none).
     pub overture: u32,
+    /// How the cache was filled: "prepass" (every record placed before shading) or
+    /// "progressive" (records made as pixels render).
+    pub cache_build: &'static str,
+    /// The prepass: seconds, rounds, sites looked at and records made (all in the totals too).
+    pub prepass_s: f64,
+    pub prepass_rounds: u64,
+    pub prepass_sites: u64,
+    pub prepass_records: u64,
+    /// Records pixels had to make after the prepass, each for its own use (a gap it left).
+    pub gap_records: u64,
     pub triangles: usize,
     pub dropped_triangles: usize,
     pub load_s: f64,
@@ -178,6 +193,14 @@ pub struct RenderStats {
 
 impl RenderStats {
     /// Fills the totals from the threads' reports.
+    pub fn add_prepass(&mut self, prepass: &crate::prepass::PrepassOutcome) {
+        self.cache_build = "prepass";
+        self.prepass_s = prepass.seconds;
+        self.prepass_rounds = prepass.rounds as u64;
+        self.prepass_sites = prepass.sites;
+        self.prepass_records = prepass.records;
+    }
+
     pub fn add_threads(&mut self, threads: &[ThreadStats]) {
         let mut total = RayCounts::default();
         for t in threads {
@@ -188,6 +211,7 @@ impl RenderStats {
         self.lookups = total.lookups;
         self.hits = total.hits;
         self.duplicates = total.duplicates;
+        self.gap_records = total.gap_records;
         self.t_amb_s = self.per_thread.iter().map(|t| t.t_amb_s).sum();
         self.t_notamb_s = self.per_thread.iter().map(|t| t.t_notamb_s).sum();
         self.rays = RayStats::from(&total);
@@ -203,6 +227,7 @@ impl RenderStats {
             threads: self.threads,
             tiles: self.per_thread.iter().map(|t| t.tiles).sum(),
             records_computed: self.records_computed,
+            gap_records: self.gap_records,
             lookups: self.lookups,
             hits: self.hits,
             t_amb_s: self.t_amb_s,
@@ -215,6 +240,7 @@ impl RenderStats {
     /// Totals over the ranks' reports.
     pub fn add_ranks(&mut self, ranks: Vec<RankReport>) {
         self.records_computed = ranks.iter().map(|r| r.records_computed).sum();
+        self.gap_records = ranks.iter().map(|r| r.gap_records).sum();
         self.lookups = ranks.iter().map(|r| r.lookups).sum();
         self.hits = ranks.iter().map(|r| r.hits).sum();
         self.t_amb_s = ranks.iter().map(|r| r.t_amb_s).sum();

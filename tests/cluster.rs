@@ -416,7 +416,11 @@ fn every_mode_across_hosts_matches_serial_and_its_bytes_match_the_kernel_counts(
 /// A render that lasts several seconds across 3 workers and keeps a cache file, whose growth
 /// shows the render is under way (the master appends what the workers sync).
 fn long_render<'a>(mode: &'a str, cache: &'a str, timeout: &'a str) -> Vec<&'a str> {
+    // Records made as tiles render: the faults land in the modes' own sharing and gathering
+    // (a fault during the prepass has a test of its own).
     vec![
+        "--ic-build",
+        "progressive",
         "-x",
         "192",
         "-y",
@@ -619,6 +623,48 @@ fn a_worker_host_losing_its_link_ends_the_job_naming_rank_and_host() {
             problems.push(format!("no message names the lost host {}", bed.host(2)));
         }
         assert_no_problems("host 2's link down mid-render", &problems, &ended);
+    });
+}
+
+#[test]
+fn a_host_lost_during_the_prepass_ends_the_job_naming_rank_and_host() {
+    // The default build: every rank takes part in each prepass round, so the master notices a
+    // worker whose round does not arrive within --timeout, says which rank on which host, and
+    // ends the job with the records of the finished rounds in the cache file.
+    with_bed(4, &[], |bed| {
+        let dir = tempfile::tempdir().unwrap();
+        let scene = project_dir().join("scenes/cornell.gltf");
+        let cache = dir.path().join("c.icc");
+        let (out, stats) = (dir.path().join("pre.exr"), dir.path().join("pre.json"));
+        let render: Vec<&str> = long_render("broadcast", cache.to_str().unwrap(), "8")
+            .into_iter()
+            .skip(2)
+            .collect();
+        let args = render_args(
+            scene.to_str().unwrap(),
+            out.to_str().unwrap(),
+            stats.to_str().unwrap(),
+            &render,
+        );
+        let mut job = Job::spawn(bed.mpirun(&[], 4, &args), dir.path().join("pre.log"));
+        wait_for_progress(&mut job, &cache, 32);
+        bed.link(3, "down");
+        let ended = job.wait(Duration::from_secs(120));
+        let mut problems = fault_problems(&ended, Duration::from_secs(90), &out);
+        if !ended.output.contains("prepass") {
+            problems.push("the error does not say the prepass was under way".into());
+        }
+        if !names_rank(&ended.output, 3) {
+            problems.push("no message names rank 3".into());
+        }
+        if !ended.output.contains(&bed.host(3)) {
+            problems.push(format!("no message names the lost host {}", bed.host(3)));
+        }
+        assert_no_problems("host 3's link down during the prepass", &problems, &ended);
+        assert!(
+            cache_records(&cache).unwrap_or(0) >= 32,
+            "the cache file lost its records"
+        );
     });
 }
 

@@ -53,6 +53,11 @@ fn render(dir: &Path, scene: &Path, name: &str, np: Option<usize>, extra: &[&str
     if !extra.contains(&"--tile") {
         args.extend_from_slice(&["--tile", "8x8"]);
     }
+    // These tests are about the modes' own sharing of records, which they do when records are
+    // made as tiles render; the prepass (the default) has a test of its own.
+    if !extra.contains(&"--ic-build") {
+        args.extend_from_slice(&["--ic-build", "progressive"]);
+    }
     args.extend_from_slice(extra);
     let output = match np {
         Some(np) => mpirun(np, &args),
@@ -181,6 +186,72 @@ fn every_mode_matches_serial_and_statistics_add_up() {
                 "{}: shared {ce} {bc} vs noshare {ns}",
                 scene.display()
             );
+        }
+    }
+}
+
+/// With the prepass every rank starts the final pass from the record set one process makes
+/// (the same records, inserted in the same order), so every mode renders the serial image bit
+/// for bit, whatever the rank count.
+#[test]
+fn the_prepass_gives_every_mode_the_serial_image() {
+    let _one_job = one_job_at_a_time();
+    let dir = tempfile::tempdir().unwrap();
+    // The Cornell box with its mirror: the prepass follows the mirror to the walls it shows.
+    let scene = project_dir().join("scenes/cornell.gltf");
+    let prepass = ["--ic-build", "prepass", "-ab", "2", "--spp", "2"];
+    let serial = render(
+        dir.path(),
+        &scene,
+        "serial",
+        None,
+        &[&prepass[..], &["--threads", "2"]].concat(),
+    );
+    assert_eq!(serial.stats["cache_build"], "prepass");
+    assert_eq!(u(&serial.stats, "gap_records"), 0);
+    let records = u(&serial.stats, "prepass_records");
+    assert!(records > 20);
+    for (mode, np) in [
+        ("noshare", 3),
+        ("centralised", 3),
+        ("broadcast", 4),
+        ("component", 4),
+        ("component", 5),
+    ] {
+        let name = format!("{mode}-{np}");
+        let run = render(
+            dir.path(),
+            &scene,
+            &name,
+            Some(np),
+            &[&prepass[..], &["--mode", mode]].concat(),
+        );
+        let s = &run.stats;
+        assert_eq!(s["cache_build"], "prepass", "{name}");
+        assert_eq!(
+            u(s, "prepass_records"),
+            records,
+            "{name}: the prepass made other records"
+        );
+        // Every record is made once, by one worker, and no rank made any afterwards.
+        assert_eq!(u(s, "records_computed"), records, "{name}");
+        assert_eq!(u(s, "gap_records"), 0, "{name}");
+        let (a, b) = (rgb(&run.image, ""), rgb(&serial.image, ""));
+        let differing = (0..3)
+            .map(|c| {
+                a[c].iter()
+                    .zip(&b[c])
+                    .filter(|(x, y)| x.to_bits() != y.to_bits())
+                    .count()
+            })
+            .sum::<usize>();
+        assert_eq!(
+            differing, 0,
+            "{name}: {differing} channel values differ from the serial image"
+        );
+        if mode == "component" {
+            // The PRs found every value in their cache: nothing was left to the PAs.
+            assert_eq!(u(s, "requests_sent"), 0, "{name}");
         }
     }
 }

@@ -35,6 +35,8 @@ fn trace_cache_lists_every_lookup_and_record() {
         stats.to_str().unwrap(),
         "--trace-cache",
         trace.to_str().unwrap(),
+        "--ic-build",
+        "progressive",
     ]);
     let s: Value = serde_json::from_str(&std::fs::read_to_string(&stats).unwrap()).unwrap();
     let text = std::fs::read_to_string(&trace).unwrap();
@@ -77,6 +79,8 @@ fn trace_cache_lists_every_lookup_and_record() {
         "1",
         "-q",
         "--no-preview",
+        "--ic-build",
+        "progressive",
     ]);
     assert_eq!(rgb(&read_exr(&out), ""), rgb(&read_exr(&plain), ""));
 }

@@ -6,6 +6,7 @@ pub mod export;
 pub mod info;
 pub mod reference;
 pub mod render;
+pub mod seams;
 pub mod view;
 
 /// A failed command: one line for the user, already naming the file when a file is at fault.

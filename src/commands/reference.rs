@@ -60,8 +60,9 @@ pub fn run(args: &ReferenceArgs) -> CommandResult {
         job.settings.seed = base_seed.wrapping_add(pass.wrapping_mul(0x9e37_79b9));
         let integrator = Integrator::new(&job.scene, &job.tracer, &job.shading, None);
         let progress = Progress::new(0, true);
-        let (frame, stats) = render(&integrator, &job.camera, &job.settings, &progress);
-        thread_stats.extend(stats);
+        let rendered = render(&integrator, &job.camera, &job.settings, &progress);
+        let frame = rendered.frame;
+        thread_stats.extend(rendered.threads);
         let half = (pass % 2) as usize;
         halves[half].accumulate(&frame);
         counts[half] += 1;

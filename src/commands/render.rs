@@ -44,7 +44,7 @@ pub fn options_line(args: &RenderArgs) -> String {
     let av = args.ambient_value.as_deref().unwrap_or(&[0.0, 0.0, 0.0]);
     format!(
         "-x {} -y {} -ab {} -aa {} -ad {} -as {} -ar {} -av {} {} {} -st {} -lr {} -lw {} --ic-metric {:?} \
-         --light-samples {} --direct {} --spp {} --seed {}{}{}",
+         --light-samples {} --direct {} --spp {} --seed {} --ic-build {} --ic-deep {}{}{}",
         args.width,
         args.height,
         args.ambient_bounces,
@@ -66,6 +66,14 @@ pub fn options_line(args: &RenderArgs) -> String {
         },
         args.spp,
         args.seed,
+        match crate::job::cache_build(args) {
+            crate::cli::CacheBuildArg::Prepass => "prepass",
+            crate::cli::CacheBuildArg::Progressive => "progressive",
+        },
+        match args.ic_deep {
+            crate::cli::DeepArg::Paths => "paths",
+            crate::cli::DeepArg::Records => "records",
+        },
         args.overture.map(|n| format!(" --overture {n}")).unwrap_or_default(),
         if args.lambertian { " --lambertian" } else { "" }
     )
@@ -85,6 +93,7 @@ pub fn job_stats(args: &RenderArgs, job: &Job, mode: &'static str, ranks: usize,
         spp: args.spp,
         threads: job.settings.threads,
         overture: job.settings.overture,
+        cache_build: if job.settings.prepass { "prepass" } else { "progressive" },
         triangles: job.scene.triangle_count(),
         dropped_triangles: job.scene.dropped_triangles,
         load_s: job.load_s,
@@ -273,8 +282,8 @@ pub fn run(args: &RenderArgs) -> CommandResult {
     let tiles_restored = restored.as_ref().map_or(0, Restored::count);
     let progress = Progress::new(all_tiles.len(), args.quiet);
     let render_start = Instant::now();
-    let (frame, thread_stats) =
-        render_resumable(&integrator, &job.camera, s, &progress, journal.as_ref().zip(restored));
+    let rendered = render_resumable(&integrator, &job.camera, s, &progress, journal.as_ref().zip(restored));
+    let (frame, thread_stats) = (rendered.frame, rendered.threads);
     let render_s = render_start.elapsed().as_secs_f64();
     if let Some(cache) = &job.cache
         && let Err(e) = cache.finish()
@@ -288,6 +297,9 @@ pub fn run(args: &RenderArgs) -> CommandResult {
     let mut stats = job_stats(args, &job, "serial", 1, render_s);
     stats.tiles_restored = tiles_restored as u64;
     stats.add_threads(&thread_stats);
+    if let Some(prepass) = &rendered.prepass {
+        stats.add_prepass(prepass);
+    }
     if stats.nonfinite_dropped > 0 {
         warn(&format!(
             "{} non-finite contribution(s) were dropped",

@@ -5,3 +5,4 @@ pub mod framebuffer;
 pub mod metrics;
 pub mod output;
 pub mod preview;
+pub mod seams;

@@ -39,6 +39,8 @@ pub struct Plan<'a> {
     pub hosts: &'a [String],
     /// The --checkpoint journal and what an earlier run finished (those tiles are not handed out).
     pub resume: Option<(&'a Checkpoint, &'a Restored)>,
+    /// Every worker already holds the cache's records (the prepass shared them).
+    pub workers_have_cache: bool,
 }
 
 pub fn run(comm: &Comm<'_>, plan: &Plan<'_>) -> Result<MasterResult, MasterError> {
@@ -52,6 +54,7 @@ pub fn run(comm: &Comm<'_>, plan: &Plan<'_>) -> Result<MasterResult, MasterError
         timeout,
         hosts,
         resume,
+        workers_have_cache,
     } = *plan;
     let start = Instant::now();
     let sends = MasterSends {
@@ -72,7 +75,10 @@ pub fn run(comm: &Comm<'_>, plan: &Plan<'_>) -> Result<MasterResult, MasterError
     };
 
     // Every worker starts from the records of the cache file (possibly none).
-    let initial: Vec<Record> = cache.map_or_else(Vec::new, |c| c.records());
+    let initial: Vec<Record> = match cache {
+        Some(c) if !workers_have_cache => c.records(),
+        _ => Vec::new(),
+    };
     let initial_batch = encode_batch(&initial, 0);
     for w in 1..size {
         sends.send(w as i32, TAG_INITIAL_RECORDS, &initial_batch);

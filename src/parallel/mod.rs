@@ -8,6 +8,7 @@ pub mod component;
 pub mod link_bench;
 pub mod master;
 pub mod master_sends;
+pub mod prepass;
 pub mod protocol;
 pub mod worker;
 
@@ -75,6 +76,7 @@ pub fn rank_report(rank: i32, role: &str, threads: &[ThreadStats], counters: &[&
         threads: threads.len(),
         tiles: reports.iter().map(|t| t.tiles).sum(),
         records_computed: reports.iter().map(|t| t.records_computed).sum(),
+        gap_records: reports.iter().map(|t| t.gap_records).sum(),
         lookups: reports.iter().map(|t| t.lookups).sum(),
         hits: reports.iter().map(|t| t.hits).sum(),
         t_amb_s: reports.iter().map(|t| t.t_amb_s).sum(),
@@ -128,6 +130,8 @@ fn pid_in_session_dir(dir: &str) -> Option<u32> {
 
 /// What a worker renders with.
 pub struct WorkerSetup<'a> {
+    /// What this rank did in the prepass, thread by thread (empty without one).
+    pub prepass: &'a [ThreadStats],
     pub scene: &'a Scene,
     pub tracer: &'a Tracer,
     pub shading: &'a ShadingOptions,
@@ -140,6 +144,7 @@ pub struct WorkerSetup<'a> {
 impl<'a> WorkerSetup<'a> {
     pub fn new(job: &'a Job, tiles: &'a [Tile]) -> Self {
         WorkerSetup {
+            prepass: &job.prepass_threads,
             scene: &job.scene,
             tracer: &job.tracer,
             shading: &job.shading,
@@ -272,8 +277,17 @@ pub fn run(args: &RenderArgs, mode: Mode) -> CommandResult {
         }
     };
     let resume = checkpoint.as_ref().map(|(journal, restored)| (journal, restored));
+    // The prepass: every rank ends it with the same complete cache; the modes then only read
+    // it (a gap's record stays with the pixel that needed it).
+    let prepass = job.settings.prepass.then(|| {
+        let timeout = Duration::from_secs_f64(args.timeout.max(1.0));
+        prepass::run(&comm, &job, timeout, &hosts).unwrap_or_else(|e| end_job(&comm, job.cache.as_ref(), &e))
+    });
+    job.prepass_threads = prepass.as_ref().map(|p| p.threads.clone()).unwrap_or_default();
     if mode == Mode::Component {
-        return run_component(args, &comm, job, &all_tiles, &hosts, outputs, wall, universe, resume);
+        return run_component(
+            args, &comm, job, &all_tiles, &hosts, outputs, wall, universe, resume, prepass,
+        );
     }
     let sync = args.sync.unwrap_or(50).max(1) as usize;
     let persist_local = args.ambient_file.is_some();
@@ -300,6 +314,7 @@ pub fn run(args: &RenderArgs, mode: Mode) -> CommandResult {
         timeout,
         hosts: &hosts,
         resume,
+        workers_have_cache: prepass.is_some(),
     };
     let result = master::run(&comm, &plan);
     let result = match result {
@@ -318,6 +333,7 @@ pub fn run(args: &RenderArgs, mode: Mode) -> CommandResult {
         outputs,
         wall,
         resume.map_or(0, |(_, r)| r.count()),
+        prepass.as_ref(),
     )?;
     drop(universe);
     Ok(())
@@ -337,6 +353,7 @@ fn finish_master(
     outputs: Option<Outputs>,
     wall: Instant,
     tiles_restored: usize,
+    prepass: Option<&crate::prepass::PrepassOutcome>,
 ) -> CommandResult {
     if let Some(cache) = &job.cache
         && let Err(e) = cache.finish()
@@ -349,6 +366,11 @@ fn finish_master(
     };
     stats.tiles_restored = tiles_restored as u64;
     stats.add_ranks(ranks);
+    let mut frame = frame;
+    if let Some(prepass) = prepass {
+        stats.add_prepass(prepass);
+        crate::render::add_prepass_records(&mut frame, prepass);
+    }
     stats.wall_s = wall.elapsed().as_secs_f64();
     let outputs = outputs.expect("rank 0 checked its outputs");
     outputs.write(args, job, &frame, &stats)?;
@@ -370,6 +392,7 @@ fn run_component(
     wall: Instant,
     universe: mpi::environment::Universe,
     resume: Option<(&Checkpoint, &Restored)>,
+    prepass: Option<crate::prepass::PrepassOutcome>,
 ) -> CommandResult {
     let rank = comm.rank();
     let needed = job.cache.is_some() || (job.shading.ambient_bounces > 0 && job.scene.needs().diffuse);
@@ -428,6 +451,7 @@ fn run_component(
         timeout,
         hosts,
         resume,
+        prepass.is_some(),
     );
     let result = match result {
         Ok(r) => r,
@@ -445,6 +469,7 @@ fn run_component(
         outputs,
         wall,
         resume.map_or(0, |(_, r)| r.count()),
+        prepass.as_ref(),
     )?;
     drop(universe);
     Ok(())

@@ -23,6 +23,12 @@ pub const TAG_INITIAL_RECORDS: Tag = 4;
 pub const TAG_STATS: Tag = 5;
 /// Worker -> MC at the end (no sharing, with -af): the rank's records, for the file.
 pub const TAG_FINAL_RECORDS: Tag = 6;
+/// MC -> worker before the prepass: the records every rank starts the prepass from.
+pub const TAG_PREPASS_START: Tag = 7;
+/// Worker -> MC, each prepass round: the records of the worker's share of the round's sites.
+pub const TAG_PREPASS_UP: Tag = 8;
+/// MC -> worker, each prepass round: the round's records from every worker, in site order.
+pub const TAG_PREPASS_DOWN: Tag = 9;
 /// MC -> worker thread t: a tile or "no more work" (tag base + t).
 pub const TAG_WORK_BASE: Tag = 1000;
 /// MC -> worker thread t: records answering TAG_RECORDS_UP (tag base + t).
@@ -62,6 +68,43 @@ pub struct Batch {
     pub records: Vec<Record>,
     pub rejected: usize,
     pub flags: u32,
+}
+
+/// A prepass round's records: a count, each record's site index, then the records as a batch.
+pub fn encode_round(records: &[(u32, Record)]) -> Vec<u8> {
+    let mut out = Vec::with_capacity(4 + records.len() * (4 + RECORD_BYTES) + 16);
+    out.extend_from_slice(&(records.len() as u32).to_le_bytes());
+    for (index, _) in records {
+        out.extend_from_slice(&index.to_le_bytes());
+    }
+    let batch: Vec<Record> = records.iter().map(|(_, r)| r.clone()).collect();
+    out.extend(encode_batch(&batch, 0));
+    out
+}
+
+/// A prepass round's records. Every rank must insert exactly the same records, so a record
+/// that fails validation fails the whole message.
+pub fn decode_round(bytes: &[u8]) -> Result<Vec<(u32, Record)>, ProtocolError> {
+    let count = u32_at(bytes, 0)? as usize;
+    let indices_end = count
+        .checked_mul(4)
+        .and_then(|n| n.checked_add(4))
+        .filter(|&end| end <= bytes.len())
+        .ok_or_else(|| {
+            ProtocolError(format!(
+                "prepass round says {count} records but holds {} bytes",
+                bytes.len()
+            ))
+        })?;
+    let indices: Vec<u32> = (0..count).map(|i| u32_at(bytes, 4 + 4 * i)).collect::<Result<_, _>>()?;
+    let batch = decode_batch(&bytes[indices_end..])?;
+    if batch.rejected > 0 || batch.records.len() != count {
+        return Err(ProtocolError(format!(
+            "prepass round: {} of {count} records invalid",
+            count - batch.records.len().min(count)
+        )));
+    }
+    Ok(indices.into_iter().zip(batch.records).collect())
 }
 
 pub fn decode_batch(bytes: &[u8]) -> Result<Batch, ProtocolError> {
@@ -198,6 +241,32 @@ pub fn decode_work(bytes: &[u8]) -> Result<Option<u32>, ProtocolError> {
 mod tests {
     use super::*;
     use crate::irradiance::record::tests::flat_record;
+
+    #[test]
+    fn prepass_rounds_round_trip_and_refuse_damage() {
+        let records: Vec<(u32, Record)> = (0..5u32)
+            .map(|i| {
+                let mut r = flat_record(0.1 + i as f32, 0.5);
+                r.position = Vec3::new(i as f32, 2.0, -1.0);
+                (i * 7 + 3, r)
+            })
+            .collect();
+        let bytes = encode_round(&records);
+        assert_eq!(decode_round(&bytes).unwrap(), records);
+        assert_eq!(decode_round(&encode_round(&[])).unwrap(), Vec::new());
+        // Cut anywhere: refused, never a shorter list.
+        for cut in [0, 3, 4, 10, bytes.len() - 1] {
+            assert!(decode_round(&bytes[..cut]).is_err(), "cut at {cut}");
+        }
+        // A count larger than the message.
+        let mut lying = bytes.clone();
+        lying[..4].copy_from_slice(&1000u32.to_le_bytes());
+        assert!(decode_round(&lying).is_err());
+        // A record that fails validation (a non-finite value) fails the round.
+        let mut bad = records.clone();
+        bad[2].1.value = Vec3::splat(f32::NAN);
+        assert!(decode_round(&encode_round(&bad)).is_err());
+    }
 
     #[test]
     fn work_messages_must_have_their_exact_length() {

@@ -115,7 +115,8 @@ pub fn run(setup: &WorkerSetup<'_>, mode: Mode, sync: usize, persist_local: bool
                 let (counters, received, rejected, share_lock) = (&counters, &received, &rejected, &share_lock);
                 scope.spawn(move || {
                     let comm = Comm::new(counters);
-                    let integrator = Integrator::new(setup.scene, setup.tracer, setup.shading, cache);
+                    let integrator = Integrator::new(setup.scene, setup.tracer, setup.shading, cache)
+                        .cache_frozen(setup.settings.prepass);
                     let mut stats = ThreadStats::default();
                     let clock = ThreadClock::start();
                     let mut finished: Option<(u32, Vec<_>)> = None;
@@ -152,7 +153,8 @@ pub fn run(setup: &WorkerSetup<'_>, mode: Mode, sync: usize, persist_local: bool
                 })
             })
             .collect();
-        let stats: Vec<ThreadStats> = renderers.into_iter().map(|r| r.join().unwrap_or_default()).collect();
+        let mut stats: Vec<ThreadStats> = renderers.into_iter().map(|r| r.join().unwrap_or_default()).collect();
+        crate::render::add_prepass_work(&mut stats, setup.prepass);
         // What is left to share goes out now; broadcast ends with the end marker so every
         // receiver knows when it has everything.
         if let Some(cache) = cache {

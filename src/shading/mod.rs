@@ -45,6 +45,9 @@ pub struct ShadingOptions {
     /// rays used only for the share that gets through; false: plain sampling (unbiased, for
     /// references).
     pub analytic_direct: bool,
+    /// Past a record's bounce (-ab 2 and more), each hemisphere ray continues as one path
+    /// instead of looking up records of deeper levels (`--ic-deep paths`).
+    pub deep_paths: bool,
 }
 
 impl Default for ShadingOptions {
@@ -57,6 +60,7 @@ impl Default for ShadingOptions {
             min_weight: 1e-3,
             light_samples: 1,
             analytic_direct: true,
+            deep_paths: true,
         }
     }
 }
@@ -80,6 +84,9 @@ pub struct RayCounts {
     pub duplicates: u64,
     /// Records computed at level 0 (for the ic_records debug layer).
     pub records_level0: u64,
+    /// Level-0 records a pixel had to make after the prepass (a gap it left: surfaces seen
+    /// only through mirrors or glass), used for that pixel alone.
+    pub gap_records: u64,
     /// Seconds spent computing L_a (lookups and new records), the paper's T_amb.
     pub t_amb: f64,
     /// Indirect diffuse values left to a PA as requests (component mode's PRs).
@@ -110,6 +117,7 @@ impl RayCounts {
         self.records_computed += o.records_computed;
         self.duplicates += o.duplicates;
         self.records_level0 += o.records_level0;
+        self.gap_records += o.gap_records;
         self.t_amb += o.t_amb;
         self.deferred += o.deferred;
     }
@@ -159,6 +167,9 @@ pub struct Integrator<'a> {
     /// Component mode's PR: indirect diffuse values that the cache cannot give are not
     /// computed here but become requests in this list (left out of the pixel).
     pub defer: Option<&'a Mutex<Vec<AmbientRequest>>>,
+    /// The cache is complete (the prepass made it): a lookup that finds no record makes one
+    /// for its own use and does not add it, so no pixel depends on another's timing.
+    pub frozen: bool,
 }
 
 /// Passes through fully transparent (alpha-masked) points before a ray gives up.
@@ -177,7 +188,14 @@ impl<'a> Integrator<'a> {
             options,
             cache,
             defer: None,
+            frozen: false,
         }
+    }
+
+    /// Whether this integrator only reads the cache (after a prepass): see `frozen`.
+    pub fn cache_frozen(mut self, frozen: bool) -> Self {
+        self.frozen = frozen;
+        self
     }
 
     /// This integrator leaves indirect diffuse values the cache cannot give to `sink`.
@@ -238,6 +256,72 @@ impl<'a> Integrator<'a> {
         {
             self.ambient_radiance(&hit, PathState::eye(false), rng, counts);
         }
+    }
+
+    /// Where the eye path of a primary ray would look up level-0 records: every diffuse
+    /// surface it reaches straight or along specular reflections and transmissions (one ray
+    /// each, glossy directions drawn from `rng`, within -lr and -lw as `trace` keeps them).
+    /// Empty without a cache to fill.
+    pub fn record_sites(&self, origin: Vec3, dir: Vec3, rng: &mut Rng, counts: &mut RayCounts) -> Vec<SurfaceHit> {
+        let mut sites = Vec::new();
+        if self.cache.is_none() || self.options.ambient_bounces == 0 {
+            return sites;
+        }
+        counts.primary += 1;
+        // Rays still to follow: origin, direction, specular depth, path weight.
+        let mut rays = vec![(origin, dir, 0u32, 1.0f32)];
+        while let Some((origin, dir, depth, weight)) = rays.pop() {
+            let coherence = if depth == 0 {
+                Coherence::Coherent
+            } else {
+                Coherence::Incoherent
+            };
+            let Some((hit, surface)) = self.first_surface(origin, dir, coherence) else {
+                continue;
+            };
+            if surface.diffuse.max_element() > 0.0 {
+                sites.push(hit);
+            }
+            if depth >= self.options.max_specular_depth {
+                continue;
+            }
+            let transmitted = weight * (1.0 - surface.opacity);
+            if surface.opacity < 1.0 && transmitted >= self.options.min_weight {
+                counts.specular += 1;
+                rays.push((self.tracer.spawn_point(&hit, dir), dir, depth + 1, transmitted));
+            }
+            if surface.specular.max_element() > 0.0
+                && let Some((wi, lobe)) =
+                    glossy::sample(hit.normal, -dir, surface.alpha, rng.next_f32(), rng.next_f32())
+                && wi.dot(hit.facing_normal) > 0.0
+            {
+                let reflected = weight * (surface.specular * lobe).max_element();
+                if reflected >= self.options.min_weight {
+                    counts.specular += 1;
+                    rays.push((self.tracer.spawn_point(&hit, wi), wi, depth + 1, reflected));
+                }
+            }
+        }
+        sites
+    }
+
+    /// The level-0 record for a site `record_site` found (not added to the cache), with its
+    /// time counted as T_amb.
+    pub fn eye_record(
+        &self,
+        cache: &IrradianceCache,
+        hit: &SurfaceHit,
+        rng: &mut Rng,
+        counts: &mut RayCounts,
+    ) -> Record {
+        let start = Instant::now();
+        counts.ambient_depth += 1;
+        let record = self.compute_record(cache, hit, PathState::eye(false), rng, counts);
+        counts.ambient_depth -= 1;
+        counts.t_amb += start.elapsed().as_secs_f64();
+        counts.records_computed += 1;
+        counts.records_level0 += 1;
+        record
     }
 
     /// The first surface along a ray that is not fully transparent (alpha-masked points are
@@ -516,8 +600,10 @@ impl<'a> Integrator<'a> {
         let start = outermost.then(Instant::now);
         counts.ambient_depth += 1;
         let value = match self.cache {
-            Some(cache) => self.cached_ambient(cache, hit, state, rng, counts),
-            None => self.brute_force_ambient(hit, state, rng, counts),
+            Some(cache) if state.level == 0 || !self.options.deep_paths => {
+                self.cached_ambient(cache, hit, state, rng, counts)
+            }
+            _ => self.brute_force_ambient(hit, state, rng, counts),
         };
         counts.ambient_depth -= 1;
         if let Some(start) = start {
@@ -585,6 +671,10 @@ impl<'a> Integrator<'a> {
         counts.records_computed += 1;
         if state.level == 0 {
             counts.records_level0 += 1;
+        }
+        if self.frozen {
+            counts.gap_records += 1;
+            return record.value;
         }
         // Another thread may have covered this point while we sampled: the work was done twice.
         if cache.lookup(hit.position, hit.normal, state.level).is_some() {

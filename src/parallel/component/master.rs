@@ -68,6 +68,7 @@ pub fn run(
     timeout: Duration,
     hosts: &[String],
     resume: Option<(&Checkpoint, &Restored)>,
+    workers_have_cache: bool,
 ) -> Result<ComponentResult, String> {
     let host = |rank: i32| hosts.get(rank as usize).map_or("?", String::as_str).to_string();
     let start = Instant::now();
@@ -94,8 +95,11 @@ pub fn run(
     };
     let mut next_tile = 0usize;
     let mut tiles_given = 0usize;
-    let mut store: Vec<(usize, Record)> =
-        cache.map_or_else(Vec::new, |c| c.records().into_iter().map(|r| (0, r)).collect());
+    // The cache file's records (none to send when the prepass already gave every rank all).
+    let mut store: Vec<(usize, Record)> = match cache {
+        Some(c) if !workers_have_cache => c.records().into_iter().map(|r| (0, r)).collect(),
+        _ => Vec::new(),
+    };
     let mut seen = vec![0usize; size];
     let mut pas: HashMap<i32, PaState> = roles.pas.iter().map(|&r| (r, PaState::default())).collect();
     let mut prs: HashMap<i32, PrState> = roles.prs.iter().map(|&r| (r, PrState::default())).collect();

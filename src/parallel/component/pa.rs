@@ -207,7 +207,8 @@ pub fn run(setup: &WorkerSetup<'_>, sync: usize, seed: u64, journal: bool, bound
                 bound,
             )
         });
-        let integrator = Integrator::new(setup.scene, setup.tracer, setup.shading, cache);
+        let integrator =
+            Integrator::new(setup.scene, setup.tracer, setup.shading, cache).cache_frozen(setup.settings.prepass);
         let clock = ThreadClock::start();
         let mut reported = u64::MAX;
         // Syncs with the master: new records up, and the queue length and the count of
@@ -290,10 +291,12 @@ pub fn run(setup: &WorkerSetup<'_>, sync: usize, seed: u64, journal: bool, bound
             .flat_map(|v| v.to_le_bytes())
             .collect::<Vec<u8>>(),
     );
+    let mut threads = vec![stats];
+    crate::render::add_prepass_work(&mut threads, setup.prepass);
     let mut report = rank_report(
         comm.rank(),
         "pa",
-        &[stats],
+        &threads,
         &[&counters, &comm_counters],
         counters.idle_s(),
     );

@@ -166,7 +166,8 @@ fn render_and_help(
     let (width, height) = (setup.camera.width, setup.camera.height);
     let mut frame = FrameBuffer::new(width, height);
     let sink = Mutex::new(Vec::new());
-    let mut integrator = Integrator::new(setup.scene, setup.tracer, setup.shading, setup.cache);
+    let mut integrator =
+        Integrator::new(setup.scene, setup.tracer, setup.shading, setup.cache).cache_frozen(setup.settings.prepass);
     if !roles.pas.is_empty() {
         integrator = integrator.deferring(&sink);
     }
@@ -305,10 +306,12 @@ fn render_and_help(
             .flat_map(|v| v.to_le_bytes())
             .collect::<Vec<u8>>(),
     );
+    let mut threads = vec![stats.clone()];
+    crate::render::add_prepass_work(&mut threads, setup.prepass);
     let mut report = rank_report(
         comm.rank(),
         "pr",
-        &[stats.clone()],
+        &threads,
         &[&counters, courier_counters],
         counters.idle_s(),
     );

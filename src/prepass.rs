@@ -1,0 +1,341 @@
+//! The cache prepass: every level-0 record the image will look up is placed before any pixel
+//! is shaded, so that each pixel interpolates between records on all its sides and no pixel's
+//! value depends on which pixels happened to render before it.
+//!
+//! The prepass visits sites (the first diffuse surface seen through a pixel) coarse to fine
+//! over the whole image: a lattice of `COARSEST_STRIDE` pixels, then at each halving of the
+//! stride the centres of the previous lattice's squares and then their edges' midpoints (as a
+//! diamond-square refinement does), down to every pixel, and, when a pixel takes several
+//! samples, every sample's own position. A site that no record covers yet gets one; records
+//! are made where the error control asks for them and large ones made early cover most later
+//! sites, so the fine rounds are mostly lookups.
+//!
+//! Each round is one deterministic step: its sites are looked up in the cache as it stood when
+//! the round began (records of the round are held back), the records it needs are computed in
+//! parallel, and they join the cache in site order. The record set, and so the image, is the
+//! same whatever the number of threads and the tile size.
+
+use crate::irradiance::IrradianceCache;
+use crate::irradiance::record::Record;
+use crate::render::{RenderSettings, ThreadClock, ThreadStats, pixel_offset};
+use crate::sampling::Rng;
+use crate::scene::view::Camera;
+use crate::shading::{Integrator, RayCounts};
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::time::Instant;
+
+/// Spacing in pixels of the first round's lattice (smaller for small images).
+const COARSEST_STRIDE: u32 = 32;
+
+/// Random stream of a lattice site's record: after every stream a pixel's samples use (those
+/// are numbered from 0, and the pixel's own light strata use u32::MAX + 1).
+const LATTICE_STREAM: u64 = u32::MAX as u64 + 2;
+/// Streams of the records made at sample positions: this plus the sample's number.
+const SAMPLE_STREAM: u64 = u32::MAX as u64 + 3;
+
+/// Where the prepass looks: a pixel, and the sample's position within it (None: its centre).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Site {
+    pub x: u32,
+    pub y: u32,
+    pub sample: Option<u32>,
+}
+
+/// What the prepass did.
+#[derive(Debug, Default)]
+pub struct PrepassOutcome {
+    /// Records made, per pixel (row-major), for the `ic_records` layer.
+    pub records_per_pixel: Vec<u32>,
+    /// Work per thread (thread i of every round adds to entry i).
+    pub threads: Vec<ThreadStats>,
+    pub rounds: usize,
+    pub sites: u64,
+    pub records: u64,
+    pub seconds: f64,
+}
+
+/// The coarsest stride for an image: `COARSEST_STRIDE`, or less so that the first lattice
+/// still has a few points along the shorter side.
+fn coarsest_stride(width: u32, height: u32) -> u32 {
+    let side = width.min(height).max(1);
+    let mut stride = COARSEST_STRIDE;
+    while stride > 1 && stride * 2 > side {
+        stride /= 2;
+    }
+    stride
+}
+
+/// The prepass's rounds of sites, coarse to fine. Every pixel centre appears exactly once;
+/// with `samples_apart` a last round holds every sample position of every pixel.
+pub fn rounds(width: u32, height: u32, samples: u32, samples_apart: bool) -> Vec<Vec<Site>> {
+    let centre = |x: u32, y: u32| Site { x, y, sample: None };
+    let lattice = |stride: u32, keep: &dyn Fn(u32, u32) -> bool| -> Vec<Site> {
+        let mut sites = Vec::new();
+        for j in 0..height.div_ceil(stride) {
+            for i in 0..width.div_ceil(stride) {
+                if keep(i, j) {
+                    sites.push(centre(i * stride, j * stride));
+                }
+            }
+        }
+        sites
+    };
+    let mut stride = coarsest_stride(width, height);
+    let mut out = vec![lattice(stride, &|_, _| true)];
+    while stride > 1 {
+        stride /= 2;
+        // In units of the new stride, the previous lattice is (even, even): first the centres
+        // of its squares (odd, odd), then the midpoints of their edges (odd, even), then
+        // (even, odd). Each kind is split four ways by the parity of (i / 2, j / 2), so that
+        // a round's sites lie at least 4 strides apart: neighbouring sites that both lack a
+        // record would each make one, where in successive rounds the first one's record
+        // covers the other (measured on the Cornell box at 128x128: 97 such duplicates of 791
+        // records with 2-stride spacing).
+        for (oi, oj) in [(1, 1), (1, 0), (0, 1)] {
+            for (pi, pj) in [(0, 0), (1, 1), (1, 0), (0, 1)] {
+                out.push(lattice(stride, &|i, j| {
+                    i % 2 == oi && j % 2 == oj && (i / 2) % 2 == pi && (j / 2) % 2 == pj
+                }));
+            }
+        }
+    }
+    if samples_apart {
+        let mut sites = Vec::with_capacity((width * height * samples) as usize);
+        for y in 0..height {
+            for x in 0..width {
+                sites.extend((0..samples).map(|s| Site { x, y, sample: Some(s) }));
+            }
+        }
+        out.push(sites);
+    }
+    out.retain(|r| !r.is_empty());
+    out
+}
+
+/// The primary ray through a site: the pixel's centre, or exactly the ray its sample takes
+/// in `render::render_pixel` (same stream, same jitter).
+fn site_ray(camera: &Camera, settings: &RenderSettings, site: Site) -> (glam::Vec3, glam::Vec3) {
+    match site.sample {
+        None => camera.ray(site.x as f32 + 0.5, site.y as f32 + 0.5),
+        Some(s) => {
+            let pixel = site.y as u64 * camera.width as u64 + site.x as u64;
+            let mut rng = Rng::for_sample(settings.seed, pixel, s as u64);
+            let (jx, jy) = pixel_offset(s, settings.spp.max(1), settings.jitter, &mut rng);
+            camera.ray(site.x as f32 + jx, site.y as f32 + jy)
+        }
+    }
+}
+
+/// Sites handed to a thread at a time.
+const CHUNK: usize = 16;
+
+/// Which of a round's sites a process computes (every process takes part in every round and
+/// ends it with the same records: see `run_shared`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Share {
+    /// Every site (one process).
+    All,
+    /// Sites `index`, `index + count`, `index + 2 count`, ... (one of `count` workers).
+    Slice { index: usize, count: usize },
+    /// None (an MPI master, which only gathers and hands out).
+    Nothing,
+}
+
+impl Share {
+    fn indices(self, sites: usize) -> Vec<u32> {
+        match self {
+            Share::All => (0..sites as u32).collect(),
+            Share::Slice { index, count } => (index..sites).step_by(count.max(1)).map(|i| i as u32).collect(),
+            Share::Nothing => Vec::new(),
+        }
+    }
+}
+
+/// A round's records, each with the index of the site it was made for, in site order.
+pub type RoundRecords = Vec<(u32, Record)>;
+
+/// Runs one round's `mine` sites on `threads` threads.
+fn run_round(
+    integrator: &Integrator<'_>,
+    cache: &IrradianceCache,
+    camera: &Camera,
+    settings: &RenderSettings,
+    sites: &[Site],
+    mine: &[u32],
+    stats: &mut [ThreadStats],
+) -> RoundRecords {
+    let next = AtomicUsize::new(0);
+    let made = Mutex::new(Vec::new());
+    std::thread::scope(|scope| {
+        for thread_stats in stats.iter_mut() {
+            let (next, made) = (&next, &made);
+            scope.spawn(move || {
+                let clock = ThreadClock::start();
+                let mut round = ThreadStats::default();
+                let mut records = Vec::new();
+                loop {
+                    let first = next.fetch_add(CHUNK, Ordering::Relaxed);
+                    if first >= mine.len() {
+                        break;
+                    }
+                    for &index in &mine[first..(first + CHUNK).min(mine.len())] {
+                        let site = sites[index as usize];
+                        let site = (index, site);
+                        site_records(integrator, cache, camera, settings, site, &mut round.rays, &mut records);
+                    }
+                }
+                clock.stop(&mut round);
+                made.lock().unwrap_or_else(|e| e.into_inner()).extend(records);
+                thread_stats.rays.add(&round.rays);
+                thread_stats.busy_s += round.busy_s;
+                thread_stats.cpu_s += round.cpu_s;
+            });
+        }
+    });
+    let mut made = made.into_inner().unwrap_or_else(|e| e.into_inner());
+    made.sort_by_key(|(index, _)| *index);
+    made
+}
+
+/// Adds the records a site needs (none when no diffuse surface on its eye path lacks one) to
+/// `records`, in the order the path reaches them.
+fn site_records(
+    integrator: &Integrator<'_>,
+    cache: &IrradianceCache,
+    camera: &Camera,
+    settings: &RenderSettings,
+    (index, site): (u32, Site),
+    counts: &mut RayCounts,
+    records: &mut RoundRecords,
+) {
+    let pixel = site.y as u64 * camera.width as u64 + site.x as u64;
+    let stream = match site.sample {
+        None => LATTICE_STREAM,
+        Some(s) => SAMPLE_STREAM + s as u64,
+    };
+    let mut rng = Rng::for_sample(settings.seed, pixel, stream);
+    let (origin, dir) = site_ray(camera, settings, site);
+    counts.pixel = pixel as u32;
+    for hit in integrator.record_sites(origin, dir, &mut rng, counts) {
+        counts.lookups += 1;
+        if cache.lookup(hit.position, hit.normal, 0).is_some() {
+            counts.hits += 1;
+            continue;
+        }
+        records.push((index, integrator.eye_record(cache, &hit, &mut rng, counts)));
+    }
+}
+
+/// Runs the whole prepass in this process into `integrator`'s cache (nothing to do without one).
+pub fn run(integrator: &Integrator<'_>, camera: &Camera, settings: &RenderSettings) -> PrepassOutcome {
+    run_shared(integrator, camera, settings, Share::All, &mut |mine| mine)
+}
+
+/// Runs the prepass as one of several processes: each round this process computes its `share`
+/// of the sites, `exchange` turns its records into the round's records from every process (in
+/// site order), and all of them join the cache in that order, so every process ends each
+/// round with the same cache as one process alone would.
+pub fn run_shared(
+    integrator: &Integrator<'_>,
+    camera: &Camera,
+    settings: &RenderSettings,
+    share: Share,
+    exchange: &mut dyn FnMut(RoundRecords) -> RoundRecords,
+) -> PrepassOutcome {
+    let start = Instant::now();
+    let mut outcome = PrepassOutcome {
+        records_per_pixel: vec![0; (camera.width * camera.height) as usize],
+        threads: vec![ThreadStats::default(); settings.threads.max(1)],
+        ..Default::default()
+    };
+    let Some(cache) = integrator.cache else {
+        return outcome;
+    };
+    if integrator.options.ambient_bounces == 0 {
+        return outcome;
+    }
+    let samples_apart = settings.spp > 1 || settings.jitter;
+    for sites in rounds(camera.width, camera.height, settings.spp.max(1), samples_apart) {
+        let mine = share.indices(sites.len());
+        let made = run_round(integrator, cache, camera, settings, &sites, &mine, &mut outcome.threads);
+        let mut made = exchange(made);
+        made.sort_by_key(|(index, _)| *index);
+        for (index, record) in made {
+            let Some(&site) = sites.get(index as usize) else {
+                continue;
+            };
+            // A record another of this round's sites made first would have served this one:
+            // the price of computing a round's records side by side.
+            if cache.lookup(record.position, record.normal, 0).is_some() {
+                outcome.threads[0].rays.duplicates += 1;
+            }
+            outcome.records_per_pixel[(site.y * camera.width + site.x) as usize] += 1;
+            outcome.records += 1;
+            cache.insert(record);
+        }
+        outcome.sites += sites.len() as u64;
+        outcome.rounds += 1;
+    }
+    outcome.seconds = start.elapsed().as_secs_f64();
+    outcome
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_pixel_centre_is_visited_once_coarse_to_fine() {
+        for (w, h) in [(67, 45), (256, 256), (1, 1), (3, 200), (100, 2)] {
+            let rounds = rounds(w, h, 1, false);
+            let mut seen = vec![0u32; (w * h) as usize];
+            for site in rounds.iter().flatten() {
+                assert_eq!(site.sample, None);
+                seen[(site.y * w + site.x) as usize] += 1;
+            }
+            assert!(seen.iter().all(|&c| c == 1), "{w}x{h}");
+            // The first round is a sparse lattice: never more than one site per 4 pixels
+            // unless the image is too small for one.
+            if w.min(h) >= 4 {
+                assert!(rounds[0].len() * 4 <= (w * h) as usize, "{w}x{h}: {}", rounds[0].len());
+            }
+        }
+    }
+
+    #[test]
+    fn each_round_fills_the_gaps_of_the_rounds_before() {
+        // After the round at stride s, every pixel is within s of a visited site (Chebyshev).
+        let (w, h) = (64u32, 64u32);
+        let rounds = rounds(w, h, 1, false);
+        let mut visited: Vec<Site> = Vec::new();
+        let mut stride = coarsest_stride(w, h);
+        // The first round, then twelve at each halving of the stride (three kinds of site,
+        // each split four ways).
+        for (k, round) in rounds.iter().enumerate() {
+            visited.extend(round);
+            if k == 0 || k % 12 != 0 {
+                continue;
+            }
+            stride /= 2;
+            for y in 0..h {
+                for x in 0..w {
+                    let nearest = visited
+                        .iter()
+                        .map(|s| s.x.abs_diff(x).max(s.y.abs_diff(y)))
+                        .min()
+                        .unwrap();
+                    assert!(nearest < 2 * stride, "round {k}: ({x}, {y}) is {nearest} from a site");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn several_samples_get_a_round_of_their_own() {
+        let rounds = rounds(5, 4, 4, true);
+        let last = rounds.last().unwrap();
+        assert_eq!(last.len(), 5 * 4 * 4);
+        assert!(last.iter().all(|s| s.sample.is_some()));
+    }
+}
