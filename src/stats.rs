@@ -142,6 +142,9 @@ pub struct RenderStats {
     pub prepass_rounds: u64,
     pub prepass_sites: u64,
     pub prepass_records: u64,
+    /// Pixels whose every sample the prepass visited (edges; the others' samples share their
+    /// centre's records).
+    pub prepass_pixels_sampled: u64,
     /// Records pixels had to make after the prepass, each for its own use (a gap it left).
     pub gap_records: u64,
     pub triangles: usize,
@@ -199,6 +202,7 @@ impl RenderStats {
         self.prepass_rounds = prepass.rounds as u64;
         self.prepass_sites = prepass.sites;
         self.prepass_records = prepass.records;
+        self.prepass_pixels_sampled = prepass.pixels_sampled;
     }
 
     pub fn add_threads(&mut self, threads: &[ThreadStats]) {
