@@ -71,9 +71,10 @@ SCENES = {
         "size": (320, 240), "ab": 2,
         "icrender": [
             "-aa 0.3 -ad 32 -as 8 -ar 16 --spp 4 --light-samples 1 --emission-samples 128",
-            "-aa 0.3 -ad 64 -as 16 -ar 16 --spp 4 --light-samples 1 --emission-samples 256",
+            "-aa 0.3 -ad 64 -as 16 -ar 32 --spp 4 --light-samples 1 --emission-samples 256",
             "-aa 0.2 -ad 128 -as 32 -ar 32 --spp 8 --light-samples 1 --emission-samples 256",
             "-aa 0.15 -ad 256 -as 64 -ar 32 --spp 16 --light-samples 1 --emission-samples 256",
+            "-aa 0.1 -ad 512 -as 128 -ar 64 --spp 16 --light-samples 2 --emission-samples 256",
         ],
         "reference_seconds": 300,
         # The glTF has no camera: icrender's automatic view down the room, and a view from a
@@ -86,9 +87,10 @@ SCENES = {
         "size": (320, 240), "ab": 2,
         "icrender": [
             "-aa 0.3 -ad 32 -as 8 -ar 16 --spp 4",
-            "-aa 0.3 -ad 64 -as 16 -ar 16 --spp 4",
+            "-aa 0.3 -ad 64 -as 16 -ar 32 --spp 4",
             "-aa 0.2 -ad 128 -as 32 -ar 32 --spp 8",
             "-aa 0.15 -ad 256 -as 64 -ar 32 --spp 16",
+            "-aa 0.1 -ad 512 -as 128 -ar 64 --spp 16",
         ],
         "reference_seconds": 300,
         "views": {"default": []},

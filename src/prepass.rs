@@ -16,6 +16,7 @@
 //! same whatever the number of threads and the tile size.
 
 use crate::irradiance::IrradianceCache;
+use crate::irradiance::index::FrozenIndex;
 use crate::irradiance::record::Record;
 use crate::render::{RenderSettings, ThreadClock, ThreadStats, pixel_offset};
 use crate::sampling::Rng;
@@ -137,12 +138,20 @@ fn same_plane(a: &SurfaceHit, b: &SurfaceHit) -> bool {
     a.normal.dot(b.normal) > 0.99 && offset.dot(a.normal).abs() <= 0.02 * offset.length()
 }
 
-/// The pixels whose samples may need records their centres did not: those whose corners'
-/// eye paths do not reach the planes the centre's reaches (a silhouette, a crease, a small
-/// object within the pixel). Inside a surface a pixel's samples land near its centre, on the
-/// same plane, where the centre's records serve them. Computed alike by every process from
-/// the geometry alone (five rays a pixel, no lookups).
-fn pixels_needing_samples(integrator: &Integrator<'_>, camera: &Camera, stats: &mut [ThreadStats]) -> Vec<bool> {
+/// The pixels whose samples may need records the centres' did not make, once every centre
+/// has its records: those with a corner whose eye path reaches a diffuse surface no record
+/// covers yet (between centres, or seen in a mirror from farther apart), or reaches other
+/// planes than the centre's (a silhouette, a crease, a small object within the pixel). Inside
+/// a covered surface a pixel's samples land between its covered corners, where the records
+/// serve them. Every process computes it alike from the geometry and the cache it holds (five
+/// eye paths a pixel, a lookup at each corner).
+fn pixels_needing_samples(pass: Pass<'_, '_>, snapshot: &FrozenIndex, stats: &mut [ThreadStats]) -> Vec<bool> {
+    let Pass {
+        integrator,
+        cache,
+        camera,
+        ..
+    } = pass;
     let (width, height) = (camera.width, camera.height);
     let sites_at = |x: f32, y: f32, counts: &mut RayCounts| {
         let (origin, dir) = camera.ray(x, y);
@@ -150,6 +159,7 @@ fn pixels_needing_samples(integrator: &Integrator<'_>, camera: &Camera, stats: &
         let mut rng = Rng::new(0, ((y as u64) << 32) | x.to_bits() as u64);
         integrator.record_sites(origin, dir, &mut rng, counts)
     };
+    let covered = |hits: &[SurfaceHit]| hits.iter().all(|h| cache.covered_in(snapshot, h.position, h.normal, 0));
     let rows = AtomicUsize::new(0);
     let needs = Mutex::new(vec![false; (width * height) as usize]);
     std::thread::scope(|scope| {
@@ -163,16 +173,23 @@ fn pixels_needing_samples(integrator: &Integrator<'_>, camera: &Camera, stats: &
                     if y >= height {
                         break;
                     }
-                    let corners = |y: u32, counts: &mut RayCounts| -> Vec<Vec<SurfaceHit>> {
-                        (0..=width).map(|x| sites_at(x as f32, y as f32, counts)).collect()
+                    // Each corner's hits, and whether records cover them all.
+                    let corners = |y: u32, counts: &mut RayCounts| -> Vec<(Vec<SurfaceHit>, bool)> {
+                        (0..=width)
+                            .map(|x| {
+                                let hits = sites_at(x as f32, y as f32, counts);
+                                let ok = covered(&hits);
+                                (hits, ok)
+                            })
+                            .collect()
                     };
                     let (top, bottom) = (corners(y, &mut mine.rays), corners(y + 1, &mut mine.rays));
                     let row: Vec<bool> = (0..width)
                         .map(|x| {
                             let centre = sites_at(x as f32 + 0.5, y as f32 + 0.5, &mut mine.rays);
                             let (x, i) = (x as usize, x as usize + 1);
-                            [&top[x], &top[i], &bottom[x], &bottom[i]].iter().any(|corner| {
-                                corner.len() != centre.len()
+                            [&top[x], &top[i], &bottom[x], &bottom[i]].iter().any(|(corner, ok)| {
+                                !ok || corner.len() != centre.len()
                                     || corner.iter().zip(&centre).any(|(a, b)| !same_plane(b, a))
                             })
                         })
@@ -233,14 +250,22 @@ impl Share {
 /// A round's records, each with the index of the site it was made for, in site order.
 pub type RoundRecords = Vec<(u32, Record)>;
 
-/// Runs one round's `mine` sites on `threads` threads.
+/// What the work at every site needs.
+#[derive(Clone, Copy)]
+struct Pass<'a, 'b> {
+    integrator: &'a Integrator<'b>,
+    cache: &'a IrradianceCache,
+    camera: &'a Camera,
+    settings: &'a RenderSettings,
+}
+
+/// Runs one round's `mine` sites on one thread per entry of `stats`, looking records up in
+/// `snapshot` (the cache as the round began).
 fn run_round(
-    integrator: &Integrator<'_>,
-    cache: &IrradianceCache,
-    camera: &Camera,
-    settings: &RenderSettings,
+    pass: Pass<'_, '_>,
     sites: &[Site],
     mine: &[u32],
+    snapshot: &FrozenIndex,
     stats: &mut [ThreadStats],
 ) -> RoundRecords {
     let next = AtomicUsize::new(0);
@@ -258,9 +283,8 @@ fn run_round(
                         break;
                     }
                     for &index in &mine[first..(first + CHUNK).min(mine.len())] {
-                        let site = sites[index as usize];
-                        let site = (index, site);
-                        site_records(integrator, cache, camera, settings, site, &mut round.rays, &mut records);
+                        let site = (index, sites[index as usize]);
+                        site_records(pass, snapshot, site, &mut round.rays, &mut records);
                     }
                 }
                 clock.stop(&mut round);
@@ -279,14 +303,18 @@ fn run_round(
 /// Adds the records a site needs (none when no diffuse surface on its eye path lacks one) to
 /// `records`, in the order the path reaches them.
 fn site_records(
-    integrator: &Integrator<'_>,
-    cache: &IrradianceCache,
-    camera: &Camera,
-    settings: &RenderSettings,
+    pass: Pass<'_, '_>,
+    snapshot: &FrozenIndex,
     (index, site): (u32, Site),
     counts: &mut RayCounts,
     records: &mut RoundRecords,
 ) {
+    let Pass {
+        integrator,
+        cache,
+        camera,
+        settings,
+    } = pass;
     let pixel = site.y as u64 * camera.width as u64 + site.x as u64;
     let stream = match site.sample {
         None => LATTICE_STREAM,
@@ -297,7 +325,7 @@ fn site_records(
     counts.pixel = pixel as u32;
     for hit in integrator.record_sites(origin, dir, &mut rng, counts) {
         counts.lookups += 1;
-        if cache.lookup(hit.position, hit.normal, 0).is_some() {
+        if cache.covered_in(snapshot, hit.position, hit.normal, 0) {
             counts.hits += 1;
             continue;
         }
@@ -333,15 +361,17 @@ pub fn run_shared(
     if integrator.options.ambient_bounces == 0 {
         return outcome;
     }
-    let mut all = rounds(camera.width, camera.height);
-    if settings.spp > 1 || settings.jitter {
-        let needs = pixels_needing_samples(integrator, camera, &mut outcome.threads);
-        outcome.pixels_sampled = needs.iter().filter(|&&n| n).count() as u64;
-        all.extend(sample_rounds(camera.width, camera.height, settings.spp, &needs));
-    }
-    for sites in all {
+    let pass = Pass {
+        integrator,
+        cache,
+        camera,
+        settings,
+    };
+    // The rounds look records up in a lock-free copy of the cache, which grows with it.
+    let mut snapshot = cache.snapshot();
+    let mut run = |sites: Vec<Site>, snapshot: &mut FrozenIndex, outcome: &mut PrepassOutcome| {
         let mine = share.indices(sites.len());
-        let made = run_round(integrator, cache, camera, settings, &sites, &mine, &mut outcome.threads);
+        let made = run_round(pass, &sites, &mine, snapshot, &mut outcome.threads);
         let mut made = exchange(made);
         made.sort_by_key(|(index, _)| *index);
         for (index, record) in made {
@@ -350,15 +380,26 @@ pub fn run_shared(
             };
             // A record another of this round's sites made first would have served this one:
             // the price of computing a round's records side by side.
-            if cache.lookup(record.position, record.normal, 0).is_some() {
+            if cache.covered_in(snapshot, record.position, record.normal, 0) {
                 outcome.threads[0].rays.duplicates += 1;
             }
+            snapshot.push(record.clone());
             outcome.records_per_pixel[(site.y * camera.width + site.x) as usize] += 1;
             outcome.records += 1;
             cache.insert(record);
         }
         outcome.sites += sites.len() as u64;
         outcome.rounds += 1;
+    };
+    for sites in rounds(camera.width, camera.height) {
+        run(sites, &mut snapshot, &mut outcome);
+    }
+    if settings.spp > 1 || settings.jitter {
+        let needs = pixels_needing_samples(pass, &snapshot, &mut outcome.threads);
+        outcome.pixels_sampled = needs.iter().filter(|&&n| n).count() as u64;
+        for sites in sample_rounds(camera.width, camera.height, settings.spp, &needs) {
+            run(sites, &mut snapshot, &mut outcome);
+        }
     }
     outcome.seconds = start.elapsed().as_secs_f64();
     outcome

@@ -3,7 +3,7 @@
 //! irradiance nearby: its gradients over translation and rotation, the Hessian that sets the
 //! record's radii, Ward's harmonic mean distance, and the horizon for the leak test.
 
-use super::record::HORIZON_SECTORS;
+use super::record::{HORIZON_SECTORS, sector};
 use crate::scene::light::luminance;
 use glam::Vec3;
 use std::f32::consts::{PI, TAU};
@@ -220,9 +220,7 @@ impl Hemisphere {
                 continue;
             }
             let tangential = s.direction - self.normal * cos;
-            let angle = tangential.dot(v_axis).atan2(tangential.dot(u_axis));
-            let turn = (angle / TAU).rem_euclid(1.0);
-            let sector = ((turn * HORIZON_SECTORS as f32) as usize).min(HORIZON_SECTORS - 1);
+            let sector = sector(tangential.dot(u_axis), tangential.dot(v_axis));
             horizon[sector] = horizon[sector].min(s.distance * tangential.length());
         }
         horizon

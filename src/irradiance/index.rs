@@ -49,6 +49,21 @@ impl Hasher for CellHasher {
 
 type CellMap = HashMap<CellKey, Vec<Record>, BuildHasherDefault<CellHasher>>;
 
+/// The level whose cells (base x 2^level wide) are at least twice `reach`.
+fn level_for(base_cell: f32, reach: f32) -> u32 {
+    let ratio = (2.0 * reach / base_cell).max(1.0);
+    (ratio.log2().ceil() as u32).min(MAX_LEVELS - 1)
+}
+
+fn cell_size(base_cell: f32, level: u32) -> f32 {
+    base_cell * (1u64 << level) as f32
+}
+
+fn cell_of(p: Vec3, size: f32) -> (i64, i64, i64) {
+    let c = (p / size).floor();
+    (c.x as i64, c.y as i64, c.z as i64)
+}
+
 pub struct RecordIndex {
     base_cell: f32,
     shards: Vec<RwLock<CellMap>>,
@@ -85,17 +100,15 @@ impl RecordIndex {
     }
 
     fn level_for(&self, reach: f32) -> u32 {
-        let ratio = (2.0 * reach / self.base_cell).max(1.0);
-        (ratio.log2().ceil() as u32).min(MAX_LEVELS - 1)
+        level_for(self.base_cell, reach)
     }
 
     fn cell_size(&self, level: u32) -> f32 {
-        self.base_cell * (1u64 << level) as f32
+        cell_size(self.base_cell, level)
     }
 
     fn cell_of(&self, p: Vec3, size: f32) -> (i64, i64, i64) {
-        let c = (p / size).floor();
-        (c.x as i64, c.y as i64, c.z as i64)
+        cell_of(p, size)
     }
 
     pub fn len(&self) -> usize {
@@ -160,6 +173,26 @@ impl RecordIndex {
         }
     }
 
+    /// The read-only copy of this index a complete cache is looked up in (see `FrozenIndex`),
+    /// its records in a canonical order (by their bits), so every process that holds the same
+    /// records sums them in the same order, whatever order they arrived in.
+    pub fn frozen(&self) -> FrozenIndex {
+        let mut records = self.all();
+        let key = |r: &Record| [r.position, r.normal, r.value].map(|v| v.to_array().map(f32::to_bits));
+        records.sort_by_key(key);
+        let mut frozen = FrozenIndex::empty(self.base_cell);
+        records.into_iter().for_each(|r| frozen.push(r));
+        frozen
+    }
+
+    /// A read-only copy in no particular order, for lookups whose answer is only whether a
+    /// record covers the point (the prepass's), extended with `FrozenIndex::push`.
+    pub fn snapshot(&self) -> FrozenIndex {
+        let mut frozen = FrozenIndex::empty(self.base_cell);
+        self.all().into_iter().for_each(|r| frozen.push(r));
+        frozen
+    }
+
     /// Every record, in no particular order.
     pub fn all(&self) -> Vec<Record> {
         let mut out = Vec::with_capacity(self.len());
@@ -170,6 +203,72 @@ impl RecordIndex {
             }
         }
         out
+    }
+}
+
+type FrozenCells = HashMap<CellKey, Vec<u32>, BuildHasherDefault<CellHasher>>;
+
+/// A copy of a `RecordIndex` for reading without locks (see `RecordIndex::frozen`): the same
+/// levels, but each record listed in every cell of its level its reach overlaps (at most 8),
+/// so a query visits one cell per occupied level instead of eight.
+pub struct FrozenIndex {
+    base_cell: f32,
+    occupied_levels: u64,
+    cells: FrozenCells,
+    records: Vec<Record>,
+}
+
+impl FrozenIndex {
+    fn empty(base_cell: f32) -> FrozenIndex {
+        FrozenIndex {
+            base_cell,
+            occupied_levels: 0,
+            cells: FrozenCells::default(),
+            records: Vec::new(),
+        }
+    }
+
+    /// Adds a record (the levels and cells are `RecordIndex`'s).
+    pub fn push(&mut self, record: Record) {
+        let level = level_for(self.base_cell, record.reach());
+        let size = cell_size(self.base_cell, level);
+        let reach = Vec3::splat(record.reach());
+        let (lo, hi) = (
+            cell_of(record.position - reach, size),
+            cell_of(record.position + reach, size),
+        );
+        let index = self.records.len() as u32;
+        for x in lo.0..=hi.0 {
+            for y in lo.1..=hi.1 {
+                for z in lo.2..=hi.2 {
+                    self.cells.entry((level, x, y, z)).or_default().push(index);
+                }
+            }
+        }
+        self.occupied_levels |= 1 << level;
+        self.records.push(record);
+    }
+
+    pub fn len(&self) -> usize {
+        self.records.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.records.is_empty()
+    }
+
+    /// Calls `visit` for every record whose reach may cover `p` (a superset, as
+    /// `RecordIndex::for_each_near`), each once.
+    pub fn for_each_near(&self, p: Vec3, mut visit: impl FnMut(&Record)) {
+        let mut levels = self.occupied_levels;
+        while levels != 0 {
+            let level = levels.trailing_zeros();
+            levels &= levels - 1;
+            let (x, y, z) = cell_of(p, cell_size(self.base_cell, level));
+            if let Some(list) = self.cells.get(&(level, x, y, z)) {
+                list.iter().for_each(|&i| visit(&self.records[i as usize]));
+            }
+        }
     }
 }
 
@@ -205,6 +304,48 @@ mod tests {
             });
             assert_eq!(found, expected);
         }
+    }
+
+    #[test]
+    fn the_frozen_index_finds_the_same_records_once_each() {
+        let index = RecordIndex::new(0.01);
+        let mut rng = Rng::new(5, 6);
+        for _ in 0..2000 {
+            let mut r = flat_record(rng.next_f32(), 0.01 + 0.5 * rng.next_f32().powi(3));
+            r.position = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 4.0 - 2.0;
+            index.insert(r);
+        }
+        let frozen = index.frozen();
+        assert_eq!(frozen.len(), 2000);
+        let key = |r: &Record| r.position.to_array().map(f32::to_bits);
+        for _ in 0..500 {
+            let p = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 4.0 - 2.0;
+            let (mut live, mut frozen_found) = (Vec::new(), Vec::new());
+            index.for_each_near(p, |r| {
+                if (r.position - p).length() <= r.reach() {
+                    live.push(key(r));
+                }
+            });
+            frozen.for_each_near(p, |r| {
+                if (r.position - p).length() <= r.reach() {
+                    frozen_found.push(key(r));
+                }
+            });
+            // No record twice, and the same set.
+            let mut unique = frozen_found.clone();
+            unique.sort();
+            unique.dedup();
+            assert_eq!(unique.len(), frozen_found.len());
+            live.sort();
+            assert_eq!(live, unique);
+        }
+        // The same records inserted in another order freeze to the same listing.
+        let again = RecordIndex::new(0.01);
+        let mut all = index.all();
+        all.reverse();
+        all.into_iter().for_each(|r| again.insert(r));
+        let (a, b) = (index.frozen(), again.frozen());
+        assert!(a.records == b.records);
     }
 
     #[test]

@@ -47,6 +47,19 @@ pub enum Metric {
 const MIN_EXTRAPOLATION: f32 = 0.5;
 const MAX_EXTRAPOLATION: f32 = 1.5;
 
+/// The sector (of `HORIZON_SECTORS`, counter-clockwise from the u axis) of the tangent-plane
+/// direction (u, v): the octant of its angle, found by comparisons instead of an arctangent
+/// (every lookup asks it of every record it weighs).
+pub fn sector(u: f32, v: f32) -> usize {
+    let (au, av) = (u.abs(), v.abs());
+    match (v >= 0.0, u > 0.0, u < 0.0) {
+        (true, true, _) => usize::from(av >= au),
+        (true, false, _) => 2 + usize::from(av <= au),
+        (false, _, true) => 4 + usize::from(av >= au),
+        (false, _, false) => 6 + usize::from(av <= au),
+    }
+}
+
 /// Largest angle between a record's normal and a query's under the Hessian metric.
 pub fn max_normal_deviation(accuracy: f32) -> f32 {
     (std::f32::consts::SQRT_2 * accuracy).min(std::f32::consts::FRAC_PI_4)
@@ -76,9 +89,7 @@ impl Record {
     }
 
     fn sector_of(&self, tangent_offset: Vec3) -> usize {
-        let angle = tangent_offset.dot(self.v_axis()).atan2(tangent_offset.dot(self.u_axis));
-        let turn = (angle / std::f32::consts::TAU).rem_euclid(1.0);
-        ((turn * HORIZON_SECTORS as f32) as usize).min(HORIZON_SECTORS - 1)
+        sector(tangent_offset.dot(self.u_axis), tangent_offset.dot(self.v_axis()))
     }
 
     /// Weight of this record at a query point with unit normal `normal` (None when it may not
@@ -98,23 +109,24 @@ impl Record {
         if along < -0.05 * self.radii[0].min(self.radii[1]) || cos_normals <= 0.0 {
             return None;
         }
-        if distance > self.horizon[self.sector_of(tangent_offset)] {
-            return None;
-        }
+        // The leak test last: most records a lookup weighs fail the cheaper bounds first.
+        let unblocked = |weight: f32| (distance <= self.horizon[self.sector_of(tangent_offset)]).then_some(weight);
         match metric {
             Metric::Hessian => {
-                let max_angle = max_normal_deviation(accuracy);
-                let angle = cos_normals.acos();
-                if angle >= max_angle {
-                    return None;
-                }
+                // The ellipse first, the angle (an arccosine) only for records inside it.
                 let du = tangent_offset.dot(self.u_axis) / self.radii[0];
                 let dv = tangent_offset.dot(self.v_axis()) / self.radii[1];
                 let t2 = du * du + dv * dv;
                 if t2.is_nan() || t2 >= 1.0 {
                     return None;
                 }
-                Some((1.0 - t2.sqrt()) * (1.0 - angle / max_angle))
+                let max_angle = max_normal_deviation(accuracy);
+                // Parallel normals (a flat surface) need no arccosine.
+                let angle = if cos_normals >= 1.0 { 0.0 } else { cos_normals.acos() };
+                if angle >= max_angle {
+                    return None;
+                }
+                unblocked((1.0 - t2.sqrt()) * (1.0 - angle / max_angle))
             }
             Metric::Ward88 => {
                 let error = offset.length() / self.harmonic_distance + (1.0 - cos_normals).max(0.0).sqrt();
@@ -123,6 +135,7 @@ impl Record {
                 (error < accuracy)
                     .then(|| 1.0 / error.max(1e-6) - 1.0 / accuracy)
                     .filter(|w| *w > 0.0)
+                    .and_then(unblocked)
             }
         }
     }
@@ -193,6 +206,25 @@ pub(crate) mod tests {
             r.weight_at(Vec3::new(-0.5, 0.01, 0.0), Vec3::Z, 0, Metric::Hessian, 0.2)
                 .is_some()
         );
+    }
+
+    #[test]
+    fn sectors_are_the_octants_of_the_angle() {
+        let mut rng = crate::sampling::Rng::new(7, 7);
+        for _ in 0..100_000 {
+            let (u, v) = (rng.next_f32() * 2.0 - 1.0, rng.next_f32() * 2.0 - 1.0);
+            let turn = (v.atan2(u) / std::f32::consts::TAU).rem_euclid(1.0);
+            let by_angle = ((turn * HORIZON_SECTORS as f32) as usize).min(HORIZON_SECTORS - 1);
+            // Away from the boundaries (where rounding may fall either way) they agree.
+            let near_boundary = (turn * 8.0 - (turn * 8.0).round()).abs() < 1e-4;
+            if !near_boundary {
+                assert_eq!(sector(u, v), by_angle, "({u}, {v})");
+            }
+        }
+        assert_eq!(sector(1.0, 0.0), 0);
+        assert_eq!(sector(0.0, 1.0), 2);
+        assert_eq!(sector(-1.0, 0.0), 3);
+        assert_eq!(sector(0.0, -1.0), 6);
     }
 
     #[test]

@@ -471,7 +471,9 @@ impl<'a> Integrator<'a> {
         }
         if has_diffuse {
             c.indirect = match self.defer {
-                Some(sink) if state.level == 0 && state.level < self.options.ambient_bounces => {
+                // After a prepass the PR's cache is complete: a gap's record is made here, from
+                // the pixel's own random stream, as every other mode makes it.
+                Some(sink) if state.level == 0 && state.level < self.options.ambient_bounces && !self.frozen => {
                     self.cached_or_requested(sink, hit, dir, surface, state, counts)
                 }
                 _ => surface.diffuse * self.ambient_radiance(hit, state, rng, counts),
