@@ -70,38 +70,58 @@ fn coarsest_stride(width: u32, height: u32) -> u32 {
     stride
 }
 
-/// The prepass's rounds of pixel centres, coarse to fine: every pixel centre exactly once.
+/// The pixel a level's cell (i, j) is visited at: a fixed pseudo-random one in the cell (cells
+/// `stride` pixels wide, cut by the image's edge), so that the records of no level line up
+/// with a grid of the image. Records made at the corners of a regular lattice do: the
+/// interpolated light then varies with the lattice's period, and a tile grid of the same
+/// period shows it at its borders (ceiling room, 32-pixel tiles: seam ratio 1.35).
+fn cell_site(i: u32, j: u32, stride: u32, width: u32, height: u32) -> Site {
+    let mut h = (u64::from(i) << 32 | u64::from(j)) ^ u64::from(stride).wrapping_mul(0x9e37_79b9_7f4a_7c15);
+    h = (h ^ (h >> 31)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    h = (h ^ (h >> 29)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    h ^= h >> 32;
+    let x = (i * stride + (h as u32) % stride).min(width - 1);
+    let y = (j * stride + ((h >> 32) as u32) % stride).min(height - 1);
+    Site { x, y, sample: None }
+}
+
+/// The prepass's rounds of pixel centres, coarse to fine: one site in every cell of a grid of
+/// `coarsest_stride` pixels, then of half that, down to 2, then every pixel. Each level is split
+/// into 9 rounds by the cells' positions modulo 3, so that a round's sites lie at least two
+/// cells apart: neighbouring sites that both lack a record would each make one, where in
+/// successive rounds the first one's record covers the other (Cornell box 128x128: 97
+/// duplicates of 791 records with sites 2 strides apart, 10 with 4). Every pixel centre is a
+/// site at least once.
 pub fn rounds(width: u32, height: u32) -> Vec<Vec<Site>> {
-    let centre = |x: u32, y: u32| Site { x, y, sample: None };
-    let lattice = |stride: u32, keep: &dyn Fn(u32, u32) -> bool| -> Vec<Site> {
-        let mut sites = Vec::new();
-        for j in 0..height.div_ceil(stride) {
-            for i in 0..width.div_ceil(stride) {
-                if keep(i, j) {
-                    sites.push(centre(i * stride, j * stride));
+    if width == 0 || height == 0 {
+        return Vec::new();
+    }
+    let mut out = Vec::new();
+    let mut stride = coarsest_stride(width, height);
+    let classes: Vec<(u32, u32)> = (0..9).map(|k| (k % 3, k / 3)).collect();
+    loop {
+        let (columns, rows) = (width.div_ceil(stride), height.div_ceil(stride));
+        for &(ci, cj) in &classes {
+            let mut sites = Vec::new();
+            for j in (cj..rows).step_by(3) {
+                for i in (ci..columns).step_by(3) {
+                    sites.push(if stride == 1 {
+                        Site {
+                            x: i,
+                            y: j,
+                            sample: None,
+                        }
+                    } else {
+                        cell_site(i, j, stride, width, height)
+                    });
                 }
             }
+            out.push(sites);
         }
-        sites
-    };
-    let mut stride = coarsest_stride(width, height);
-    let mut out = vec![lattice(stride, &|_, _| true)];
-    while stride > 1 {
+        if stride == 1 {
+            break;
+        }
         stride /= 2;
-        // In units of the new stride, the previous lattice is (even, even): first the centres
-        // of its squares (odd, odd), then the midpoints of their edges (odd, even), then
-        // (even, odd). Each kind is split four ways by the parity of (i / 2, j / 2), so that
-        // a round's sites lie at least 4 strides apart: neighbouring sites that both lack a
-        // record would each make one, where in successive rounds the first one's record
-        // covers the other (measured on the Cornell box at 128x128: 97 such duplicates of 791
-        // records with 2-stride spacing).
-        for (oi, oj) in [(1, 1), (1, 0), (0, 1)] {
-            for (pi, pj) in [(0, 0), (1, 1), (1, 0), (0, 1)] {
-                out.push(lattice(stride, &|i, j| {
-                    i % 2 == oi && j % 2 == oj && (i / 2) % 2 == pi && (j / 2) % 2 == pj
-                }));
-            }
-        }
     }
     out.retain(|r| !r.is_empty());
     out
@@ -410,38 +430,34 @@ mod tests {
     use super::*;
 
     #[test]
-    fn every_pixel_centre_is_visited_once_coarse_to_fine() {
+    fn every_pixel_centre_is_visited_coarse_to_fine() {
         for (w, h) in [(67, 45), (256, 256), (1, 1), (3, 200), (100, 2)] {
             let rounds = rounds(w, h);
             let mut seen = vec![0u32; (w * h) as usize];
             for site in rounds.iter().flatten() {
                 assert_eq!(site.sample, None);
+                assert!(site.x < w && site.y < h);
                 seen[(site.y * w + site.x) as usize] += 1;
             }
-            assert!(seen.iter().all(|&c| c == 1), "{w}x{h}");
-            // The first round is a sparse lattice: never more than one site per 4 pixels
-            // unless the image is too small for one.
-            if w.min(h) >= 4 {
-                assert!(rounds[0].len() * 4 <= (w * h) as usize, "{w}x{h}: {}", rounds[0].len());
-            }
+            // Every pixel at full resolution, some again on coarser levels.
+            assert!(seen.iter().all(|&c| c >= 1), "{w}x{h}");
+            let coarse: usize = rounds.iter().map(|r| r.len()).sum::<usize>() - (w * h) as usize;
+            assert!(coarse * 2 <= (w * h) as usize + 9, "{w}x{h}: {coarse} coarse sites");
         }
     }
 
     #[test]
-    fn each_round_fills_the_gaps_of_the_rounds_before() {
-        // After the round at stride s, every pixel is within s of a visited site (Chebyshev).
+    fn each_level_fills_the_gaps_of_the_levels_before_and_no_grid_lines_up() {
         let (w, h) = (64u32, 64u32);
         let rounds = rounds(w, h);
         let mut visited: Vec<Site> = Vec::new();
         let mut stride = coarsest_stride(w, h);
-        // The first round, then twelve at each halving of the stride (three kinds of site,
-        // each split four ways).
+        // Nine rounds a level: after each level every pixel is within 2 strides of a site.
         for (k, round) in rounds.iter().enumerate() {
             visited.extend(round);
-            if k == 0 || k % 12 != 0 {
+            if (k + 1) % 9 != 0 {
                 continue;
             }
-            stride /= 2;
             for y in 0..h {
                 for x in 0..w {
                     let nearest = visited
@@ -451,6 +467,28 @@ mod tests {
                         .unwrap();
                     assert!(nearest < 2 * stride, "round {k}: ({x}, {y}) is {nearest} from a site");
                 }
+            }
+            // Within a round, sites lie at least two cells apart.
+            for r in &rounds[k + 1 - 9..=k] {
+                for (i, a) in r.iter().enumerate() {
+                    for b in &r[i + 1..] {
+                        assert!(a.x.abs_diff(b.x).max(a.y.abs_diff(b.y)) > stride, "{a:?} {b:?}");
+                    }
+                }
+            }
+            // The coarse levels' sites are not on the multiples of any power of two.
+            if stride >= 4 {
+                let level = &visited[visited.len() - (w.div_ceil(stride) * h.div_ceil(stride)) as usize..];
+                for period in [2u32, 4, 8, 16, 32] {
+                    let on_grid = level.iter().filter(|s| s.x % period == 0 && s.y % period == 0).count();
+                    assert!(
+                        on_grid * 2 < level.len().max(2),
+                        "stride {stride}: {on_grid} sites on the {period}-grid"
+                    );
+                }
+            }
+            if stride > 1 {
+                stride /= 2;
             }
         }
     }

@@ -108,8 +108,10 @@ fn the_prepass_leaves_no_tile_seams_where_progressive_records_do() {
         &LOOK_UP[..],
     ]
     .concat();
-    // Measured: progressive 5.8 / 11.2 / 9.0, prepass 0.95 / 0.94 / 1.09 at these tiles.
-    for tile in ["8x8", "16x16", "32x32"] {
+    // Not 32x32: on this 96-pixel view its borders fall on the edges of the lamp's shadow on
+    // the ceiling, which a converged brute-force render, blurred of its noise, reads as 1.24.
+    // Measured: progressive 5.1 / 10.1 / 8.8, prepass 1.04 / 1.12 / 1.17 at these tiles.
+    for tile in ["8x8", "16x16", "24x24"] {
         let args = [&common[..], &["--tile", tile]].concat();
         render_to(dir.path(), &scene, "prepass", &args);
         let ratio = seams(&dir.path().join("prepass.exr"), tile);

@@ -238,6 +238,11 @@ fn the_prepass_gives_every_mode_the_serial_image() {
         // Every record is made once, by one worker; afterwards only the same gaps' records.
         assert_eq!(u(s, "gap_records"), gaps, "{name}");
         assert_eq!(u(s, "records_computed"), records + gaps, "{name}");
+        // The prepass's messages are in the ranks' books, and the books balance.
+        let ranks = s["per_rank"].as_array().unwrap();
+        let total = |key: &str| ranks.iter().map(|r| u(r, key)).sum::<u64>();
+        assert_eq!(total("messages"), total("messages_received"), "{name}: messages");
+        assert_eq!(total("bytes"), total("bytes_received"), "{name}: bytes");
         let (a, b) = (rgb(&run.image, ""), rgb(&serial.image, ""));
         let differing = (0..3)
             .map(|c| {

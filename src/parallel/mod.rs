@@ -132,6 +132,9 @@ fn pid_in_session_dir(dir: &str) -> Option<u32> {
 pub struct WorkerSetup<'a> {
     /// What this rank did in the prepass, thread by thread (empty without one).
     pub prepass: &'a [ThreadStats],
+    /// The messages this rank sent and received before its role began (the prepass's), for
+    /// its report.
+    pub traffic_before: &'a Counters,
     pub scene: &'a Scene,
     pub tracer: &'a Tracer,
     pub shading: &'a ShadingOptions,
@@ -142,9 +145,10 @@ pub struct WorkerSetup<'a> {
 }
 
 impl<'a> WorkerSetup<'a> {
-    pub fn new(job: &'a Job, tiles: &'a [Tile]) -> Self {
+    pub fn new(job: &'a Job, tiles: &'a [Tile], traffic_before: &'a Counters) -> Self {
         WorkerSetup {
             prepass: &job.prepass_threads,
+            traffic_before,
             scene: &job.scene,
             tracer: &job.tracer,
             shading: &job.shading,
@@ -300,7 +304,7 @@ pub fn run(args: &RenderArgs, mode: Mode) -> CommandResult {
         {
             cache.keep_outbox();
         }
-        let setup = WorkerSetup::new(&job, &all_tiles);
+        let setup = WorkerSetup::new(&job, &all_tiles, &counters);
         worker::run(&setup, mode, sync, persist_local);
         drop(universe);
         return Ok(());
@@ -412,7 +416,7 @@ fn run_component(
         // records before its pixels: its misses go to the PAs.
         let grid = job.settings.overture;
         job.settings.overture = 0;
-        let setup = WorkerSetup::new(&job, all_tiles);
+        let setup = WorkerSetup::new(&job, all_tiles, comm.counters);
         if roles.pas.contains(&rank) {
             component::pa::run(
                 &setup,

@@ -184,7 +184,7 @@ pub fn run(setup: &WorkerSetup<'_>, mode: Mode, sync: usize, persist_local: bool
         comm.rank(),
         "worker",
         &thread_stats,
-        &[&counters, &listener_counters],
+        &[&counters, &listener_counters, setup.traffic_before],
         counters.idle_s(),
     );
     report.records_received = received.load(Ordering::Relaxed);

@@ -297,7 +297,7 @@ pub fn run(setup: &WorkerSetup<'_>, sync: usize, seed: u64, journal: bool, bound
         comm.rank(),
         "pa",
         &threads,
-        &[&counters, &comm_counters],
+        &[&counters, &comm_counters, setup.traffic_before],
         counters.idle_s(),
     );
     report.records_received = replies.records.load(Ordering::Relaxed);

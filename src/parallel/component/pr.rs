@@ -312,7 +312,7 @@ fn render_and_help(
         comm.rank(),
         "pr",
         &threads,
-        &[&counters, courier_counters],
+        &[&counters, courier_counters, setup.traffic_before],
         counters.idle_s(),
     );
     report.records_received = received;
