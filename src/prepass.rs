@@ -219,9 +219,7 @@ fn pixels_needing_samples(pass: Pass<'_, '_>, snapshot: &FrozenIndex, stats: &mu
                         .copy_from_slice(&row);
                 }
                 clock.stop(&mut mine);
-                thread_stats.rays.add(&mine.rays);
-                thread_stats.busy_s += mine.busy_s;
-                thread_stats.cpu_s += mine.cpu_s;
+                thread_stats.absorb(&mine);
             });
         }
     });
@@ -309,9 +307,7 @@ fn run_round(
                 }
                 clock.stop(&mut round);
                 made.lock().unwrap_or_else(|e| e.into_inner()).extend(records);
-                thread_stats.rays.add(&round.rays);
-                thread_stats.busy_s += round.busy_s;
-                thread_stats.cpu_s += round.cpu_s;
+                thread_stats.absorb(&round);
             });
         }
     });

@@ -72,6 +72,15 @@ pub struct ThreadStats {
     pub tiles: usize,
 }
 
+impl ThreadStats {
+    /// Adds another stretch of this thread's work (rays, counters and times; not its tiles).
+    pub fn absorb(&mut self, other: &ThreadStats) {
+        self.rays.add(&other.rays);
+        self.busy_s += other.busy_s;
+        self.cpu_s += other.cpu_s;
+    }
+}
+
 /// Measures a thread's wall-clock and CPU time from now on.
 pub struct ThreadClock {
     wall: Instant,
@@ -349,9 +358,7 @@ pub fn add_prepass_work(threads: &mut Vec<ThreadStats>, prepass: &[ThreadStats])
         threads.resize(prepass.len(), ThreadStats::default());
     }
     for (thread, before) in threads.iter_mut().zip(prepass) {
-        thread.rays.add(&before.rays);
-        thread.busy_s += before.busy_s;
-        thread.cpu_s += before.cpu_s;
+        thread.absorb(before);
     }
 }
 

@@ -6,26 +6,6 @@ use common::*;
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 
-fn render_to(dir: &Path, scene: &Path, name: &str, extra: &[&str]) -> (ImageData, Value) {
-    let out = dir.join(format!("{name}.exr"));
-    let stats = dir.join(format!("{name}.json"));
-    let mut args = vec![
-        "render",
-        scene.to_str().unwrap(),
-        "-o",
-        out.to_str().unwrap(),
-        "-q",
-        "--no-preview",
-        "--overwrite",
-        "--stats",
-        stats.to_str().unwrap(),
-    ];
-    args.extend_from_slice(extra);
-    run_ok(&args);
-    let stats = serde_json::from_str(&std::fs::read_to_string(&stats).unwrap()).unwrap();
-    (read_exr(&out), stats)
-}
-
 /// A grey room whose ceiling only indirect light reaches: one small emitter hangs low, facing
 /// the floor. The view looks straight up at the ceiling, so every pixel is indirect light of
 /// one large flat surface.

@@ -13,28 +13,6 @@ fn furnace(dir: &Path, rho: f32, e: f32, scale: f32) -> PathBuf {
     b.write(dir, "furnace")
 }
 
-fn stats_of(path: &Path) -> Value {
-    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
-}
-
-fn render_to(dir: &Path, scene: &Path, name: &str, extra: &[&str]) -> (ImageData, Value) {
-    let out = dir.join(format!("{name}.exr"));
-    let stats = dir.join(format!("{name}.json"));
-    let mut args = vec![
-        "render",
-        scene.to_str().unwrap(),
-        "-o",
-        out.to_str().unwrap(),
-        "-q",
-        "--no-preview",
-        "--overwrite",
-    ];
-    args.extend_from_slice(&["--stats", stats.to_str().unwrap()]);
-    args.extend_from_slice(extra);
-    run_ok(&args);
-    (read_exr(&out), stats_of(&stats))
-}
-
 fn relmse(a: &ImageData, b: &ImageData, layer: &str) -> f64 {
     let (x, y) = (rgb(a, layer), rgb(b, layer));
     let mut sum = 0.0;

@@ -42,6 +42,28 @@ pub fn run_ok(args: &[&str]) -> Output {
     out
 }
 
+/// Renders `scene` to `dir/name.exr` with `extra` options (quiet, no preview) and returns the
+/// image and the statistics JSON.
+pub fn render_to(dir: &Path, scene: &Path, name: &str, extra: &[&str]) -> (ImageData, Value) {
+    let out = dir.join(format!("{name}.exr"));
+    let stats = dir.join(format!("{name}.json"));
+    let mut args = vec![
+        "render",
+        scene.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "-q",
+        "--no-preview",
+        "--overwrite",
+        "--stats",
+        stats.to_str().unwrap(),
+    ];
+    args.extend_from_slice(extra);
+    run_ok(&args);
+    let stats = serde_json::from_str(&std::fs::read_to_string(&stats).unwrap()).unwrap();
+    (read_exr(&out), stats)
+}
+
 pub fn read_exr(path: &Path) -> ImageData {
     read_image(path, &["icrender/options", "icrender/statistics", "icrender/command"])
         .unwrap_or_else(|e| panic!("reading {}: {e}", path.display()))
