@@ -78,7 +78,8 @@ SCENES = {
         ],
         "reference_seconds": 300,
         # The glTF has no camera: icrender's automatic view down the room, and a view from a
-        # high corner onto the table, the chairs and two walls.
+        # high corner onto the table, the chairs and two walls (run with --views all; its two
+        # references disagree, see --help).
         "views": {"default": [], "corner": ["--vp", "1500", "600", "500", "--vd", "-1", "-0.5", "-0.6",
                                             "--vu", "0", "1", "0", "--vh", "74", "--vv", "60"]},
     },
@@ -343,7 +344,10 @@ def plot(name, cfg, rows, path):
 def main():
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--scenes", default="cornell,conference,sibenik")
-    parser.add_argument("--views", default="all", help="the views to measure (names in SCENES), or all")
+    parser.add_argument("--views", default="default",
+                        help="the views to measure (names in SCENES), or all. The conference room's corner view "
+                             "is not in the default: there icrender's and Mitsuba's references differ by 1.9%% "
+                             "(0.3%% in the default view), which the bench refuses to measure against")
     parser.add_argument("--peer-spp", default="4,8,16,32,64,128,256")
     parser.add_argument("--peer-spp-large", default="4,8,16,32,64",
                         help="the conference room's and Sibenik's (a full sweep there takes many minutes)")

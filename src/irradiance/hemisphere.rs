@@ -91,6 +91,46 @@ impl Hemisphere {
             .collect()
     }
 
+    /// The cells that get an extra sample (-as), about `extra` of them, where the irradiance
+    /// varies most (`cell_differences`), chosen so that no cell's choice depends on its own
+    /// sample. Ranking all cells and taking the top `extra` does not: a bright outlier raises
+    /// its neighbours' differences, they take the places at the top, and the outlier itself is
+    /// then less likely to be chosen and averaged with a fresh sample; bright samples kept
+    /// their full weight more often than dark ones, and records came out too bright (conference
+    /// room at -ab 2 -ad 512 -as 128: indirect light +3.5 % against brute force, +0.8 % with
+    /// -as 0). Instead the sectors are split into two halves; a cell of one half is chosen when
+    /// its difference reaches the threshold that would pick the same share of the cells in the
+    /// other half's interior, whose differences involve none of this half's samples.
+    pub fn supersampled_cells(&self, extra: usize) -> Vec<usize> {
+        let n = self.n;
+        let half = n / 2;
+        // Each half needs an interior: sectors whose neighbours all lie in the same half.
+        if extra == 0 || half < 3 {
+            return Vec::new();
+        }
+        let differences = self.cell_differences();
+        let share = (extra as f32 / (n * n) as f32).min(1.0);
+        let in_first = |j: usize| j < half;
+        // The threshold from the interior of the half not containing sector `j`.
+        let threshold = |first: bool| {
+            let (lo, hi) = if first { (half + 1, n - 2) } else { (1, half - 2) };
+            let mut interior: Vec<f32> = (0..n)
+                .flat_map(|i| (lo..=hi).map(move |j| i * n + j))
+                .map(|k| differences[k])
+                .collect();
+            interior.sort_by(|a, b| b.total_cmp(a));
+            let rank = ((share * interior.len() as f32).ceil() as usize).clamp(1, interior.len());
+            interior[rank - 1]
+        };
+        let (for_first, for_second) = (threshold(true), threshold(false));
+        (0..n * n)
+            .filter(|&k| {
+                let t = if in_first(k % n) { for_first } else { for_second };
+                differences[k] > 0.0 && differences[k] >= t
+            })
+            .collect()
+    }
+
     /// Gradient of the irradiance's luminance over translation in the tangent plane, from the
     /// differences between neighbouring cells across their shared boundaries (Ward & Heckbert
     /// 1992): a boundary moves as the point moves, at a rate set by its distance.
@@ -231,6 +271,62 @@ impl Hemisphere {
 mod tests {
     use super::*;
     use crate::sampling::Rng;
+
+    /// A hemisphere of n x n cells, each sample drawn by `draw`.
+    fn drawn(n: usize, mut draw: impl FnMut() -> f32) -> Hemisphere {
+        let cells = (0..n * n)
+            .map(|_| CellSample {
+                radiance: Vec3::splat(draw()),
+                distance: 1.0,
+                direction: Vec3::Z,
+            })
+            .collect();
+        Hemisphere {
+            n,
+            normal: Vec3::Z,
+            tangent: Vec3::X,
+            bitangent: Vec3::Y,
+            cells,
+        }
+    }
+
+    #[test]
+    fn supersampling_keeps_the_mean_of_heavy_tailed_samples() {
+        // Each sample is 100 with probability 1 %, else 0: mean 1. Cells chosen for a second
+        // sample average it with a fresh one; the hemisphere's mean must stay 1 on average.
+        let (n, extra, trials) = (16usize, 64usize, 20_000);
+        let mut rng = Rng::new(11, 12);
+        let mut draw = move || if rng.next_f32() < 0.01 { 100.0 } else { 0.0 };
+        let (mut total, mut chosen) = (0.0f64, 0usize);
+        for _ in 0..trials {
+            let mut h = drawn(n, &mut draw);
+            let cells = h.supersampled_cells(extra);
+            chosen += cells.len();
+            for k in cells {
+                let fresh = draw();
+                h.cells[k].radiance = (h.cells[k].radiance + Vec3::splat(fresh)) * 0.5;
+            }
+            total += h.value().x as f64;
+        }
+        let mean = total / trials as f64;
+        // The standard error of the mean is about 0.4 %.
+        assert!((mean - 1.0).abs() < 0.02, "mean {mean}");
+        // Where cells differ at all, some are chosen.
+        assert!(chosen > 0);
+    }
+
+    #[test]
+    fn supersampling_picks_about_the_asked_share_where_the_hemisphere_varies() {
+        let mut rng = Rng::new(3, 4);
+        let h = drawn(22, || rng.next_f32());
+        let cells = h.supersampled_cells(128);
+        assert!((64..=256).contains(&cells.len()), "{} cells for 128", cells.len());
+        assert!(cells.windows(2).all(|w| w[0] < w[1]), "each cell once, in order");
+        // A uniform hemisphere varies nowhere: no cell is worth another sample.
+        assert!(drawn(22, || 0.5).supersampled_cells(128).is_empty());
+        // Too few sectors for two halves with an interior: none.
+        assert!(drawn(4, || 0.5).supersampled_cells(8).is_empty());
+    }
 
     /// A hemisphere under an infinite ceiling at height h whose radiance is 1 where x > 0 and
     /// 0 elsewhere.

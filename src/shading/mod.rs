@@ -744,26 +744,11 @@ impl<'a> Integrator<'a> {
             cells,
         };
         let extra = cache.settings.extra_samples(state.level);
-        if extra > 0 {
-            let differences = hemisphere.cell_differences();
-            let mut order: Vec<usize> = (0..n * n).collect();
-            order.sort_by(|&a, &b| differences[b].total_cmp(&differences[a]));
-            let mut taken = vec![1u32; n * n];
-            let mut sums: Vec<Vec3> = hemisphere.cells.iter().map(|c| c.radiance).collect();
-            for k in 0..extra {
-                let cell = order[k % order.len()];
-                if differences[cell] <= 0.0 {
-                    break;
-                }
-                let s = sample(cell / n, cell % n, rng, counts);
-                sums[cell] += s.radiance;
-                taken[cell] += 1;
-                let c = &mut hemisphere.cells[cell];
-                c.distance = c.distance.min(s.distance);
-            }
-            for (c, (sum, count)) in hemisphere.cells.iter_mut().zip(sums.iter().zip(&taken)) {
-                c.radiance = *sum / *count as f32;
-            }
+        for cell in hemisphere.supersampled_cells(extra) {
+            let s = sample(cell / n, cell % n, rng, counts);
+            let c = &mut hemisphere.cells[cell];
+            c.radiance = (c.radiance + s.radiance) * 0.5;
+            c.distance = c.distance.min(s.distance);
         }
         cache.make_record(&hemisphere, hit.position, state.level)
     }
