@@ -94,7 +94,9 @@ def run_serial(scene, base, ref, work, trace=None, order=common.RASTER_ORDER):
     """One process, one thread; by default in scanline order like the paper's serial runs (and
     the traces the simulation replays); order=[]: the renderer's default overture."""
     out = os.path.join(work, "serial.exr")
-    opts = base + ["--threads", "1"] + common.PAPER_BUILD + order + (["--trace-cache", trace] if trace else [])
+    # RASTER_ORDER carries the progressive build; the default order needs it added.
+    build = [] if "--ic-build" in order else common.PAPER_BUILD
+    opts = base + ["--threads", "1"] + build + order + (["--trace-cache", trace] if trace else [])
     start = time.perf_counter()
     stats, _ = common.render(scene, out, opts)
     wall = time.perf_counter() - start
