@@ -151,6 +151,23 @@ pub fn sample_rounds(width: u32, height: u32, samples: u32, needs: &[bool]) -> V
     out
 }
 
+/// Runs `work` on one thread per entry of `stats` and adds each thread's rays, counters and
+/// times to its entry (thread i of every round or pass to entry i).
+fn on_threads(stats: &mut [ThreadStats], work: impl Fn(&mut RayCounts) + Sync) {
+    std::thread::scope(|scope| {
+        for thread_stats in stats.iter_mut() {
+            let work = &work;
+            scope.spawn(move || {
+                let clock = ThreadClock::start();
+                let mut mine = ThreadStats::default();
+                work(&mut mine.rays);
+                clock.stop(&mut mine);
+                thread_stats.absorb(&mine);
+            });
+        }
+    });
+}
+
 /// Whether two hits lie on one plane (as far as a record is concerned): normals within about
 /// 8 degrees, and each within 2 % of their distance from the other's tangent plane.
 fn same_plane(a: &SurfaceHit, b: &SurfaceHit) -> bool {
@@ -182,45 +199,35 @@ fn pixels_needing_samples(pass: Pass<'_, '_>, snapshot: &FrozenIndex, stats: &mu
     let covered = |hits: &[SurfaceHit]| hits.iter().all(|h| cache.covered_in(snapshot, h.position, h.normal, 0));
     let rows = AtomicUsize::new(0);
     let needs = Mutex::new(vec![false; (width * height) as usize]);
-    std::thread::scope(|scope| {
-        for thread_stats in stats.iter_mut() {
-            let (rows, needs) = (&rows, &needs);
-            scope.spawn(move || {
-                let clock = ThreadClock::start();
-                let mut mine = ThreadStats::default();
-                loop {
-                    let y = rows.fetch_add(1, Ordering::Relaxed) as u32;
-                    if y >= height {
-                        break;
-                    }
-                    // Each corner's hits, and whether records cover them all.
-                    let corners = |y: u32, counts: &mut RayCounts| -> Vec<(Vec<SurfaceHit>, bool)> {
-                        (0..=width)
-                            .map(|x| {
-                                let hits = sites_at(x as f32, y as f32, counts);
-                                let ok = covered(&hits);
-                                (hits, ok)
-                            })
-                            .collect()
-                    };
-                    let (top, bottom) = (corners(y, &mut mine.rays), corners(y + 1, &mut mine.rays));
-                    let row: Vec<bool> = (0..width)
-                        .map(|x| {
-                            let centre = sites_at(x as f32 + 0.5, y as f32 + 0.5, &mut mine.rays);
-                            let (x, i) = (x as usize, x as usize + 1);
-                            [&top[x], &top[i], &bottom[x], &bottom[i]].iter().any(|(corner, ok)| {
-                                !ok || corner.len() != centre.len()
-                                    || corner.iter().zip(&centre).any(|(a, b)| !same_plane(b, a))
-                            })
-                        })
-                        .collect();
-                    let start = (y * width) as usize;
-                    needs.lock().unwrap_or_else(|e| e.into_inner())[start..start + width as usize]
-                        .copy_from_slice(&row);
-                }
-                clock.stop(&mut mine);
-                thread_stats.absorb(&mine);
-            });
+    on_threads(stats, |counts| {
+        loop {
+            let y = rows.fetch_add(1, Ordering::Relaxed) as u32;
+            if y >= height {
+                break;
+            }
+            // Each corner's hits, and whether records cover them all.
+            let corners = |y: u32, counts: &mut RayCounts| -> Vec<(Vec<SurfaceHit>, bool)> {
+                (0..=width)
+                    .map(|x| {
+                        let hits = sites_at(x as f32, y as f32, counts);
+                        let ok = covered(&hits);
+                        (hits, ok)
+                    })
+                    .collect()
+            };
+            let (top, bottom) = (corners(y, counts), corners(y + 1, counts));
+            let row: Vec<bool> = (0..width)
+                .map(|x| {
+                    let centre = sites_at(x as f32 + 0.5, y as f32 + 0.5, counts);
+                    let (x, i) = (x as usize, x as usize + 1);
+                    [&top[x], &top[i], &bottom[x], &bottom[i]].iter().any(|(corner, ok)| {
+                        !ok || corner.len() != centre.len()
+                            || corner.iter().zip(&centre).any(|(a, b)| !same_plane(b, a))
+                    })
+                })
+                .collect();
+            let start = (y * width) as usize;
+            needs.lock().unwrap_or_else(|e| e.into_inner())[start..start + width as usize].copy_from_slice(&row);
         }
     });
     needs.into_inner().unwrap_or_else(|e| e.into_inner())
@@ -288,28 +295,18 @@ fn run_round(
 ) -> RoundRecords {
     let next = AtomicUsize::new(0);
     let made = Mutex::new(Vec::new());
-    std::thread::scope(|scope| {
-        for thread_stats in stats.iter_mut() {
-            let (next, made) = (&next, &made);
-            scope.spawn(move || {
-                let clock = ThreadClock::start();
-                let mut round = ThreadStats::default();
-                let mut records = Vec::new();
-                loop {
-                    let first = next.fetch_add(CHUNK, Ordering::Relaxed);
-                    if first >= mine.len() {
-                        break;
-                    }
-                    for &index in &mine[first..(first + CHUNK).min(mine.len())] {
-                        let site = (index, sites[index as usize]);
-                        site_records(pass, snapshot, site, &mut round.rays, &mut records);
-                    }
-                }
-                clock.stop(&mut round);
-                made.lock().unwrap_or_else(|e| e.into_inner()).extend(records);
-                thread_stats.absorb(&round);
-            });
+    on_threads(stats, |counts| {
+        let mut records = Vec::new();
+        loop {
+            let first = next.fetch_add(CHUNK, Ordering::Relaxed);
+            if first >= mine.len() {
+                break;
+            }
+            for &index in &mine[first..(first + CHUNK).min(mine.len())] {
+                site_records(pass, snapshot, (index, sites[index as usize]), counts, &mut records);
+            }
         }
+        made.lock().unwrap_or_else(|e| e.into_inner()).extend(records);
     });
     let mut made = made.into_inner().unwrap_or_else(|e| e.into_inner());
     made.sort_by_key(|(index, _)| *index);
@@ -417,6 +414,8 @@ pub fn run_shared(
             run(sites, &mut snapshot, &mut outcome);
         }
     }
+    // The cache is complete: from now on lookups read its lock-free copy.
+    cache.freeze();
     outcome.seconds = start.elapsed().as_secs_f64();
     outcome
 }

@@ -274,9 +274,6 @@ pub fn render_resumable(
     checkpoint: Option<(&Checkpoint, Restored)>,
 ) -> Rendered {
     let prepass = (settings.prepass && integrator.cache.is_some()).then(|| prepass::run(integrator, camera, settings));
-    if let (Some(_), Some(cache)) = (&prepass, integrator.cache) {
-        cache.freeze();
-    }
     // After the prepass the pixels only read the cache (see `Integrator::frozen`).
     let reading = Integrator {
         frozen: prepass.is_some(),

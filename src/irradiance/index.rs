@@ -180,17 +180,13 @@ impl RecordIndex {
         let mut records = self.all();
         let key = |r: &Record| [r.position, r.normal, r.value].map(|v| v.to_array().map(f32::to_bits));
         records.sort_by_key(key);
-        let mut frozen = FrozenIndex::empty(self.base_cell);
-        records.into_iter().for_each(|r| frozen.push(r));
-        frozen
+        FrozenIndex::of(self.base_cell, records)
     }
 
     /// A read-only copy in no particular order, for lookups whose answer is only whether a
     /// record covers the point (the prepass's), extended with `FrozenIndex::push`.
     pub fn snapshot(&self) -> FrozenIndex {
-        let mut frozen = FrozenIndex::empty(self.base_cell);
-        self.all().into_iter().for_each(|r| frozen.push(r));
-        frozen
+        FrozenIndex::of(self.base_cell, self.all())
     }
 
     /// Every record, in no particular order.
@@ -219,13 +215,16 @@ pub struct FrozenIndex {
 }
 
 impl FrozenIndex {
-    fn empty(base_cell: f32) -> FrozenIndex {
-        FrozenIndex {
+    /// The index of `records`, listed in the order given.
+    fn of(base_cell: f32, records: Vec<Record>) -> FrozenIndex {
+        let mut frozen = FrozenIndex {
             base_cell,
             occupied_levels: 0,
             cells: FrozenCells::default(),
-            records: Vec::new(),
-        }
+            records: Vec::with_capacity(records.len()),
+        };
+        records.into_iter().for_each(|r| frozen.push(r));
+        frozen
     }
 
     /// Adds a record (the levels and cells are `RecordIndex`'s).

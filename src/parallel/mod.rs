@@ -288,9 +288,6 @@ pub fn run(args: &RenderArgs, mode: Mode) -> CommandResult {
         prepass::run(&comm, &job, timeout, &hosts).unwrap_or_else(|e| end_job(&comm, job.cache.as_ref(), &e))
     });
     job.prepass_threads = prepass.as_ref().map(|p| p.threads.clone()).unwrap_or_default();
-    if let (Some(_), Some(cache)) = (&prepass, &job.cache) {
-        cache.freeze();
-    }
     if mode == Mode::Component {
         return run_component(
             args, &comm, job, &all_tiles, &hosts, outputs, wall, universe, resume, prepass,

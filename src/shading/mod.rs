@@ -305,7 +305,7 @@ impl<'a> Integrator<'a> {
         sites
     }
 
-    /// The level-0 record for a site `record_site` found (not added to the cache), with its
+    /// The level-0 record for a site `record_sites` found (not added to the cache), with its
     /// time counted as T_amb.
     pub fn eye_record(
         &self,
@@ -314,11 +314,9 @@ impl<'a> Integrator<'a> {
         rng: &mut Rng,
         counts: &mut RayCounts,
     ) -> Record {
-        let start = Instant::now();
-        counts.ambient_depth += 1;
-        let record = self.compute_record(cache, hit, PathState::eye(false), rng, counts);
-        counts.ambient_depth -= 1;
-        counts.t_amb += start.elapsed().as_secs_f64();
+        let record = timed_ambient(counts, |counts| {
+            self.compute_record(cache, hit, PathState::eye(false), rng, counts)
+        });
         counts.records_computed += 1;
         counts.records_level0 += 1;
         record
@@ -598,20 +596,12 @@ impl<'a> Integrator<'a> {
         if state.level >= self.options.ambient_bounces {
             return self.options.ambient_value;
         }
-        let outermost = counts.ambient_depth == 0;
-        let start = outermost.then(Instant::now);
-        counts.ambient_depth += 1;
-        let value = match self.cache {
+        timed_ambient(counts, |counts| match self.cache {
             Some(cache) if state.level == 0 || !self.options.deep_paths => {
                 self.cached_ambient(cache, hit, state, rng, counts)
             }
             _ => self.brute_force_ambient(hit, state, rng, counts),
-        };
-        counts.ambient_depth -= 1;
-        if let Some(start) = start {
-            counts.t_amb += start.elapsed().as_secs_f64();
-        }
-        value
+        })
     }
 
     /// Brute force (-aa 0): -ad stratified cosine-weighted samples at the first bounce, one per
@@ -752,6 +742,19 @@ impl<'a> Integrator<'a> {
         }
         cache.make_record(&hemisphere, hit.position, state.level)
     }
+}
+
+/// Runs indirect diffuse work, timing it as T_amb when it is the outermost (work nested in it,
+/// deeper bounces, is inside that time already).
+fn timed_ambient<T>(counts: &mut RayCounts, work: impl FnOnce(&mut RayCounts) -> T) -> T {
+    let start = (counts.ambient_depth == 0).then(Instant::now);
+    counts.ambient_depth += 1;
+    let out = work(counts);
+    counts.ambient_depth -= 1;
+    if let Some(start) = start {
+        counts.t_amb += start.elapsed().as_secs_f64();
+    }
+    out
 }
 
 /// Drops (and counts) a component that is not a finite, non-negative colour, so no NaN or Inf
