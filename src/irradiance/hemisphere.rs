@@ -8,6 +8,10 @@ use crate::scene::light::luminance;
 use glam::Vec3;
 use std::f32::consts::{PI, TAU};
 
+/// The largest weight one hemisphere sample's radiance gets in a record's curvature, relative
+/// to the hemisphere's mean (see `Hemisphere::geometric_hessian`).
+pub const RADIANCE_WEIGHT_CAP: f32 = 8.0;
+
 /// One cell's sample: the radiance that came back, the distance to what it hit (infinite when
 /// nothing) and the unit direction it went.
 #[derive(Clone, Copy, Debug)]
@@ -193,15 +197,30 @@ impl Hemisphere {
         if inverse > 0.0 { 1.0 / inverse } else { f32::INFINITY }
     }
 
-    /// Principal axes and curvatures of the Hessian of irradiance over translation, from the
-    /// geometry alone: each hit is a small patch of unit radiance whose contribution
-    /// cos(theta) A / r^2 changes with the point's position (in the tangent plane its Hessian is
-    /// (pi/N) / r^2 (15 t t^T sin^2 - 3 I) along the sample's horizontal direction t). The
-    /// curvatures are the absolute eigenvalues of the sum, floored at a twentieth of what the
-    /// patches would give with nothing cancelling, so a lucky cancellation cannot make a radius
-    /// unbounded. Returns (axis of the largest curvature, [largest, smallest]).
+    /// Principal axes and curvatures of the Hessian of irradiance over translation: each hit is
+    /// a small patch whose contribution cos(theta) A / r^2 changes with the point's position (in
+    /// the tangent plane its Hessian is (pi/N) / r^2 (15 t t^T sin^2 - 3 I) along the sample's
+    /// horizontal direction t), times the patch's radiance relative to the hemisphere's mean
+    /// (at most `RADIANCE_WEIGHT_CAP`). With unit radiance everywhere, the patches of an open
+    /// room cancel (a uniformly lit hemisphere gives the same irradiance everywhere), and a
+    /// ceiling above lit pools on a table got records as wide as the room: +4.5 % indirect
+    /// light on the conference room against brute force (168x128, -ab 1); weighted, +1.2..2.2 %
+    /// with 4 % fewer records. The cap keeps one bright sample from shrinking its record alone
+    /// (a record's reach would then depend on its own noise). The curvatures are the absolute
+    /// eigenvalues of the sum, floored at a twentieth of what the patches would give with
+    /// nothing cancelling, so a lucky cancellation cannot make a radius unbounded. Returns
+    /// (axis of the largest curvature, [largest, smallest]).
     pub fn geometric_hessian(&self) -> (Vec3, [f32; 2]) {
         let share = PI / self.cells.len().max(1) as f32;
+        let luminance = |c: &CellSample| luminance(c.radiance);
+        let mean = self.cells.iter().map(luminance).sum::<f32>() / self.cells.len().max(1) as f32;
+        let weight = |c: &CellSample| {
+            if mean > 0.0 {
+                (luminance(c) / mean).min(RADIANCE_WEIGHT_CAP)
+            } else {
+                1.0
+            }
+        };
         let mut signed = [0.0f32; 3];
         let mut bound = 0.0f32;
         for s in &self.cells {
@@ -211,7 +230,7 @@ impl Hemisphere {
             let cos = s.direction.dot(self.normal);
             let tangential = s.direction - self.normal * cos;
             let sin2 = tangential.length_squared();
-            let scale = share / (s.distance * s.distance);
+            let scale = weight(s) * share / (s.distance * s.distance);
             let (tx, ty) = if sin2 > 1e-12 {
                 let t = tangential / sin2.sqrt();
                 (t.dot(self.tangent), t.dot(self.bitangent))

@@ -21,6 +21,8 @@ use std::sync::{Mutex, OnceLock};
 /// reach; together they stay inside the extrapolation clamp of `Record::extrapolate`.
 const MAX_TRANSLATION_CHANGE: f32 = 0.35;
 const MAX_ROTATION_CHANGE: f32 = 0.15;
+/// How far below -ar's smallest radius a steep gradient may shrink a record.
+const STEEP_RADIUS_FRACTION: f32 = 0.5;
 
 /// The total weight of the records at a point below which the prepass makes a record there
 /// anyway (a weight falls from 1 at a record's position to 0 at the edge of its reach). A
@@ -298,9 +300,16 @@ impl IrradianceCache {
                 // lambda R^2 / 2; keep it under the accuracy times the (unit) irradiance pi.
                 let radius = |lambda: f32| (2.0 * s.accuracy * std::f32::consts::PI / lambda).sqrt();
                 // The first-order change over R stays well inside the value (see below).
+                // Where the light changes fast (a contact, a corner) the gradient may shrink a
+                // record below -ar's smallest radius, down to `STEEP_RADIUS_FRACTION` of it:
+                // held at the minimum, a record by a corner spread its dark value (its gradient
+                // scaled down to fit, see below) over the brighter wall beside it. Corridor,
+                // 128x128, against brute force: indirect relMSE 1.5e-4 -> 1.0e-4 with 10 % more
+                // records, bias -1.4 % -> +1.1 %.
                 let gradient_limit = MAX_TRANSLATION_CHANGE / translation_gradient.length().max(1e-30);
-                let r0 = clamp_radius(radius(large).min(gradient_limit));
-                let r1 = clamp_radius(radius(small).min(gradient_limit));
+                let steepest = gradient_limit.max(s.min_radius * STEEP_RADIUS_FRACTION);
+                let r0 = clamp_radius(radius(large)).min(steepest);
+                let r1 = clamp_radius(radius(small)).min(steepest);
                 // At most 2:1 anisotropy.
                 (axis, [r0, r1.min(2.0 * r0)])
             }
