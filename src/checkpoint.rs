@@ -18,10 +18,11 @@
 //! The irradiance cache goes to `DIR/cache.icc` (unless `-af` names another file), so a resumed
 //! render also starts with every record the killed one had written.
 
+use crate::image::framebuffer::PixelValue;
 use crate::image::framebuffer::{FrameBuffer, Layer};
 use crate::irradiance::codec::checksum;
 use crate::parallel::protocol::{PIXEL_FLOATS, decode_pixels, encode_pixels};
-use crate::render::{PixelValue, Tile};
+use crate::tiles::Tile;
 use glam::Vec3;
 use std::fs::{File, OpenOptions};
 use std::io::{Read, Write};
@@ -243,7 +244,7 @@ fn restore(entries: Vec<Entry>, tiles: &[Tile], width: u32, height: u32) -> (Fra
         if !all_finite {
             continue;
         }
-        crate::render::store_tile(&mut frame, &tiles[tile], pixels);
+        crate::tiles::store_tile(&mut frame, &tiles[tile], pixels);
         for r in found {
             frame.add(r.pixel as usize, r.layer, r.value);
         }
@@ -409,8 +410,8 @@ pub fn decode_results(bytes: &[u8]) -> Option<Vec<RequestResult>> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::render::tiles;
-    use crate::shading::components::Components;
+    use crate::image::components::Components;
+    use crate::tiles::tiles;
 
     fn pixels(tile: &Tile, value: f32) -> Vec<PixelValue> {
         let n = ((tile.x1 - tile.x0) * (tile.y1 - tile.y0)) as usize;

@@ -18,4 +18,5 @@ pub mod scene;
 pub mod shading;
 pub mod stats;
 pub mod sys;
+pub mod tiles;
 pub mod tracer;

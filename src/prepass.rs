@@ -18,7 +18,7 @@
 use crate::irradiance::IrradianceCache;
 use crate::irradiance::index::FrozenIndex;
 use crate::irradiance::record::Record;
-use crate::render::{RenderSettings, ThreadClock, ThreadStats, pixel_offset};
+use crate::render::pixel::{RenderSettings, ThreadClock, ThreadStats, pixel_offset};
 use crate::sampling::Rng;
 use crate::scene::view::Camera;
 use crate::shading::{Integrator, RayCounts};

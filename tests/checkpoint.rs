@@ -6,7 +6,7 @@
 mod common;
 use common::*;
 use icrender::checkpoint;
-use icrender::render::tiles;
+use icrender::tiles::tiles;
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};

@@ -9,11 +9,12 @@ use crate::image::{metrics, output};
 use crate::job::{Job, validate};
 use crate::parallel::{Mode, under_mpirun};
 use crate::progress::Progress;
-use crate::render::{Tile, render_resumable, tiles};
+use crate::render::render_resumable;
 use crate::scene::SceneNeeds;
 use crate::shading::{Integrator, ShadingOptions};
 use crate::stats::RenderStats;
 use crate::sys::image_io;
+use crate::tiles::{Tile, tiles};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 

@@ -1,6 +1,6 @@
 //! One float RGB plane per component layer; the composite is their sum.
 
-use crate::shading::components::Components;
+use crate::image::components::Components;
 use glam::Vec3;
 
 /// The component layers, in the order they are stored and written.
@@ -124,4 +124,11 @@ impl FrameBuffer {
             .map(|i| self.layers.iter().map(|l| l[i]).sum())
             .collect()
     }
+}
+
+/// One rendered pixel: its components and the records of the cache it made at level 0.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct PixelValue {
+    pub components: Components,
+    pub records: f32,
 }

@@ -1,6 +1,7 @@
 //! Images: per-layer framebuffers, the layered EXR and PNG preview written atomically, and the
 //! error metrics `compare` and `--reference` report.
 
+pub mod components;
 pub mod framebuffer;
 pub mod metrics;
 pub mod output;

@@ -10,8 +10,8 @@ use crate::checkpoint::{Checkpoint, Restored};
 use crate::image::framebuffer::FrameBuffer;
 use crate::irradiance::IrradianceCache;
 use crate::irradiance::record::Record;
-use crate::render::{Tile, store_tile};
 use crate::stats::RankReport;
+use crate::tiles::{Tile, store_tile};
 use std::time::{Duration, Instant};
 
 pub struct MasterResult {

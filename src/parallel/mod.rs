@@ -18,12 +18,13 @@ use crate::commands::render::{Outputs, job_stats, open_checkpoint, with_checkpoi
 use crate::commands::{CommandError, CommandResult, warn};
 use crate::irradiance::IrradianceCache;
 use crate::job::{Job, validate};
+use crate::render::RenderSettings;
 use crate::render::ThreadStats;
-use crate::render::{RenderSettings, Tile, tiles};
 use crate::scene::Scene;
 use crate::scene::view::Camera;
 use crate::shading::ShadingOptions;
 use crate::stats::{RankReport, RenderStats, ThreadReport};
+use crate::tiles::{Tile, tiles};
 use crate::tracer::Tracer;
 use comm::{Comm, Counters};
 use mpi::Threading;

@@ -4,10 +4,10 @@
 //! nothing in it is a pointer or a process-local id (tiles are indices into the same
 //! deterministic tile list every rank computes; records are self-contained values).
 
+use crate::image::components::Components;
+use crate::image::framebuffer::PixelValue;
 use crate::irradiance::codec::{self, RECORD_BYTES};
 use crate::irradiance::record::Record;
-use crate::render::PixelValue;
-use crate::shading::components::Components;
 use glam::Vec3;
 use mpi::Tag;
 

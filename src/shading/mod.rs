@@ -6,11 +6,11 @@
 //! diffuse light do not count the emission they hit; specular rays do, since the direct
 //! component leaves the specular lobe's view of area emitters to them.
 
-pub mod components;
 pub mod direct;
 pub mod glossy;
 pub mod request;
 
+use crate::image::components::Components;
 use crate::image::framebuffer::Layer;
 use crate::irradiance::IrradianceCache;
 use crate::irradiance::hemisphere::{CellSample, Frame, Hemisphere, cell_direction};
@@ -19,7 +19,6 @@ use crate::sampling::{Rng, basis, cosine_hemisphere, grid_side};
 use crate::scene::Scene;
 use crate::sys::embree::Coherence;
 use crate::tracer::{SurfaceHit, Tracer};
-use components::Components;
 use direct::LightStrata;
 use glam::Vec3;
 use request::AmbientRequest;

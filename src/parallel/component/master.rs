@@ -17,8 +17,8 @@ use crate::irradiance::IrradianceCache;
 use crate::parallel::comm::Comm;
 use crate::parallel::master_sends::MasterSends;
 use crate::parallel::protocol::{TAG_STATS, encode_work};
-use crate::render::Tile;
 use crate::stats::RankReport;
+use crate::tiles::Tile;
 use std::collections::HashMap;
 use std::time::{Duration, Instant};
 

@@ -12,12 +12,12 @@ pub mod requests;
 
 use crate::checkpoint::{RequestResult, encode_results};
 use crate::image::framebuffer::FrameBuffer;
+use crate::image::framebuffer::PixelValue;
 use crate::irradiance::record::Record;
 use crate::parallel::comm::Comm;
 use crate::parallel::protocol::{
     Batch, ProtocolError, decode_batch, decode_work_request, encode_batch, encode_work_request,
 };
-use crate::render::PixelValue;
 use crate::sampling::Rng;
 use crate::shading::request::AmbientRequest;
 use crate::shading::{Integrator, RayCounts};

@@ -1,18 +1,15 @@
-//! The single-process renderer: the image is cut into tiles, threads take tiles from a shared
-//! counter until none are left, and each pixel averages `spp` stratified (jittered) samples over
-//! its area, which is the box filter a converged reference integrates.
+//! One pixel and one tile of the image: where a pixel's samples fall, the components they
+//! gather, and a tile's pixels in order (with the overture's records first, if asked). What
+//! every renderer shares, the one-process renderer, the prepass and the MPI workers alike.
 
-use crate::checkpoint::{Checkpoint, Restored};
-use crate::image::framebuffer::FrameBuffer;
-use crate::prepass::{self, PrepassOutcome};
-use crate::progress::Progress;
+use crate::image::components::Components;
+use crate::image::framebuffer::PixelValue;
 use crate::sampling::Rng;
 use crate::scene::footprint::EmitterFootprint;
 use crate::scene::view::Camera;
-use crate::shading::components::Components;
 use crate::shading::{Integrator, RayCounts};
-use std::sync::atomic::{AtomicUsize, Ordering};
-use std::sync::{Arc, Mutex};
+use crate::tiles::Tile;
+use std::sync::Arc;
 use std::time::Instant;
 
 #[derive(Clone, Debug)]
@@ -35,31 +32,6 @@ pub struct RenderSettings {
     /// Place every cache record before shading (`prepass`); the pixels then only read the
     /// cache. False: records are made as pixels render (with the overture, if any).
     pub prepass: bool,
-}
-
-#[derive(Clone, Copy, Debug)]
-pub struct Tile {
-    pub x0: u32,
-    pub y0: u32,
-    pub x1: u32,
-    pub y1: u32,
-}
-
-/// Tiles in scanline order covering the image exactly once.
-pub fn tiles(width: u32, height: u32, tile_width: u32, tile_height: u32) -> Vec<Tile> {
-    let (tw, th) = (tile_width.max(1), tile_height.max(1));
-    let mut out = Vec::new();
-    for y0 in (0..height).step_by(th as usize) {
-        for x0 in (0..width).step_by(tw as usize) {
-            out.push(Tile {
-                x0,
-                y0,
-                x1: (x0 + tw).min(width),
-                y1: (y0 + th).min(height),
-            });
-        }
-    }
-    out
 }
 
 /// What one thread did.
@@ -185,13 +157,6 @@ pub fn render_pixel(
     pixel
 }
 
-/// One rendered pixel: its components and the records of the cache it made at level 0.
-#[derive(Clone, Copy, Debug, Default)]
-pub struct PixelValue {
-    pub components: Components,
-    pub records: f32,
-}
-
 /// Renders a tile's pixels in scanline order. `after_pixel` runs after each pixel (the MPI
 /// modes share cache records there).
 pub fn render_tile(
@@ -233,149 +198,9 @@ pub fn render_tile(
     values
 }
 
-/// Stores a rendered tile's pixels in the frame.
-pub fn store_tile(frame: &mut FrameBuffer, tile: &Tile, values: &[PixelValue]) {
-    let mut it = values.iter();
-    for y in tile.y0..tile.y1 {
-        for x in tile.x0..tile.x1 {
-            if let Some(v) = it.next() {
-                frame.set(x, y, &v.components);
-                frame.set_records(x, y, v.records);
-            }
-        }
-    }
-}
-
-/// What a one-process render made: the image, each thread's work (the prepass's included)
-/// and the prepass's own account, when there was one.
-pub struct Rendered {
-    pub frame: FrameBuffer,
-    pub threads: Vec<ThreadStats>,
-    pub prepass: Option<PrepassOutcome>,
-}
-
-/// Renders the whole image on `settings.threads` threads in one process.
-pub fn render(
-    integrator: &Integrator<'_>,
-    camera: &Camera,
-    settings: &RenderSettings,
-    progress: &Progress,
-) -> Rendered {
-    render_resumable(integrator, camera, settings, progress, None)
-}
-
-/// As [`render`], but with a checkpoint: the tiles an earlier run finished are taken from it
-/// and every tile finished now is journalled.
-pub fn render_resumable(
-    integrator: &Integrator<'_>,
-    camera: &Camera,
-    settings: &RenderSettings,
-    progress: &Progress,
-    checkpoint: Option<(&Checkpoint, Restored)>,
-) -> Rendered {
-    let prepass = (settings.prepass && integrator.cache.is_some()).then(|| prepass::run(integrator, camera, settings));
-    // After the prepass the pixels only read the cache (see `Integrator::frozen`).
-    let reading = Integrator {
-        frozen: prepass.is_some(),
-        ..*integrator
-    };
-    let integrator = &reading;
-    let all = tiles(camera.width, camera.height, settings.tile_width, settings.tile_height);
-    let (journal, todo, start) = match checkpoint {
-        Some((journal, restored)) => (Some(journal), restored.unfinished(), restored.frame),
-        None => (
-            None,
-            (0..all.len()).collect(),
-            FrameBuffer::new(camera.width, camera.height),
-        ),
-    };
-    progress.advance(all.len() - todo.len());
-    let next = AtomicUsize::new(0);
-    let frame = Mutex::new(start);
-    let threads = settings.threads.max(1).min(todo.len().max(1));
-    let stats: Vec<ThreadStats> = std::thread::scope(|scope| {
-        let workers: Vec<_> = (0..threads)
-            .map(|_| {
-                scope.spawn(|| {
-                    let mut stats = ThreadStats::default();
-                    let clock = ThreadClock::start();
-                    while let Some(&index) = todo.get(next.fetch_add(1, Ordering::Relaxed)) {
-                        let tile = &all[index];
-                        let values = render_tile(integrator, camera, settings, tile, &mut stats.rays, |_| {});
-                        if let Some(journal) = journal {
-                            journal.tile(index as u32, 0, &values);
-                        }
-                        store_tile(&mut frame.lock().unwrap_or_else(|e| e.into_inner()), tile, &values);
-                        stats.tiles += 1;
-                        progress.advance(1);
-                    }
-                    clock.stop(&mut stats);
-                    stats
-                })
-            })
-            .collect();
-        workers.into_iter().map(|w| w.join().unwrap_or_default()).collect()
-    });
-    progress.finish();
-    let mut frame = frame.into_inner().unwrap_or_else(|e| e.into_inner());
-    let mut stats = stats;
-    if let Some(prepass) = &prepass {
-        add_prepass(&mut frame, &mut stats, prepass);
-    }
-    Rendered {
-        frame,
-        threads: stats,
-        prepass,
-    }
-}
-
-/// Counts the prepass's records in the `ic_records` layer and its work in the threads'.
-fn add_prepass(frame: &mut FrameBuffer, threads: &mut Vec<ThreadStats>, prepass: &PrepassOutcome) {
-    add_prepass_records(frame, prepass);
-    add_prepass_work(threads, &prepass.threads);
-}
-
-/// Counts the records the prepass made for each pixel in the frame's `ic_records` layer.
-pub fn add_prepass_records(frame: &mut FrameBuffer, prepass: &PrepassOutcome) {
-    for (pixel, &count) in prepass.records_per_pixel.iter().enumerate() {
-        if count > 0 {
-            let (x, y) = (
-                (pixel % frame.width as usize) as u32,
-                (pixel / frame.width as usize) as u32,
-            );
-            let before = frame.records()[pixel];
-            frame.set_records(x, y, before + count as f32);
-        }
-    }
-}
-
-/// Adds the prepass's work, thread by thread, to the threads that rendered afterwards.
-pub fn add_prepass_work(threads: &mut Vec<ThreadStats>, prepass: &[ThreadStats]) {
-    if threads.len() < prepass.len() {
-        threads.resize(prepass.len(), ThreadStats::default());
-    }
-    for (thread, before) in threads.iter_mut().zip(prepass) {
-        thread.absorb(before);
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn tiles_cover_every_pixel_once() {
-        let (w, h) = (67, 45);
-        let mut seen = vec![0u8; (w * h) as usize];
-        for t in tiles(w, h, 16, 8) {
-            for y in t.y0..t.y1 {
-                for x in t.x0..t.x1 {
-                    seen[(y * w + x) as usize] += 1;
-                }
-            }
-        }
-        assert!(seen.iter().all(|&c| c == 1));
-    }
 
     #[test]
     fn strata_tile_the_pixel_for_any_count() {

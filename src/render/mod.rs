@@ -1,0 +1,130 @@
+//! The single-process renderer: the image is cut into tiles, threads take tiles from a shared
+//! counter until none are left, and each pixel averages `spp` stratified (jittered) samples over
+//! its area, which is the box filter a converged reference integrates.
+
+pub mod pixel;
+
+pub use pixel::{RenderSettings, ThreadClock, ThreadStats, pixel_offset, pixel_strata, render_pixel, render_tile};
+
+use crate::checkpoint::{Checkpoint, Restored};
+use crate::image::framebuffer::FrameBuffer;
+use crate::prepass::{self, PrepassOutcome};
+use crate::progress::Progress;
+use crate::scene::view::Camera;
+use crate::shading::Integrator;
+use crate::tiles::{store_tile, tiles};
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+/// What a one-process render made: the image, each thread's work (the prepass's included)
+/// and the prepass's own account, when there was one.
+pub struct Rendered {
+    pub frame: FrameBuffer,
+    pub threads: Vec<ThreadStats>,
+    pub prepass: Option<PrepassOutcome>,
+}
+
+/// Renders the whole image on `settings.threads` threads in one process.
+pub fn render(
+    integrator: &Integrator<'_>,
+    camera: &Camera,
+    settings: &RenderSettings,
+    progress: &Progress,
+) -> Rendered {
+    render_resumable(integrator, camera, settings, progress, None)
+}
+
+/// As [`render`], but with a checkpoint: the tiles an earlier run finished are taken from it
+/// and every tile finished now is journalled.
+pub fn render_resumable(
+    integrator: &Integrator<'_>,
+    camera: &Camera,
+    settings: &RenderSettings,
+    progress: &Progress,
+    checkpoint: Option<(&Checkpoint, Restored)>,
+) -> Rendered {
+    let prepass = (settings.prepass && integrator.cache.is_some()).then(|| prepass::run(integrator, camera, settings));
+    // After the prepass the pixels only read the cache (see `Integrator::frozen`).
+    let reading = Integrator {
+        frozen: prepass.is_some(),
+        ..*integrator
+    };
+    let integrator = &reading;
+    let all = tiles(camera.width, camera.height, settings.tile_width, settings.tile_height);
+    let (journal, todo, start) = match checkpoint {
+        Some((journal, restored)) => (Some(journal), restored.unfinished(), restored.frame),
+        None => (
+            None,
+            (0..all.len()).collect(),
+            FrameBuffer::new(camera.width, camera.height),
+        ),
+    };
+    progress.advance(all.len() - todo.len());
+    let next = AtomicUsize::new(0);
+    let frame = Mutex::new(start);
+    let threads = settings.threads.max(1).min(todo.len().max(1));
+    let stats: Vec<ThreadStats> = std::thread::scope(|scope| {
+        let workers: Vec<_> = (0..threads)
+            .map(|_| {
+                scope.spawn(|| {
+                    let mut stats = ThreadStats::default();
+                    let clock = ThreadClock::start();
+                    while let Some(&index) = todo.get(next.fetch_add(1, Ordering::Relaxed)) {
+                        let tile = &all[index];
+                        let values = render_tile(integrator, camera, settings, tile, &mut stats.rays, |_| {});
+                        if let Some(journal) = journal {
+                            journal.tile(index as u32, 0, &values);
+                        }
+                        store_tile(&mut frame.lock().unwrap_or_else(|e| e.into_inner()), tile, &values);
+                        stats.tiles += 1;
+                        progress.advance(1);
+                    }
+                    clock.stop(&mut stats);
+                    stats
+                })
+            })
+            .collect();
+        workers.into_iter().map(|w| w.join().unwrap_or_default()).collect()
+    });
+    progress.finish();
+    let mut frame = frame.into_inner().unwrap_or_else(|e| e.into_inner());
+    let mut stats = stats;
+    if let Some(prepass) = &prepass {
+        add_prepass(&mut frame, &mut stats, prepass);
+    }
+    Rendered {
+        frame,
+        threads: stats,
+        prepass,
+    }
+}
+
+/// Counts the prepass's records in the `ic_records` layer and its work in the threads'.
+fn add_prepass(frame: &mut FrameBuffer, threads: &mut Vec<ThreadStats>, prepass: &PrepassOutcome) {
+    add_prepass_records(frame, prepass);
+    add_prepass_work(threads, &prepass.threads);
+}
+
+/// Counts the records the prepass made for each pixel in the frame's `ic_records` layer.
+pub fn add_prepass_records(frame: &mut FrameBuffer, prepass: &PrepassOutcome) {
+    for (pixel, &count) in prepass.records_per_pixel.iter().enumerate() {
+        if count > 0 {
+            let (x, y) = (
+                (pixel % frame.width as usize) as u32,
+                (pixel / frame.width as usize) as u32,
+            );
+            let before = frame.records()[pixel];
+            frame.set_records(x, y, before + count as f32);
+        }
+    }
+}
+
+/// Adds the prepass's work, thread by thread, to the threads that rendered afterwards.
+pub fn add_prepass_work(threads: &mut Vec<ThreadStats>, prepass: &[ThreadStats]) {
+    if threads.len() < prepass.len() {
+        threads.resize(prepass.len(), ThreadStats::default());
+    }
+    for (thread, before) in threads.iter_mut().zip(prepass) {
+        thread.absorb(before);
+    }
+}
