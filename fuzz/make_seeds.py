@@ -163,8 +163,19 @@ def record(value=1.0, radius=0.5, level=0, position=(0.0, 0.0, 0.0)):
     return payload + struct.pack("<I", fnv1a(payload))
 
 
-def batch(records, flags=0):
-    return b"ICRB" + struct.pack("<III", 1, flags, len(records)) + b"".join(records)
+# Byte 0 of a `records` seed picks the message kind, in the order of the harness's KINDS.
+KINDS = ["heartbeat", "initial_records", "prepass_start", "prepass_round", "work_request", "records_up",
+         "records_broadcast", "final_records", "stats", "requests", "forwarded", "idle", "pa_status",
+         "forward_order", "finish", "image", "results", "work", "records_down"]
+VERSION = b"\x02"
+
+
+def seed(kind, body, repair=False):
+    return bytes([KINDS.index(kind), int(repair)]) + VERSION + body
+
+
+def records_body(records):
+    return struct.pack("<I", len(records)) + b"".join(records)
 
 
 def request(pixel, layer=3):
@@ -175,20 +186,33 @@ def request(pixel, layer=3):
 
 
 def record_seeds(out):
+    """Messages in the layouts of `src/parallel/protocol/` (version byte, then the body)."""
     recs = [record(1.0, 0.5), record(2.0, 0.25, 1, (1, 2, 3)), record(0.0, 1e-3, 1024)]
     pixel = struct.pack("<13f", *([0.5] * 12 + [2.0]))
     seeds = {
-        "batch_empty": b"\x00\x00" + batch([]),
-        "batch_three": b"\x00\x00" + batch(recs, 1),
-        "batch_repair": b"\x00\x01" + batch(recs[:2])[:-4] + b"\0\0\0\0",
-        "work_request_first": b"\x01\x00" + struct.pack("<I", 3),
-        "work_request_tile": b"\x01\x00" + struct.pack("<III", 1, 7, 2) + pixel * 2,
-        "work_none": b"\x02\x00\x00",
-        "work_tile": b"\x02\x00\x01" + struct.pack("<I", 42),
-        "requests_two": b"\x03\x00" + b"ICRQ" + struct.pack("<II", 1, 2) + request(5) + request(99, 2),
-        "requests_empty": b"\x03\x00" + b"ICRQ" + struct.pack("<II", 1, 0),
-        "counts_and_records": b"\x04\x01" + b"\x02" + struct.pack("<QQ", 10, 20) + batch(recs[:1]),
-        "counts_only": b"\x04\x00" + b"\x03" + struct.pack("<QQQ", 1, 2, 3) + batch([]),
+        "heartbeat": seed("heartbeat", b""),
+        "initial_empty": seed("initial_records", records_body([])),
+        "initial_three": seed("initial_records", records_body(recs)),
+        "initial_repair": seed("initial_records", records_body(recs[:2])[:-4] + b"\0\0\0\0", True),
+        "prepass_round": seed("prepass_round", struct.pack("<I", 2) + struct.pack("<I", 3) + recs[0]
+                              + struct.pack("<I", 9) + recs[1]),
+        "work_request_first": seed("work_request", struct.pack("<IB", 3, 0)),
+        "work_request_tile": seed("work_request", struct.pack("<IBIII", 1, 1, 7, 0, 2) + pixel * 2),
+        "work_none": seed("work", b"\x00" + struct.pack("<I", 0) + records_body([])),
+        "work_tile": seed("work", b"\x01" + struct.pack("<I", 42) + records_body(recs[:1])),
+        "records_up": seed("records_up", struct.pack("<I", 2) + records_body(recs[:2])),
+        "records_down": seed("records_down", records_body(recs[1:])),
+        "broadcast_last": seed("records_broadcast", b"\x01" + records_body(recs[:1])),
+        "stats": seed("stats", b'{"rank":1,"role":"pa"}'),
+        "requests_two": seed("requests", struct.pack("<I", 2) + request(5) + request(99, 2)),
+        "requests_empty": seed("requests", struct.pack("<I", 0)),
+        "forwarded": seed("forwarded", struct.pack("<I", 1) + request(7)),
+        "idle": seed("idle", struct.pack("<QQ", 10, 20) + records_body(recs[:1]), True),
+        "pa_status": seed("pa_status", struct.pack("<QQ", 1, 2) + records_body([])),
+        "forward_order": seed("forward_order", struct.pack("<IIB", 4, 17, 1)),
+        "finish": seed("finish", b""),
+        "image": seed("image", struct.pack("<I3f", 3, 0.0, 1.5, 3.25)),
+        "results": seed("results", struct.pack("<III3f", 1, 9, 2, 0.1, 0.2, 0.3)),
     }
     write_all(os.path.join(out, "records"), seeds)
 

@@ -18,12 +18,13 @@
 //! The irradiance cache goes to `DIR/cache.icc` (unless `-af` names another file), so a resumed
 //! render also starts with every record the killed one had written.
 
+use crate::image::framebuffer::FrameBuffer;
 use crate::image::framebuffer::PixelValue;
-use crate::image::framebuffer::{FrameBuffer, Layer};
 use crate::irradiance::codec::checksum;
-use crate::parallel::protocol::{PIXEL_FLOATS, decode_pixels, encode_pixels};
+use crate::parallel::protocol::wire::Reader;
+use crate::parallel::protocol::{PIXEL_FLOATS, RESULT_BYTES, decode_pixels, encode_pixels, put_results, take_results};
+pub use crate::shading::request::RequestResult;
 use crate::tiles::Tile;
-use glam::Vec3;
 use std::fs::{File, OpenOptions};
 use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
@@ -33,18 +34,8 @@ const MAGIC: &[u8; 8] = b"ICRJRNL1";
 const KIND_START: u8 = 0;
 const KIND_TILE: u8 = 1;
 const KIND_RESULTS: u8 = 2;
-/// One result: pixel, layer, RGB.
-const RESULT_BYTES: usize = 20;
 /// No entry is larger than a 16k x 16k tile's pixels; a longer length is damage.
 const MAX_ENTRY: usize = 16384 * 16384 * PIXEL_FLOATS * 4;
-
-/// Light computed for one request made elsewhere: added to `layer` at `pixel`.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct RequestResult {
-    pub pixel: u32,
-    pub layer: Layer,
-    pub value: Vec3,
-}
 
 /// What an earlier run finished: the frame with the finished tiles' pixels, and which they are.
 pub struct Restored {
@@ -102,10 +93,6 @@ fn u32_at(bytes: &[u8], offset: usize) -> Option<u32> {
         .map(|b| u32::from_le_bytes(b.try_into().expect("4 bytes")))
 }
 
-fn f32_at(bytes: &[u8], offset: usize) -> Option<f32> {
-    u32_at(bytes, offset).map(f32::from_bits)
-}
-
 /// One decoded entry.
 enum Entry {
     Start(u32),
@@ -144,17 +131,7 @@ fn decode_entry(kind: u8, p: &[u8]) -> Option<Entry> {
             if body.len() != (count as usize).checked_mul(RESULT_BYTES)? {
                 return None;
             }
-            let results = body
-                .chunks_exact(RESULT_BYTES)
-                .map(|c| {
-                    let layer = Layer::ALL.get(u32_at(c, 4)? as usize).copied()?;
-                    Some(RequestResult {
-                        pixel: u32_at(c, 0)?,
-                        layer,
-                        value: Vec3::new(f32_at(c, 8)?, f32_at(c, 12)?, f32_at(c, 16)?),
-                    })
-                })
-                .collect::<Option<Vec<_>>>()?;
+            let results = take_results(&mut Reader::new(body, "journal results"), count as usize).ok()?;
             Some(Entry::Results { attempt, results })
         }
         _ => None,
@@ -377,41 +354,29 @@ pub fn finished_tiles(dir: &Path, tiles: &[Tile], width: u32, height: u32) -> us
     restore(entries, tiles, width, height).1.iter().filter(|d| **d).count()
 }
 
-/// Results as bytes (the journal's form, also sent from PAs to the master).
+/// Results as bytes (the journal's form; the `Results` message adds a count).
 pub fn encode_results(results: &[RequestResult]) -> Vec<u8> {
     let mut out = Vec::with_capacity(results.len() * RESULT_BYTES);
-    for r in results {
-        out.extend_from_slice(&r.pixel.to_le_bytes());
-        out.extend_from_slice(&(r.layer.index() as u32).to_le_bytes());
-        for c in r.value.to_array() {
-            out.extend_from_slice(&c.to_le_bytes());
-        }
-    }
+    put_results(&mut out, results);
     out
 }
 
-/// The inverse of [`encode_results`]; `None` for a malformed message.
+/// The inverse of [`encode_results`]; `None` for malformed bytes.
 pub fn decode_results(bytes: &[u8]) -> Option<Vec<RequestResult>> {
     if !bytes.len().is_multiple_of(RESULT_BYTES) {
         return None;
     }
-    bytes
-        .chunks_exact(RESULT_BYTES)
-        .map(|c| {
-            Some(RequestResult {
-                pixel: u32_at(c, 0)?,
-                layer: Layer::ALL.get(u32_at(c, 4)? as usize).copied()?,
-                value: Vec3::new(f32_at(c, 8)?, f32_at(c, 12)?, f32_at(c, 16)?),
-            })
-        })
-        .collect()
+    let mut reader = Reader::new(bytes, "results");
+    take_results(&mut reader, bytes.len() / RESULT_BYTES).ok()
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::image::components::Components;
+    use crate::image::framebuffer::Layer;
     use crate::tiles::tiles;
+    use glam::Vec3;
 
     fn pixels(tile: &Tile, value: f32) -> Vec<PixelValue> {
         let n = ((tile.x1 - tile.x0) * (tile.y1 - tile.y0)) as usize;

@@ -77,7 +77,7 @@ impl From<&ThreadStats> for ThreadReport {
 }
 
 /// One rank's share of an MPI render (the serial mode reports itself as one rank too).
-#[derive(Clone, Debug, Default, Serialize, serde::Deserialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, serde::Deserialize)]
 pub struct RankReport {
     pub rank: u32,
     /// "serial", "mc" (master controller), "worker", "pr" or "pa".

@@ -1334,17 +1334,32 @@ fn fuzz_scene_load_regressions() {
     }
 }
 
-/// The records target's first finding (not a crash): `decode_work` takes [1, tile (4 bytes)]
-/// followed by anything, while every other decoder refuses a message whose length does not
-/// match. The input is the fuzzer's: byte 0 selects decode_work, byte 1 is the target's flag.
+/// The records target's first finding (not a crash): the old `decode_work` took [1, tile (4
+/// bytes)] followed by anything. Every message is now read exactly: the input's trailing bytes
+/// after a valid work message (of today's codec) are refused, as is the old layout itself. The
+/// input is the fuzzer's: byte 0 selected decode_work, byte 1 was the target's flag.
 #[test]
 fn fuzz_records_decode_work_refuses_trailing_bytes() {
+    use icrender::parallel::protocol::{Kind, Message, Records};
     for (name, bytes) in fuzz_inputs("records") {
         if name.contains("decode_work") {
-            let message = &bytes[2..];
+            let old = &bytes[2..];
+            let tag = Kind::Work.for_thread(0);
             assert!(
-                icrender::parallel::protocol::decode_work(message).is_err(),
-                "{name}: {message:?} was accepted"
+                Message::decode(tag, old).is_err(),
+                "{name}: the old layout was accepted"
+            );
+            let trailing = &old[5..];
+            assert!(!trailing.is_empty(), "{name}: the input has no trailing bytes");
+            let work = Message::Work {
+                thread: 0,
+                tile: Some(u32::from_le_bytes(old[1..5].try_into().unwrap())),
+                records: Records::default(),
+            };
+            let padded = [work.encode(), trailing.to_vec()].concat();
+            assert!(
+                Message::decode(tag, &padded).is_err(),
+                "{name}: {padded:?} was accepted"
             );
         }
     }

@@ -127,7 +127,7 @@ impl FrameBuffer {
 }
 
 /// One rendered pixel: its components and the records of the cache it made at level 0.
-#[derive(Clone, Copy, Debug, Default)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct PixelValue {
     pub components: Components,
     pub records: f32,

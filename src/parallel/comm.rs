@@ -3,6 +3,7 @@
 //! MPI's blocking calls spin: on an oversubscribed machine a waiting rank would steal the core
 //! from the rank it waits for.
 
+use super::protocol::{Kind, Message, ProtocolError, empty_requests};
 use mpi::Tag;
 use mpi::point_to_point::{Destination, MatchedReceiveVec, Source};
 use mpi::request::{Request, Scope, StaticScope};
@@ -34,12 +35,19 @@ fn completed<'a, S: Scope<'a>>(pending: &mut Option<Request<'a, [u8], S>>) -> Op
 /// A synchronous send in flight (see `Comm::send_marker`); it must be waited for.
 pub struct Marker(Request<'static, [u8], StaticScope>);
 
-/// A received message.
+/// A received message, or why its bytes could not be read.
 #[derive(Debug)]
-pub struct Received {
+pub struct Envelope {
     pub source: i32,
-    pub tag: Tag,
-    pub data: Vec<u8>,
+    pub message: Result<Message, ProtocolError>,
+}
+
+/// Which messages a receive takes: from a rank (None: any) with a tag (None: any).
+pub type Filter = (Option<i32>, Option<Tag>);
+
+/// A filter for messages of one kind (thread 0's tag for the per-thread kinds).
+pub fn kind(source: Option<i32>, kind: Kind) -> Filter {
+    (source, Some(kind.tag()))
 }
 
 /// Traffic and waiting of one rank; shared by its threads.
@@ -86,7 +94,11 @@ impl<'c> Comm<'c> {
         self.world.size()
     }
 
-    pub fn send(&self, dest: i32, tag: Tag, data: &[u8]) {
+    pub fn send(&self, dest: i32, message: &Message) {
+        self.send_bytes(dest, message.tag(), &message.encode());
+    }
+
+    fn send_bytes(&self, dest: i32, tag: Tag, data: &[u8]) {
         self.world.process_at_rank(dest).send_with_tag(data, tag);
         self.counters.messages_sent.fetch_add(1, Ordering::Relaxed);
         self.counters.bytes_sent.fetch_add(data.len() as u64, Ordering::Relaxed);
@@ -96,7 +108,9 @@ impl<'c> Comm<'c> {
     /// go eagerly waits until its receiver takes it, and a receiver whose host is gone never
     /// does. Past the limit `stalled` is called, which ends the job (it cannot return): the
     /// send is still in flight and MPI owns `data` until it completes.
-    pub fn send_within(&self, dest: i32, tag: Tag, data: &[u8], limit: Duration, stalled: impl FnOnce() -> Infallible) {
+    pub fn send_within(&self, dest: i32, message: &Message, limit: Duration, stalled: impl FnOnce() -> Infallible) {
+        let (tag, data) = (message.tag(), message.encode());
+        let data = data.as_slice();
         mpi::request::scope(|scope| {
             let request = self
                 .world
@@ -112,10 +126,11 @@ impl<'c> Comm<'c> {
         self.counters.bytes_sent.fetch_add(data.len() as u64, Ordering::Relaxed);
     }
 
-    /// Sends a marker with a synchronous send: it completes only once the receiver has taken
-    /// it in, and so (messages between two ranks keep their order) everything sent before it
-    /// with the same tag. `wait_marker` waits for that.
-    pub fn send_marker(&self, dest: i32, tag: Tag, marker: &'static [u8]) -> Marker {
+    /// Sends an empty request buffer as a marker, with a synchronous send: it completes only
+    /// once the receiver has taken it in, and so (messages between two ranks keep their order)
+    /// every request buffer sent before it. `wait_marker` waits for that.
+    pub fn send_marker(&self, dest: i32) -> Marker {
+        let (tag, marker) = (Kind::Requests.tag(), empty_requests());
         let request = self
             .world
             .process_at_rank(dest)
@@ -152,17 +167,14 @@ impl<'c> Comm<'c> {
         }
     }
 
-    fn count_received(&self, r: Received) -> Received {
+    fn count_received(&self, bytes: usize) {
         self.counters.messages_received.fetch_add(1, Ordering::Relaxed);
-        self.counters
-            .bytes_received
-            .fetch_add(r.data.len() as u64, Ordering::Relaxed);
-        r
+        self.counters.bytes_received.fetch_add(bytes as u64, Ordering::Relaxed);
     }
 
     /// A message with `tag` (any tag when None) from `source` (anyone when None), if one is
     /// waiting now.
-    pub fn try_receive(&self, source: Option<i32>, tag: Option<Tag>) -> Option<Received> {
+    pub fn try_receive(&self, source: Option<i32>, tag: Option<Tag>) -> Option<Envelope> {
         let probe = match (source, tag) {
             (Some(s), Some(t)) => self.world.process_at_rank(s).immediate_matched_probe_with_tag(t),
             (Some(s), None) => self.world.process_at_rank(s).immediate_matched_probe(),
@@ -171,28 +183,29 @@ impl<'c> Comm<'c> {
         };
         probe.map(|matched| {
             let (data, status) = matched.matched_receive_vec::<u8>();
-            self.count_received(Received {
+            self.count_received(data.len());
+            Envelope {
                 source: status.source_rank(),
-                tag: status.tag(),
-                data,
-            })
+                message: Message::decode(status.tag(), &data),
+            }
         })
     }
 
     /// Waits for a matching message, pausing between polls; the wait counts as idle time.
     /// Gives up after `timeout` (None: never) and returns None.
-    pub fn receive(&self, source: Option<i32>, tag: Option<Tag>, timeout: Option<Duration>) -> Option<Received> {
+    pub fn receive(&self, source: Option<i32>, tag: Option<Tag>, timeout: Option<Duration>) -> Option<Envelope> {
         self.receive_one_of(&[(source, tag)], timeout)
     }
 
-    /// Like `receive`, for the first message matching any of several (source, tag) filters,
-    /// tried in order at every poll.
-    pub fn receive_one_of(
-        &self,
-        filters: &[(Option<i32>, Option<Tag>)],
-        timeout: Option<Duration>,
-    ) -> Option<Received> {
-        let poll = || filters.iter().find_map(|&(source, tag)| self.try_receive(source, tag));
+    /// Like `receive`, for the first message matching any of several filters, tried in order
+    /// at every poll. A heartbeat a filter for any tag takes is noted, not returned.
+    pub fn receive_one_of(&self, filters: &[Filter], timeout: Option<Duration>) -> Option<Envelope> {
+        let poll = || {
+            filters
+                .iter()
+                .find_map(|&(source, tag)| self.try_receive(source, tag))
+                .filter(|envelope| !matches!(envelope.message, Ok(Message::Heartbeat)))
+        };
         if let Some(r) = poll() {
             return Some(r);
         }

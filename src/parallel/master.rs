@@ -5,7 +5,8 @@
 use super::Mode;
 use super::comm::{Comm, Counters};
 use super::master_sends::MasterSends;
-use super::protocol::*;
+use super::protocol::{FinishedTile, Message, Records};
+use super::relay::RecordRelay;
 use crate::checkpoint::{Checkpoint, Restored};
 use crate::image::framebuffer::FrameBuffer;
 use crate::irradiance::IrradianceCache;
@@ -79,27 +80,18 @@ pub fn run(comm: &Comm<'_>, plan: &Plan<'_>) -> Result<MasterResult, MasterError
         Some(c) if !workers_have_cache => c.records(),
         _ => Vec::new(),
     };
-    let initial_batch = encode_batch(&initial, 0);
+    let initial = Message::InitialRecords(Records::from(initial));
     for w in 1..size {
-        sends.send(w as i32, TAG_INITIAL_RECORDS, &initial_batch);
+        sends.send(w as i32, &initial);
     }
 
     let mut next_tile = 0usize;
     let mut finished_requesters = 0usize;
     let requesters = workers * threads_per_worker as usize;
-    // Centralised sharing: every record with the rank it came from, and per rank how far
-    // into that list it has been brought up to date.
-    let mut store: Vec<(usize, Record)> = Vec::new();
-    let mut seen = vec![0usize; size];
+    // Centralised sharing goes through the relay (the initial records every worker has).
+    let mut relay = RecordRelay::new(size, cache);
     let mut end_markers = 0usize;
     let mut reports: Vec<Option<RankReport>> = vec![None; size];
-    let mut records_received = 0u64;
-    let mut records_rejected = 0u64;
-    let persist = |records: &[Record]| {
-        if let Some(cache) = cache {
-            records.iter().for_each(|r| cache.insert(r.clone()));
-        }
-    };
     let done = |finished: usize, reports: &[Option<RankReport>], ends: usize| {
         finished == requesters
             && reports[1..].iter().all(Option::is_some)
@@ -118,11 +110,15 @@ pub fn run(comm: &Comm<'_>, plan: &Plan<'_>) -> Result<MasterResult, MasterError
             )));
         };
         let source = msg.source as usize;
-        let bad = |what: &str, e: ProtocolError| MasterError(format!("rank {source} sent a malformed {what}: {}", e.0));
-        match msg.tag {
-            TAG_WORK_REQUEST => {
-                let (thread, finished) = decode_work_request(&msg.data).map_err(|e| bad("work request", e))?;
-                if let Some((index, pixels)) = finished {
+        let message = msg
+            .message
+            .map_err(|e| MasterError(format!("rank {source} sent a malformed message: {e}")))?;
+        match message {
+            Message::WorkRequest { thread, finished } => {
+                if let Some(FinishedTile {
+                    tile: index, pixels, ..
+                }) = finished
+                {
                     let tile = tiles
                         .get(index as usize)
                         .filter(|_| !tiles_done[index as usize])
@@ -146,49 +142,33 @@ pub fn run(comm: &Comm<'_>, plan: &Plan<'_>) -> Result<MasterResult, MasterError
                 } else {
                     finished_requesters += 1;
                 }
-                sends.send(msg.source, TAG_WORK_BASE + thread as i32, &encode_work(assignment));
+                let work = Message::Work {
+                    thread,
+                    tile: assignment,
+                    records: Records::default(),
+                };
+                sends.send(msg.source, &work);
             }
-            TAG_RECORDS_UP => {
-                let thread = msg
-                    .data
-                    .get(..4)
-                    .map(|b| u32::from_le_bytes(b.try_into().expect("4 bytes")));
-                let thread =
-                    thread.ok_or_else(|| MasterError(format!("rank {source} sent an empty record message")))?;
-                let batch = decode_batch(&msg.data[4..]).map_err(|e| bad("record batch", e))?;
-                records_received += batch.records.len() as u64;
-                records_rejected += batch.rejected as u64;
-                persist(&batch.records);
-                store.extend(batch.records.into_iter().map(|r| (source, r)));
-                let missing: Vec<Record> = store[seen[source]..]
-                    .iter()
-                    .filter(|(from, _)| *from != source)
-                    .map(|(_, r)| r.clone())
-                    .collect();
-                seen[source] = store.len();
-                sends.send(
-                    msg.source,
-                    TAG_RECORDS_DOWN_BASE + thread as i32,
-                    &encode_batch(&missing, 0),
-                );
+            Message::RecordsUp { thread, records } => {
+                relay.share(source, records);
+                let reply = Message::RecordsDown {
+                    thread,
+                    records: relay.catch_up(source),
+                };
+                sends.send(msg.source, &reply);
             }
-            TAG_RECORDS_BROADCAST | TAG_FINAL_RECORDS => {
-                let batch = decode_batch(&msg.data).map_err(|e| bad("record batch", e))?;
-                records_received += batch.records.len() as u64;
-                records_rejected += batch.rejected as u64;
-                persist(&batch.records);
-                if msg.tag == TAG_RECORDS_BROADCAST && batch.flags & BATCH_END != 0 {
-                    end_markers += 1;
-                }
+            Message::RecordsBroadcast { records, last } => {
+                relay.keep(records);
+                end_markers += usize::from(last);
             }
-            TAG_STATS => {
-                let report: RankReport = serde_json::from_slice(&msg.data)
-                    .map_err(|e| MasterError(format!("rank {source} sent unreadable statistics: {e}")))?;
-                reports[source] = Some(report);
+            Message::FinalRecords(records) => {
+                relay.keep(records);
             }
+            Message::Stats(report) => reports[source] = Some(report),
             other => {
                 return Err(MasterError(format!(
-                    "rank {source} sent a message with unknown tag {other}"
+                    "rank {source} sent an unexpected message ({:?})",
+                    other.kind()
                 )));
             }
         }
@@ -206,8 +186,8 @@ pub fn run(comm: &Comm<'_>, plan: &Plan<'_>) -> Result<MasterResult, MasterError
         bytes: counters.bytes_sent.load(std::sync::atomic::Ordering::Relaxed),
         messages_received: counters.messages_received.load(std::sync::atomic::Ordering::Relaxed),
         bytes_received: counters.bytes_received.load(std::sync::atomic::Ordering::Relaxed),
-        records_received,
-        records_rejected,
+        records_received: relay.received,
+        records_rejected: relay.rejected,
         wall_s: render_s,
         ..Default::default()
     }];

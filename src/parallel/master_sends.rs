@@ -6,8 +6,8 @@
 //! and host that stopped taking messages.
 
 use super::comm::Comm;
+use super::protocol::Message;
 use crate::irradiance::IrradianceCache;
-use mpi::Tag;
 use std::convert::Infallible;
 use std::time::Duration;
 
@@ -19,8 +19,8 @@ pub struct MasterSends<'a, 'c> {
 }
 
 impl MasterSends<'_, '_> {
-    pub fn send(&self, dest: i32, tag: Tag, data: &[u8]) {
-        self.comm.send_within(dest, tag, data, self.limit, || -> Infallible {
+    pub fn send(&self, dest: i32, message: &Message) {
+        self.comm.send_within(dest, message, self.limit, || -> Infallible {
             let host = self.hosts.get(dest as usize).map_or("?", String::as_str);
             super::end_job(
                 self.comm,

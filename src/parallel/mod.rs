@@ -10,6 +10,7 @@ pub mod master;
 pub mod master_sends;
 pub mod prepass;
 pub mod protocol;
+pub mod relay;
 pub mod worker;
 
 use crate::checkpoint::{Checkpoint, Restored};
@@ -28,6 +29,7 @@ use crate::tiles::{Tile, tiles};
 use crate::tracer::Tracer;
 use comm::{Comm, Counters};
 use mpi::Threading;
+use protocol::Message;
 use std::time::{Duration, Instant};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -96,16 +98,14 @@ pub fn rank_report(rank: i32, role: &str, threads: &[ThreadStats], counters: &[&
 pub fn send_report(comm: &Comm<'_>, mut report: RankReport) {
     report.messages += 1;
     let before = report.bytes;
-    let mut json = serde_json::to_vec(&report).unwrap_or_default();
     for _ in 0..4 {
-        let total = before + json.len() as u64;
+        let total = before + Message::Stats(report.clone()).encode().len() as u64;
         if report.bytes == total {
             break;
         }
         report.bytes = total;
-        json = serde_json::to_vec(&report).unwrap_or_default();
     }
-    comm.send(0, protocol::TAG_STATS, &json);
+    comm.send(0, &Message::Stats(report));
 }
 
 /// Whether this process was started by mpirun (Open MPI, MPICH or a PMIx launcher).

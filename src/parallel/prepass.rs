@@ -5,10 +5,8 @@
 //! in the same order, so all caches hold the record set one process would have made, and the
 //! image is the same for any number of ranks and any mode.
 
-use super::comm::Comm;
-use super::protocol::{
-    TAG_PREPASS_DOWN, TAG_PREPASS_START, TAG_PREPASS_UP, decode_batch, decode_round, encode_batch, encode_round,
-};
+use super::comm::{Comm, kind};
+use super::protocol::{Kind, Message, Records};
 use crate::job::Job;
 use crate::prepass::{PrepassOutcome, RoundRecords, Share, run_shared};
 use crate::shading::Integrator;
@@ -27,9 +25,9 @@ pub fn run(comm: &Comm<'_>, job: &Job, timeout: Duration, hosts: &[String]) -> R
     let mut failure: Option<String> = None;
     if rank == 0 {
         // Workers start from the master's records (its cache file), as the master does.
-        let start = encode_batch(&cache.records(), 0);
+        let start = Message::PrepassStart(Records::from(cache.records()));
         for worker in 1..size {
-            comm.send(worker, TAG_PREPASS_START, &start);
+            comm.send(worker, &start);
         }
         let mut gather = |_: RoundRecords| -> RoundRecords {
             if failure.is_some() {
@@ -37,14 +35,14 @@ pub fn run(comm: &Comm<'_>, job: &Job, timeout: Duration, hosts: &[String]) -> R
             }
             let mut round = Vec::new();
             for worker in 1..size {
-                let message = comm.receive(Some(worker), Some(TAG_PREPASS_UP), Some(timeout));
-                match message.map(|m| decode_round(&m.data)) {
-                    Some(Ok(records)) => round.extend(records),
-                    Some(Err(e)) => {
+                let message = comm.receive_one_of(&[kind(Some(worker), Kind::PrepassRound)], Some(timeout));
+                match message.map(|m| m.message) {
+                    Some(Ok(Message::PrepassRound(records))) => round.extend(records),
+                    Some(other) => {
                         failure = Some(format!(
                             "prepass: rank {worker} on {} sent a bad round: {}",
                             host(worker),
-                            e.0
+                            other.err().map_or_else(|| "not a round".into(), |e| e.0)
                         ))
                     }
                     None => {
@@ -58,34 +56,40 @@ pub fn run(comm: &Comm<'_>, job: &Job, timeout: Duration, hosts: &[String]) -> R
                 }
             }
             round.sort_by_key(|(index, _)| *index);
-            let message = encode_round(&round);
+            let message = Message::PrepassRound(round);
             for worker in 1..size {
-                comm.send(worker, TAG_PREPASS_DOWN, &message);
+                comm.send(worker, &message);
             }
+            let Message::PrepassRound(round) = message else {
+                unreachable!("built above")
+            };
             round
         };
         let outcome = run_shared(&integrator, &job.camera, &job.settings, Share::Nothing, &mut gather);
         return failure.map_or(Ok(outcome), Err);
     }
     match comm
-        .receive(Some(0), Some(TAG_PREPASS_START), Some(timeout))
-        .map(|m| decode_batch(&m.data))
+        .receive_one_of(&[kind(Some(0), Kind::PrepassStart)], Some(timeout))
+        .map(|m| m.message)
     {
-        Some(Ok(batch)) => batch.records.into_iter().for_each(|r| cache.insert_shared(r)),
+        Some(Ok(Message::PrepassStart(start))) => start.records.into_iter().for_each(|r| cache.insert_shared(r)),
         _ => return Err(format!("rank {rank}: prepass: no start from the master")),
     }
     let mut exchange = |mine: RoundRecords| -> RoundRecords {
         if failure.is_some() {
             return Vec::new();
         }
-        comm.send(0, TAG_PREPASS_UP, &encode_round(&mine));
+        comm.send(0, &Message::PrepassRound(mine));
         match comm
-            .receive(Some(0), Some(TAG_PREPASS_DOWN), Some(timeout))
-            .map(|m| decode_round(&m.data))
+            .receive_one_of(&[kind(Some(0), Kind::PrepassRound)], Some(timeout))
+            .map(|m| m.message)
         {
-            Some(Ok(round)) => round,
-            Some(Err(e)) => {
-                failure = Some(format!("rank {rank}: prepass: bad round from the master: {}", e.0));
+            Some(Ok(Message::PrepassRound(round))) => round,
+            Some(other) => {
+                failure = Some(format!(
+                    "rank {rank}: prepass: bad round from the master: {}",
+                    other.err().map_or_else(|| "not a round".into(), |e| e.0)
+                ));
                 Vec::new()
             }
             None => {

@@ -5,11 +5,10 @@
 
 use super::Mode;
 use super::WorkerSetup;
-use super::comm::{Comm, Counters};
-use super::protocol::*;
+use super::comm::{Comm, Counters, kind};
+use super::protocol::{FinishedTile, Kind, Message, Records};
 use super::{rank_report, send_report};
 use crate::irradiance::IrradianceCache;
-use crate::irradiance::record::Record;
 use crate::render::{ThreadClock, ThreadStats, render_tile};
 use crate::shading::{Integrator, RayCounts};
 use std::sync::Mutex;
@@ -28,29 +27,37 @@ fn share(
     end: bool,
 ) {
     let records = cache.take_outbox();
+    let take = |records: Records| {
+        received.fetch_add(records.records.len() as u64, Ordering::Relaxed);
+        rejected.fetch_add(records.rejected as u64, Ordering::Relaxed);
+        records.records.into_iter().for_each(|r| cache.insert_shared(r));
+    };
     match mode {
         Mode::Centralised => {
             if records.is_empty() {
                 return;
             }
-            let mut message = thread.to_le_bytes().to_vec();
-            message.extend(encode_batch(&records, 0));
-            comm.send(0, TAG_RECORDS_UP, &message);
-            let reply = comm.receive(Some(0), Some(TAG_RECORDS_DOWN_BASE + thread as i32), None);
-            if let Some(batch) = reply.and_then(|r| decode_batch(&r.data).ok()) {
-                received.fetch_add(batch.records.len() as u64, Ordering::Relaxed);
-                rejected.fetch_add(batch.rejected as u64, Ordering::Relaxed);
-                batch.records.into_iter().for_each(|r| cache.insert_shared(r));
+            let up = Message::RecordsUp {
+                thread,
+                records: Records::from(records),
+            };
+            comm.send(0, &up);
+            let reply = comm.receive(Some(0), Some(Kind::RecordsDown.for_thread(thread)), None);
+            if let Some(Ok(Message::RecordsDown { records, .. })) = reply.map(|r| r.message) {
+                take(records);
             }
         }
         Mode::Broadcast => {
             if records.is_empty() && !end {
                 return;
             }
-            let batch = encode_batch(&records, if end { BATCH_END } else { 0 });
+            let batch = Message::RecordsBroadcast {
+                records: Records::from(records),
+                last: end,
+            };
             // The master is a recipient too: it keeps the cache file.
             for rank in (0..comm.size()).filter(|&r| r != comm.rank()) {
-                comm.send(rank, TAG_RECORDS_BROADCAST, &batch);
+                comm.send(rank, &batch);
             }
         }
         Mode::Noshare | Mode::Component | Mode::Serial => {}
@@ -70,20 +77,20 @@ fn receive_broadcasts(
     let comm = Comm::new(counters);
     let mut ends = 0;
     while ends < peers {
-        let Some(msg) = comm.receive(None, Some(TAG_RECORDS_BROADCAST), None) else {
+        let Some(msg) = comm.receive_one_of(&[kind(None, Kind::RecordsBroadcast)], None) else {
             continue;
         };
-        match decode_batch(&msg.data) {
-            Ok(batch) => {
-                received.fetch_add(batch.records.len() as u64, Ordering::Relaxed);
-                rejected.fetch_add(batch.rejected as u64, Ordering::Relaxed);
-                batch.records.into_iter().for_each(|r| cache.insert_shared(r));
-                if batch.flags & BATCH_END != 0 {
+        match msg.message {
+            Ok(Message::RecordsBroadcast { records, last }) => {
+                received.fetch_add(records.records.len() as u64, Ordering::Relaxed);
+                rejected.fetch_add(records.rejected as u64, Ordering::Relaxed);
+                records.records.into_iter().for_each(|r| cache.insert_shared(r));
+                if last {
                     ends += 1;
                 }
             }
             // A broken message cannot be trusted at all; count it and go on.
-            Err(_) => {
+            _ => {
                 rejected.fetch_add(1, Ordering::Relaxed);
             }
         }
@@ -99,9 +106,9 @@ pub fn run(setup: &WorkerSetup<'_>, mode: Mode, sync: usize, persist_local: bool
     let received = AtomicU64::new(0);
     let rejected = AtomicU64::new(0);
 
-    let initial = comm.receive(Some(0), Some(TAG_INITIAL_RECORDS), None);
-    if let (Some(cache), Some(batch)) = (cache, initial.and_then(|m| decode_batch(&m.data).ok())) {
-        batch.records.into_iter().for_each(|r| cache.insert_shared(r));
+    let initial = comm.receive_one_of(&[kind(Some(0), Kind::InitialRecords)], None);
+    if let (Some(cache), Some(Ok(Message::InitialRecords(records)))) = (cache, initial.map(|m| m.message)) {
+        records.records.into_iter().for_each(|r| cache.insert_shared(r));
     }
     let share_lock = Mutex::new(());
     let threads = setup.settings.threads.max(1) as u32;
@@ -119,12 +126,17 @@ pub fn run(setup: &WorkerSetup<'_>, mode: Mode, sync: usize, persist_local: bool
                         .cache_frozen(setup.settings.prepass);
                     let mut stats = ThreadStats::default();
                     let clock = ThreadClock::start();
-                    let mut finished: Option<(u32, Vec<_>)> = None;
+                    let mut finished: Option<FinishedTile> = None;
                     loop {
-                        let request = encode_work_request(thread, finished.as_ref().map(|(t, p)| (*t, p.as_slice())));
-                        comm.send(0, TAG_WORK_REQUEST, &request);
-                        let reply = comm.receive(Some(0), Some(TAG_WORK_BASE + thread as i32), None);
-                        let Some(Ok(Some(index))) = reply.map(|r| decode_work(&r.data)) else {
+                        comm.send(
+                            0,
+                            &Message::WorkRequest {
+                                thread,
+                                finished: finished.take(),
+                            },
+                        );
+                        let reply = comm.receive(Some(0), Some(Kind::Work.for_thread(thread)), None);
+                        let Some(Ok(Message::Work { tile: Some(index), .. })) = reply.map(|r| r.message) else {
                             break;
                         };
                         let tile = &setup.tiles[index as usize];
@@ -145,7 +157,11 @@ pub fn run(setup: &WorkerSetup<'_>, mode: Mode, sync: usize, persist_local: bool
                             &mut stats.rays,
                             &mut after_pixel,
                         );
-                        finished = Some((index, pixels));
+                        finished = Some(FinishedTile {
+                            tile: index,
+                            requests: 0,
+                            pixels,
+                        });
                         stats.tiles += 1;
                     }
                     clock.stop(&mut stats);
@@ -162,16 +178,18 @@ pub fn run(setup: &WorkerSetup<'_>, mode: Mode, sync: usize, persist_local: bool
                 Mode::Centralised => share(&comm, mode, cache, 0, &received, &rejected, true),
                 Mode::Broadcast => share(&comm, mode, cache, 0, &received, &rejected, true),
                 _ if persist_local => {
-                    let records: Vec<Record> = cache.take_outbox();
-                    comm.send(0, TAG_FINAL_RECORDS, &encode_batch(&records, BATCH_END));
+                    comm.send(0, &Message::FinalRecords(Records::from(cache.take_outbox())));
                 }
                 _ => {}
             }
         } else if mode == Mode::Broadcast {
             // Without a cache there is nothing to share, but peers still wait for the marker.
-            let batch = encode_batch(&[], BATCH_END);
+            let last = Message::RecordsBroadcast {
+                records: Records::default(),
+                last: true,
+            };
             for rank in (0..comm.size()).filter(|&r| r != comm.rank()) {
-                comm.send(rank, TAG_RECORDS_BROADCAST, &batch);
+                comm.send(rank, &last);
             }
         }
         if let Some(listener) = listener {

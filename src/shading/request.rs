@@ -32,3 +32,11 @@ pub struct AmbientRequest {
     /// Random stream for the computation, so results do not depend on who computes them.
     pub stream: u64,
 }
+
+/// Light computed for one request made elsewhere: added to `layer` at `pixel`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RequestResult {
+    pub pixel: u32,
+    pub layer: Layer,
+    pub value: Vec3,
+}

@@ -1,34 +1,22 @@
 //! The component mode's master controller: tiles on demand to PRs (with the records each PR
-//! lacks), record relay for PAs at their syncs, load balancing, the termination check, and the
-//! sum of every rank's image.
-//!
-//! Termination is counted, not guessed. Every request a PR makes goes to exactly one PA queue;
-//! from there it is either computed by that PA or forwarded once to an idle PR, which computes
-//! it. PRs report how many they sent once they have no tile left (cumulative, after flushing),
-//! PAs report how many they computed whenever they sync or their queue runs dry, helping PRs
-//! report how many they computed. When every PR has flushed, no forward order is outstanding,
-//! and sent == computed by PAs + computed by helpers, every request has been computed exactly
-//! once and nothing is in flight: then, and only then, FINISH goes out.
+//! lacks), the record relay for PAs and helpers at their syncs, load balancing
+//! (`LoadBalancer`), the termination check (`TerminationLedger`), and the sum of every rank's
+//! image.
 
-use super::*;
-use crate::checkpoint::{Checkpoint, Restored, decode_results};
+use super::Roles;
+use super::balancer::{LoadBalancer, Share};
+use super::ledger::TerminationLedger;
+use crate::checkpoint::{Checkpoint, Restored};
 use crate::image::framebuffer::FrameBuffer;
 use crate::irradiance::IrradianceCache;
 use crate::parallel::comm::Comm;
 use crate::parallel::master_sends::MasterSends;
-use crate::parallel::protocol::{TAG_STATS, encode_work};
+use crate::parallel::protocol::{FinishedTile, Message, Records};
+use crate::parallel::relay::RecordRelay;
 use crate::stats::RankReport;
 use crate::tiles::Tile;
-use std::collections::HashMap;
+use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
-
-/// A share smaller than this is not worth forwarding.
-const MIN_SHARE: u64 = 2;
-/// An idle PR takes this fraction (1/SHARE_DIVISOR) of the longest PA queue. Half, the first
-/// choice, left the PA with nothing to do while the PR worked through its half (the simulation,
-/// bench/icsim.py, put component mode's idle time on the Cornell box at 29-52 % at 4-16
-/// processors with halves, 9-26 % with eighths, which made it the fastest mode there).
-const SHARE_DIVISOR: u64 = 8;
 
 pub struct ComponentResult {
     pub frame: FrameBuffer,
@@ -36,25 +24,13 @@ pub struct ComponentResult {
     pub render_s: f64,
 }
 
+/// What the master remembers of a PA for its report and for saying what a lost one held.
 #[derive(Default)]
-struct PaState {
-    queue: u64,
+struct PaLog {
     done: u64,
-    /// Ran dry after the last tile went out, and waits for a share of another PA's queue.
-    waiting: bool,
     samples: Vec<(f64, u32)>,
     /// When it last reported (seconds since the start).
     last_report: f64,
-}
-
-#[derive(Default)]
-struct PrState {
-    flushed: bool,
-    sent: u64,
-    helped: u64,
-    /// A forward order for this PR is on its way; the PR will report back.
-    awaiting_forward: bool,
-    waiting: bool,
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -85,150 +61,44 @@ pub fn run(
         None => (0..tiles.len()).collect(),
     };
     let journal = resume.map(|(journal, _)| journal);
-    // Indirect light computed for requests, into the journal (--checkpoint only).
-    let journal_results = |source: i32, data: &[u8]| -> Result<(), String> {
-        let results = decode_results(data).ok_or_else(|| format!("rank {source} sent malformed results"))?;
-        if let Some(journal) = journal {
-            journal.results(&results);
-        }
-        Ok(())
-    };
     let mut next_tile = 0usize;
-    let mut tiles_given = 0usize;
-    // The cache file's records (none to send when the prepass already gave every rank all).
-    let mut store: Vec<(usize, Record)> = match cache {
-        Some(c) if !workers_have_cache => c.records().into_iter().map(|r| (0, r)).collect(),
+    // The cache file's records (none to send when the prepass already gave every rank all):
+    // PAs get them now, PRs with their first tile.
+    let initial = match cache {
+        Some(c) if !workers_have_cache => c.records(),
         _ => Vec::new(),
     };
-    let mut seen = vec![0usize; size];
-    let mut pas: HashMap<i32, PaState> = roles.pas.iter().map(|&r| (r, PaState::default())).collect();
-    let mut prs: HashMap<i32, PrState> = roles.prs.iter().map(|&r| (r, PrState::default())).collect();
-    let mut records_received = 0u64;
-    let mut records_rejected = 0u64;
-    let mut forwarded_orders = 0u64;
-    // PAs start from the cache file's records; PRs get them with their first tile.
-    let initial = encode_batch(&store.iter().map(|(_, r)| r.clone()).collect::<Vec<_>>(), 0);
+    let mut relay = RecordRelay::new(size, cache);
+    relay.preload(initial);
     for &pa in &roles.pas {
-        sends.send(pa, crate::parallel::protocol::TAG_INITIAL_RECORDS, &initial);
-        seen[pa as usize] = store.len();
+        sends.send(pa, &Message::InitialRecords(relay.catch_up(pa as usize)));
     }
-
-    let persist = |records: &[Record]| {
-        if let Some(cache) = cache {
-            records.iter().for_each(|r| cache.insert(r.clone()));
-        }
-    };
-    // Records the rank lacks, from every other rank, since its last sync.
-    let catch_up = |store: &[(usize, Record)], seen: &mut [usize], rank: usize| -> Vec<u8> {
-        let missing: Vec<Record> = store[seen[rank]..]
-            .iter()
-            .filter(|(from, _)| *from != rank)
-            .map(|(_, r)| r.clone())
-            .collect();
-        seen[rank] = store.len();
-        encode_batch(&missing, 0)
-    };
-    // Orders the PA with the longest queue (other than `to`) to send a share of it to `to`, an
-    // idle PR or a PA that ran dry, if one is worth splitting; the share's size.
-    let order_share = |sends: &MasterSends<'_, '_>, pas: &mut HashMap<i32, PaState>, to: i32, orders: &mut u64| {
-        let to_a_pa = pas.contains_key(&to);
-        let (&pa, longest) = pas.iter_mut().filter(|(r, _)| **r != to).max_by_key(|(_, s)| s.queue)?;
-        let share = longest.queue / SHARE_DIVISOR;
-        if share < MIN_SHARE {
-            return None;
-        }
-        longest.queue -= share;
-        let mut order = (to as u32).to_le_bytes().to_vec();
-        order.extend_from_slice(&(share as u32).to_le_bytes());
-        if to_a_pa {
-            order.extend_from_slice(&FORWARD_TO_PA.to_le_bytes());
-        }
-        sends.send(pa, TAG_FORWARD_ORDER, &order);
-        *orders += 1;
-        Some(share)
-    };
-    // Gives an idle PR a share of the longest PA queue, if one is worth splitting.
-    let dispatch = |sends: &MasterSends<'_, '_>,
-                    pas: &mut HashMap<i32, PaState>,
-                    pr: i32,
-                    state: &mut PrState,
-                    orders: &mut u64| {
-        if order_share(sends, pas, pr, orders).is_none() {
-            return false;
-        }
-        state.awaiting_forward = true;
-        state.waiting = false;
-        true
-    };
-    // Gives a PA that ran dry a share of another's queue (not in the paper, where only PRs
-    // help): without it, once the tiles were out, PAs whose queues emptied sat idle while the
-    // last shares were worked through elsewhere (bench/icsim.py: 7-24 ms of a 74 ms render at 16
-    // workers on the Cornell box).
-    let feed_pa = |sends: &MasterSends<'_, '_>, pas: &mut HashMap<i32, PaState>, pa: i32, orders: &mut u64| {
-        let Some(share) = order_share(sends, pas, pa, orders) else {
-            return false;
+    let mut balancer = LoadBalancer::new(&roles.pas);
+    let mut ledger = TerminationLedger::new(&roles.pas, &roles.prs);
+    let mut pa_logs: BTreeMap<i32, PaLog> = roles.pas.iter().map(|&r| (r, PaLog::default())).collect();
+    let order = |share: Share, ledger: &mut TerminationLedger| {
+        let message = Message::ForwardOrder {
+            to: share.to as u32,
+            count: share.count as u32,
+            to_pa: share.to_pa,
         };
-        let state = pas.get_mut(&pa).expect("a PA");
-        state.queue += share;
-        state.waiting = false;
-        true
+        sends.send(share.from, &message);
+        if !share.to_pa {
+            ledger.forward_ordered(share.to);
+        }
     };
 
-    let finished = |prs: &HashMap<i32, PrState>, pas: &HashMap<i32, PaState>| {
-        let sent: u64 = prs.values().map(|p| p.sent).sum();
-        let computed: u64 = prs.values().map(|p| p.helped).sum::<u64>() + pas.values().map(|p| p.done).sum::<u64>();
-        prs.values().all(|p| p.flushed && !p.awaiting_forward) && sent == computed
-    };
-
-    while !finished(&prs, &pas) {
+    while !ledger.complete() {
         let Some(msg) = comm.receive(None, None, Some(timeout)) else {
-            // Say who went quiet and what is missing: a lost PA takes its queue with it, a PR
-            // that never finished leaves its tiles' pixels undelivered.
-            let now = start.elapsed().as_secs_f64();
-            let mut quiet: Vec<(&i32, &PaState)> = pas
-                .iter()
-                .filter(|(_, p)| now - p.last_report >= timeout.as_secs_f64() * 0.9)
-                .collect();
-            quiet.sort_by_key(|(r, _)| **r);
-            let pa_text: Vec<String> = quiet
-                .iter()
-                .map(|(r, p)| {
-                    format!(
-                        "PA {r} (rank {r}, host {}, last queue {}, computed {})",
-                        host(**r),
-                        p.queue,
-                        p.done
-                    )
-                })
-                .collect();
-            let mut stuck: Vec<i32> = prs.iter().filter(|(_, p)| !p.flushed).map(|(r, _)| *r).collect();
-            stuck.sort();
-            let pr_text: Vec<String> = stuck.iter().map(|r| format!("PR {r} (host {})", host(*r))).collect();
-            let sent: u64 = prs.values().map(|p| p.sent).sum();
-            let computed: u64 = prs.values().map(|p| p.helped).sum::<u64>() + pas.values().map(|p| p.done).sum::<u64>();
-            return Err(format!(
-                "no message from any rank for {:.0} s; {}{}missing: the indirect light of every pixel whose \
-                 requests those ranks held, and the pixels of unfinished PRs (requests reported sent {sent}, computed {computed})",
-                timeout.as_secs_f64(),
-                if pa_text.is_empty() {
-                    String::new()
-                } else {
-                    format!("silent: {}; ", pa_text.join(", "))
-                },
-                if pr_text.is_empty() {
-                    String::new()
-                } else {
-                    format!("unfinished: {}; ", pr_text.join(", "))
-                },
-            ));
+            return Err(silence(timeout, start, &pa_logs, &balancer, &ledger, &host));
         };
         let source = msg.source;
-        let malformed = |what: &str, e: ProtocolError| format!("rank {source} sent a malformed {what}: {}", e.0);
-        match msg.tag {
-            TAG_PR_WORK_REQUEST => {
-                if let Some((tile, requests, pixels)) =
-                    decode_tile_report(&msg.data).map_err(|e| malformed("tile report", e))?
-                {
+        let message = msg
+            .message
+            .map_err(|e| format!("rank {source} sent a malformed message: {e}"))?;
+        match message {
+            Message::WorkRequest { finished, .. } => {
+                if let Some(FinishedTile { tile, requests, pixels }) = finished {
                     let fits = tiles
                         .get(tile as usize)
                         .is_some_and(|t| ((t.x1 - t.x0) * (t.y1 - t.y0)) as usize == pixels.len());
@@ -239,89 +109,67 @@ pub fn run(
                         journal.tile(tile, requests, &pixels);
                     }
                 }
-                let assignment = todo.get(next_tile).map(|&i| i as u32);
-                if assignment.is_some() {
-                    next_tile += 1;
-                    tiles_given += 1;
-                }
-                let work = encode_work(assignment);
-                let mut reply = (work.len() as u32).to_le_bytes().to_vec();
-                reply.extend(work);
-                reply.extend(catch_up(&store, &mut seen, source as usize));
-                sends.send(source, TAG_PR_WORK, &reply);
+                let tile = todo.get(next_tile).map(|&i| i as u32);
+                next_tile += usize::from(tile.is_some());
+                let work = Message::Work {
+                    thread: 0,
+                    tile,
+                    records: relay.catch_up(source as usize),
+                };
+                sends.send(source, &work);
             }
-            TAG_PR_IDLE => {
-                let (counts, batch) =
-                    decode_counts_and_records(&msg.data, 2).map_err(|e| malformed("idle report", e))?;
-                records_received += batch.records.len() as u64;
-                records_rejected += batch.rejected as u64;
-                persist(&batch.records);
-                store.extend(batch.records.into_iter().map(|r| (source as usize, r)));
-                let state = prs
-                    .get_mut(&source)
-                    .ok_or_else(|| format!("rank {source} is not a PR but reported as one"))?;
-                state.flushed = true;
-                state.sent = counts[0];
-                state.helped = counts[1];
-                state.awaiting_forward = false;
-                if !dispatch(&sends, &mut pas, source, state, &mut forwarded_orders) {
-                    state.waiting = true;
+            Message::Idle { sent, helped, records } => {
+                relay.share(source as usize, records);
+                ledger.pr_idle(source, sent, helped)?;
+                if let Some(share) = balancer.pr_idle(source) {
+                    order(share, &mut ledger);
                 }
             }
-            TAG_RESULTS => journal_results(source, &msg.data)?,
-            TAG_PR_SYNC => {
-                let batch = decode_batch(&msg.data).map_err(|e| malformed("record batch", e))?;
-                records_received += batch.records.len() as u64;
-                records_rejected += batch.rejected as u64;
-                persist(&batch.records);
-                store.extend(batch.records.into_iter().map(|r| (source as usize, r)));
-                sends.send(source, TAG_PR_CATCH_UP, &catch_up(&store, &mut seen, source as usize));
-            }
-            TAG_PA_STATUS => {
-                let (counts, batch) = decode_counts_and_records(&msg.data, 2).map_err(|e| malformed("status", e))?;
-                records_received += batch.records.len() as u64;
-                records_rejected += batch.rejected as u64;
-                persist(&batch.records);
-                store.extend(batch.records.into_iter().map(|r| (source as usize, r)));
-                let reply = catch_up(&store, &mut seen, source as usize);
-                sends.send(source, TAG_PA_STATUS_REPLY, &reply);
-                let pa = pas
-                    .get_mut(&source)
-                    .ok_or_else(|| format!("rank {source} is not a PA but reported as one"))?;
-                pa.queue = counts[0];
-                pa.done = counts[1];
-                pa.last_report = start.elapsed().as_secs_f64();
-                pa.samples.push((start.elapsed().as_secs_f64(), counts[0] as u32));
-                // A PA reports an empty queue when it runs dry; once every tile is out, no new
-                // requests are coming its way but forwarded ones.
-                pa.waiting = counts[0] == 0 && next_tile >= todo.len();
-                let waiting: Vec<i32> = prs.iter().filter(|(_, p)| p.waiting).map(|(&r, _)| r).collect();
-                for pr in waiting {
-                    let state = prs.get_mut(&pr).expect("listed");
-                    if !dispatch(&sends, &mut pas, pr, state, &mut forwarded_orders) {
-                        break;
-                    }
-                }
-                let mut dry: Vec<i32> = pas.iter().filter(|(_, p)| p.waiting).map(|(&r, _)| r).collect();
-                dry.sort();
-                for pa in dry {
-                    if !feed_pa(&sends, &mut pas, pa, &mut forwarded_orders) {
-                        break;
-                    }
+            Message::Results(results) => {
+                if let Some(journal) = journal {
+                    journal.results(&results);
                 }
             }
-            other => return Err(format!("rank {source} sent an unexpected message (tag {other})")),
+            Message::RecordsUp { thread, records } => {
+                relay.share(source as usize, records);
+                let reply = Message::RecordsDown {
+                    thread,
+                    records: relay.catch_up(source as usize),
+                };
+                sends.send(source, &reply);
+            }
+            Message::PaStatus { queue, done, records } => {
+                relay.share(source as usize, records);
+                let reply = Message::RecordsDown {
+                    thread: 0,
+                    records: relay.catch_up(source as usize),
+                };
+                sends.send(source, &reply);
+                ledger.pa_done(source, done)?;
+                let now = start.elapsed().as_secs_f64();
+                let log = pa_logs.get_mut(&source).expect("a PA, or pa_done refused it");
+                log.done = done;
+                log.last_report = now;
+                log.samples.push((now, queue as u32));
+                balancer.report(source, queue, next_tile >= todo.len());
+                for share in balancer.rebalance() {
+                    order(share, &mut ledger);
+                }
+            }
+            other => {
+                return Err(format!("rank {source} sent an unexpected message ({:?})", other.kind()));
+            }
         }
     }
-    if tiles_given != todo.len() {
-        return Err(format!("only {tiles_given} of {} tiles were rendered", todo.len()));
+    if next_tile != todo.len() {
+        return Err(format!("only {next_tile} of {} tiles were rendered", todo.len()));
     }
     let render_s = start.elapsed().as_secs_f64();
 
     // Everything is computed: collect the images and statistics. A PA may still send a status
     // (its last sync) after FINISH; it gets its answer so it can stop.
     for rank in 1..size as i32 {
-        sends.send(rank, TAG_FINISH, &[]);
+        sends.send(rank, &Message::Finish);
     }
     let mut frame = match resume {
         Some((_, restored)) => restored.frame.clone(),
@@ -336,45 +184,45 @@ pub fn run(
                 timeout.as_secs_f64()
             ));
         };
-        match msg.tag {
-            TAG_IMAGE => {
-                let floats: Vec<f32> = msg
-                    .data
-                    .chunks_exact(4)
-                    .map(|b| f32::from_le_bytes(b.try_into().expect("4 bytes")))
-                    .collect();
+        let source = msg.source;
+        match msg.message {
+            Ok(Message::Image(floats)) => {
                 let part = FrameBuffer::from_floats(width, height, &floats)
-                    .filter(|_| floats.iter().all(|v| v.is_finite()))
-                    .ok_or_else(|| format!("rank {} sent a malformed image", msg.source))?;
+                    .ok_or_else(|| format!("rank {source} sent an image of the wrong size"))?;
                 frame.accumulate(&part);
                 images += 1;
             }
-            TAG_STATS => {
-                let mut report: RankReport = serde_json::from_slice(&msg.data)
-                    .map_err(|e| format!("rank {} sent unreadable statistics: {e}", msg.source))?;
-                if let Some(pa) = pas.get(&msg.source)
+            Ok(Message::Stats(mut report)) => {
+                if let Some(log) = pa_logs.get(&source)
                     && report.queue_lengths.is_empty()
                 {
-                    report.queue_lengths = pa.samples.clone();
+                    report.queue_lengths = log.samples.clone();
                 }
-                reports[msg.source as usize] = Some(report);
+                reports[source as usize] = Some(report);
             }
-            TAG_RESULTS => journal_results(msg.source, &msg.data)?,
-            TAG_PA_STATUS => {
-                let (_, batch) = decode_counts_and_records(&msg.data, 2).map_err(|e| e.0)?;
-                persist(&batch.records);
-                sends.send(msg.source, TAG_PA_STATUS_REPLY, &encode_batch(&[], 0));
+            Ok(Message::Results(results)) => {
+                if let Some(journal) = journal {
+                    journal.results(&results);
+                }
+            }
+            Ok(Message::PaStatus { records, .. }) => {
+                relay.keep(records);
+                let reply = Message::RecordsDown {
+                    thread: 0,
+                    records: Records::default(),
+                };
+                sends.send(source, &reply);
             }
             other => {
                 return Err(format!(
-                    "rank {} sent an unexpected message (tag {other}) at the end",
-                    msg.source
+                    "rank {source} sent an unexpected message at the end: {:?}",
+                    other.map(|m| m.kind())
                 ));
             }
         }
     }
-    let counters = comm.counters;
     use std::sync::atomic::Ordering::Relaxed;
+    let counters = comm.counters;
     let mut ranks = vec![RankReport {
         rank: 0,
         role: "mc".into(),
@@ -383,12 +231,58 @@ pub fn run(
         bytes: counters.bytes_sent.load(Relaxed),
         messages_received: counters.messages_received.load(Relaxed),
         bytes_received: counters.bytes_received.load(Relaxed),
-        records_received,
-        records_rejected,
+        records_received: relay.received,
+        records_rejected: relay.rejected,
         wall_s: start.elapsed().as_secs_f64(),
         ..Default::default()
     }];
     ranks.extend(reports.into_iter().skip(1).flatten());
-    let _ = forwarded_orders;
     Ok(ComponentResult { frame, ranks, render_s })
+}
+
+/// Why the job stops when no rank has said anything for `timeout`: who went quiet and what is
+/// missing (a lost PA takes its queue with it, a PR that never finished leaves its tiles'
+/// pixels undelivered).
+fn silence(
+    timeout: Duration,
+    start: Instant,
+    pa_logs: &BTreeMap<i32, PaLog>,
+    balancer: &LoadBalancer,
+    ledger: &TerminationLedger,
+    host: &dyn Fn(i32) -> String,
+) -> String {
+    let now = start.elapsed().as_secs_f64();
+    let quiet: Vec<String> = pa_logs
+        .iter()
+        .filter(|(_, log)| now - log.last_report >= timeout.as_secs_f64() * 0.9)
+        .map(|(r, log)| {
+            format!(
+                "PA {r} (rank {r}, host {}, last queue {}, computed {})",
+                host(*r),
+                balancer.queue(*r),
+                log.done
+            )
+        })
+        .collect();
+    let unfinished: Vec<String> = ledger
+        .unflushed()
+        .iter()
+        .map(|r| format!("PR {r} (host {})", host(*r)))
+        .collect();
+    let list = |what: &str, items: &[String]| {
+        if items.is_empty() {
+            String::new()
+        } else {
+            format!("{what}: {}; ", items.join(", "))
+        }
+    };
+    format!(
+        "no message from any rank for {:.0} s; {}{}missing: the indirect light of every pixel whose \
+         requests those ranks held, and the pixels of unfinished PRs (requests reported sent {}, computed {})",
+        timeout.as_secs_f64(),
+        list("silent", &quiet),
+        list("unfinished", &unfinished),
+        ledger.sent(),
+        ledger.computed(),
+    )
 }

@@ -6,16 +6,16 @@
 //! master, reporting its queue length and how many requests it has computed.
 
 use super::order::RequestQueue;
-use super::*;
-use crate::checkpoint::RequestResult;
+use super::{compute_request, send_results};
 use crate::image::framebuffer::FrameBuffer;
 use crate::irradiance::IrradianceCache;
-use crate::parallel::comm::{Comm, Counters};
-use crate::parallel::protocol::TAG_INITIAL_RECORDS;
+use crate::parallel::comm::{Comm, Counters, kind};
+use crate::parallel::protocol::{Kind, Message, Records, Requests};
 use crate::parallel::{WorkerSetup, rank_report, send_report};
 use crate::render::{ThreadClock, ThreadStats};
 use crate::shading::Integrator;
 use crate::shading::request::AmbientRequest;
+use crate::shading::request::RequestResult;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Condvar, Mutex};
 use std::time::{Duration, Instant};
@@ -52,9 +52,10 @@ struct Replies<'a> {
 }
 
 impl Replies<'_> {
-    fn take(&self, data: &[u8]) {
+    fn take(&self, records: Records) {
         self.pending.fetch_sub(1, Ordering::AcqRel);
-        if let (Some(cache), Ok(batch)) = (self.cache, decode_batch(data)) {
+        if let Some(cache) = self.cache {
+            let batch = records;
             self.records.fetch_add(batch.records.len() as u64, Ordering::Relaxed);
             batch.records.into_iter().for_each(|r| cache.insert_shared(r));
         }
@@ -82,12 +83,12 @@ fn communicate(
     // Replies before FINISH: the master sends FINISH after every reply it owed, so all of them
     // are in before FINISH is taken.
     let filters = [
-        (Some(0), Some(TAG_PA_STATUS_REPLY)),
-        (Some(0), Some(TAG_FINISH)),
-        (Some(0), Some(TAG_FORWARD_ORDER)),
-        (None, Some(TAG_REQUESTS)),
-        // A share of another PA's queue, when this one ran dry (see component::master).
-        (None, Some(TAG_FORWARDED)),
+        kind(Some(0), Kind::RecordsDown),
+        kind(Some(0), Kind::Finish),
+        kind(Some(0), Kind::ForwardOrder),
+        kind(None, Kind::Requests),
+        // A share of another PA's queue, when this one ran dry (see component::balancer).
+        kind(None, Kind::Forwarded),
     ];
     std::thread::scope(|senders| {
         loop {
@@ -101,40 +102,28 @@ fn communicate(
             let Some(msg) = comm.receive_one_of(accepted, wait) else {
                 continue;
             };
-            match msg.tag {
-                TAG_PA_STATUS_REPLY => replies.take(&msg.data),
-                TAG_REQUESTS | TAG_FORWARDED => {
+            match msg.message {
+                Ok(Message::RecordsDown { records, .. }) => replies.take(records),
+                Ok(Message::Requests(decoded)) | Ok(Message::Forwarded(decoded)) => {
                     let handling = Instant::now();
-                    match requests::decode(&msg.data, pixels) {
-                        Ok(decoded) => {
-                            tallies.rejected.fetch_add(decoded.rejected as u64, Ordering::Relaxed);
-                            // Refused requests still count as done, so the master's totals close.
-                            let mut q = queue.lock().unwrap_or_else(|e| e.into_inner());
-                            q.requests.extend(decoded.requests);
-                            q.longest = q.longest.max(q.requests.len());
-                            drop(q);
-                            ready.notify_one();
-                            tallies
-                                .handling_ns
-                                .fetch_add(handling.elapsed().as_nanos() as u64, Ordering::Relaxed);
-                        }
-                        Err(_) => {
-                            tallies.rejected.fetch_add(1, Ordering::Relaxed);
-                        }
-                    }
+                    // Refused requests still count as done, so the master's totals close.
+                    let (inside, outside): (Vec<AmbientRequest>, Vec<AmbientRequest>) =
+                        decoded.requests.into_iter().partition(|r| r.pixel < pixels);
+                    tallies
+                        .rejected
+                        .fetch_add((decoded.rejected + outside.len()) as u64, Ordering::Relaxed);
+                    let mut q = queue.lock().unwrap_or_else(|e| e.into_inner());
+                    q.requests.extend(inside);
+                    q.longest = q.longest.max(q.requests.len());
+                    drop(q);
+                    ready.notify_one();
+                    tallies
+                        .handling_ns
+                        .fetch_add(handling.elapsed().as_nanos() as u64, Ordering::Relaxed);
                 }
-                TAG_FORWARD_ORDER => {
-                    let word = |o: usize| {
-                        msg.data
-                            .get(o..o + 4)
-                            .map(|b| u32::from_le_bytes(b.try_into().expect("4 bytes")))
-                    };
-                    let (Some(to), Some(count)) = (word(0), word(4)) else {
-                        continue;
-                    };
+                Ok(Message::ForwardOrder { to, count, to_pa }) => {
                     // A PR waits for its share, empty or not; a PA that ran dry does not (see
-                    // master::feed_pa), and an empty share sent to it could arrive after FINISH.
-                    let to_a_pa = word(8) == Some(FORWARD_TO_PA);
+                    // component::balancer), and an empty share sent to it could arrive after FINISH.
                     // The newest requests go: the PA keeps working through the oldest (see
                     // RequestQueue::take_newest).
                     let share: Vec<AmbientRequest> = queue
@@ -143,13 +132,17 @@ fn communicate(
                         .requests
                         .take_newest(count as usize);
                     tallies.forwarded.fetch_add(share.len() as u64, Ordering::Relaxed);
-                    if !(to_a_pa && share.is_empty()) {
+                    if !(to_pa && share.is_empty()) {
                         // Every share is received before the job ends (a PR waits for its own, and
                         // a PA's are requests the master waits to see computed), so the scope's
                         // end, after FINISH, never waits on one.
-                        let data = requests::encode(&share);
-                        senders.spawn(move || Comm::new(counters).send(to as i32, TAG_FORWARDED, &data));
+                        let message = Message::Forwarded(Requests::from(share));
+                        senders.spawn(move || Comm::new(counters).send(to as i32, &message));
                     }
+                }
+                // A batch that cannot be read: counted, never trusted.
+                Err(_) => {
+                    tallies.rejected.fetch_add(1, Ordering::Relaxed);
                 }
                 _ => {
                     queue.lock().unwrap_or_else(|e| e.into_inner()).finish = true;
@@ -184,8 +177,8 @@ pub fn run(setup: &WorkerSetup<'_>, sync: usize, seed: u64, journal: bool, bound
         records: AtomicU64::new(0),
     };
 
-    if let Some(initial) = comm.receive(Some(0), Some(TAG_INITIAL_RECORDS), None)
-        && let (Some(cache), Ok(batch)) = (cache, decode_batch(&initial.data))
+    if let Some(initial) = comm.receive_one_of(&[kind(Some(0), Kind::InitialRecords)], None)
+        && let (Some(cache), Ok(Message::InitialRecords(batch))) = (cache, initial.message)
     {
         batch.records.into_iter().for_each(|r| cache.insert_shared(r));
     }
@@ -222,11 +215,12 @@ pub fn run(setup: &WorkerSetup<'_>, sync: usize, seed: u64, journal: bool, bound
                 // Refused requests count as done: the PR counted them as sent.
                 let finished = done + tallies.rejected.load(Ordering::Relaxed);
                 replies.pending.fetch_add(1, Ordering::AcqRel);
-                comm.send(
-                    0,
-                    TAG_PA_STATUS,
-                    &encode_counts_and_records(&[left as u64, finished], &records),
-                );
+                let status = Message::PaStatus {
+                    queue: left as u64,
+                    done: finished,
+                    records: Records::from(records),
+                };
+                comm.send(0, &status);
                 samples.push((start.elapsed().as_secs_f64(), left as u32));
             };
         loop {
@@ -276,21 +270,16 @@ pub fn run(setup: &WorkerSetup<'_>, sync: usize, seed: u64, journal: bool, bound
     // A status sent after FINISH (the last sync) still has its reply coming: the master answers
     // every status, also after FINISH.
     while replies.pending.load(Ordering::Acquire) > 0 {
-        match comm.receive(Some(0), Some(TAG_PA_STATUS_REPLY), None) {
-            Some(reply) => replies.take(&reply.data),
-            None => break,
+        match comm
+            .receive_one_of(&[kind(Some(0), Kind::RecordsDown)], None)
+            .map(|r| r.message)
+        {
+            Some(Ok(Message::RecordsDown { records, .. })) => replies.take(records),
+            _ => break,
         }
     }
 
-    comm.send(
-        0,
-        TAG_IMAGE,
-        &frame
-            .to_floats()
-            .iter()
-            .flat_map(|v| v.to_le_bytes())
-            .collect::<Vec<u8>>(),
-    );
+    comm.send(0, &Message::Image(frame.to_floats()));
     let mut threads = vec![stats];
     crate::render::add_prepass_work(&mut threads, setup.prepass);
     let mut report = rank_report(

@@ -4,11 +4,12 @@
 //! With no tile left it flushes its buffer and, when the master asks, computes requests
 //! forwarded from a loaded PA. Its image goes to the master only at the end.
 
-use super::*;
+use super::{Roles, compute_request, send_results};
 use crate::checkpoint::RequestResult;
 use crate::image::framebuffer::FrameBuffer;
-use crate::parallel::comm::{Comm, Counters, Marker};
-use crate::parallel::protocol::decode_work;
+use crate::parallel::comm::kind;
+use crate::parallel::comm::{Comm, Counters, Envelope, Marker};
+use crate::parallel::protocol::{FinishedTile, Kind, Message, Records, Requests};
 use crate::parallel::{WorkerSetup, rank_report, send_report};
 use crate::render::{ThreadClock, ThreadStats, render_tile};
 use crate::shading::Integrator;
@@ -30,7 +31,7 @@ const BATCHES_IN_FLIGHT: usize = 16;
 /// several PAs compute near-identical records for the same spot (measured on the Cornell box at
 /// 8 ranks: 934-968 records against 765-772, fewer than centralised or broadcast sharing).
 struct Sender<'c> {
-    outbox: Option<SyncSender<(i32, Vec<u8>)>>,
+    outbox: Option<SyncSender<(i32, Message)>>,
     /// Where the renderer's waits for a full outbox are counted (its idle time).
     idle_ns: &'c AtomicU64,
     pas: &'c [i32],
@@ -58,7 +59,7 @@ impl Sender<'_> {
         }
         let pa = self.pas[self.pa];
         self.sent += batch.len() as u64;
-        let message = (pa, requests::encode(&batch));
+        let message = (pa, Message::Requests(Requests::from(batch)));
         let queued = outbox.try_send(message);
         self.handling_ns += handling.elapsed().as_nanos() as u64;
         if let Err(TrySendError::Full(message)) = queued {
@@ -86,18 +87,18 @@ const WINDOW: usize = 16;
 /// (back-pressure from PA to PR), while a PA that keeps up costs the PR no waiting at all.
 /// The courier ends once every marker has been taken in, so nothing of this PR's is still on
 /// its way when it reports itself idle.
-fn deliver(counters: &Counters, inbox: Receiver<(i32, Vec<u8>)>) {
+fn deliver(counters: &Counters, inbox: Receiver<(i32, Message)>) {
     let comm = Comm::new(counters);
     let mut windows: HashMap<i32, (usize, Option<Marker>)> = HashMap::new();
     for (pa, batch) in inbox {
-        comm.send(pa, TAG_REQUESTS, &batch);
+        comm.send(pa, &batch);
         let (since, marker) = windows.entry(pa).or_default();
         *since += 1;
         if *since >= WINDOW {
             if let Some(previous) = marker.take() {
                 comm.wait_marker(previous);
             }
-            *marker = Some(comm.send_marker(pa, TAG_REQUESTS, &requests::EMPTY_BATCH));
+            *marker = Some(comm.send_marker(pa));
             *since = 0;
         }
     }
@@ -116,9 +117,15 @@ fn sync_records(
     received: &mut u64,
     rejected: &mut u64,
 ) {
-    comm.send(0, TAG_PR_SYNC, &encode_batch(&up, 0));
-    if let Some(reply) = comm.receive(Some(0), Some(TAG_PR_CATCH_UP), None)
-        && let Ok(batch) = decode_batch(&reply.data)
+    comm.send(
+        0,
+        &Message::RecordsUp {
+            thread: 0,
+            records: Records::from(up),
+        },
+    );
+    if let Some(reply) = comm.receive_one_of(&[kind(Some(0), Kind::RecordsDown)], None)
+        && let Ok(Message::RecordsDown { records: batch, .. }) = reply.message
     {
         *received += batch.records.len() as u64;
         *rejected += batch.rejected as u64;
@@ -157,7 +164,7 @@ fn render_and_help(
     sync: usize,
     seed: u64,
     journal: bool,
-    outbox: SyncSender<(i32, Vec<u8>)>,
+    outbox: SyncSender<(i32, Message)>,
     courier_counters: &Counters,
     join_courier: impl FnOnce(),
 ) {
@@ -189,39 +196,34 @@ fn render_and_help(
     // between tiles (a 16x16 tile is under a millisecond of work, the round trip a few tenths).
     // The request carries the report of the tile finished before (with --checkpoint); the
     // records that come with the next tile are one tile older than they would have been.
-    let ask = |report: Vec<u8>| comm.send(0, TAG_PR_WORK_REQUEST, &report);
+    let ask = |finished: Option<FinishedTile>| comm.send(0, &Message::WorkRequest { thread: 0, finished });
     let take = |received: &mut u64, rejected: &mut u64| -> Option<u32> {
-        let reply = comm.receive(Some(0), Some(TAG_PR_WORK), None)?;
-        let work_len = reply
-            .data
-            .get(..4)
-            .map_or(0, |b| u32::from_le_bytes(b.try_into().expect("4 bytes")) as usize);
-        let work = reply.data.get(4..4 + work_len).map(decode_work);
-        if let (Some(cache), Some(Ok(batch))) = (setup.cache, reply.data.get(4 + work_len..).map(decode_batch)) {
-            *received += batch.records.len() as u64;
-            *rejected += batch.rejected as u64;
-            batch.records.into_iter().for_each(|r| cache.insert_shared(r));
+        let reply = comm.receive_one_of(&[kind(Some(0), Kind::Work)], None)?;
+        let Ok(Message::Work { tile, records, .. }) = reply.message else {
+            return None;
+        };
+        if let Some(cache) = setup.cache {
+            *received += records.records.len() as u64;
+            *rejected += records.rejected as u64;
+            records.records.into_iter().for_each(|r| cache.insert_shared(r));
         }
-        match work {
-            Some(Ok(Some(index))) => Some(index),
-            _ => None,
-        }
+        tile
     };
-    ask(Vec::new());
+    ask(None);
     let mut next = take(&mut received, &mut rejected);
-    let mut finished_tile: Vec<u8> = Vec::new();
+    let mut finished_tile: Option<FinishedTile> = None;
     loop {
         let Some(index) = next else {
-            if finished_tile.is_empty() {
+            if finished_tile.is_none() {
                 break;
             }
             // The last tile's report still has to reach the master: one more request (its
             // answer is no tile; were it one, the loop renders it).
-            ask(std::mem::take(&mut finished_tile));
+            ask(finished_tile.take());
             next = take(&mut received, &mut rejected);
             continue;
         };
-        ask(std::mem::take(&mut finished_tile));
+        ask(finished_tile.take());
         let tile = &setup.tiles[index as usize];
         sender.start_tile(index);
         // The outgoing buffer is empty here (flushed at every tile's end), so what this tile
@@ -236,7 +238,11 @@ fn render_and_help(
         sender.send(&sink);
         if journal {
             let requests = (sender.sent - sent_before) as u32;
-            finished_tile = encode_tile_report(index, requests, &pixels);
+            finished_tile = Some(FinishedTile {
+                tile: index,
+                requests,
+                pixels: pixels.clone(),
+            });
         }
         store_tile(&mut frame, tile, &pixels);
         stats.tiles += 1;
@@ -258,20 +264,18 @@ fn render_and_help(
     loop {
         let records = setup.cache.map_or_else(Vec::new, |c| c.take_outbox());
         send_results(&comm, &mut results);
-        comm.send(
-            0,
-            TAG_PR_IDLE,
-            &encode_counts_and_records(&[sender.sent, helped], &records),
-        );
+        let idle = Message::Idle {
+            sent: sender.sent,
+            helped,
+            records: Records::from(records),
+        };
+        comm.send(0, &idle);
         let Some(msg) = wait_for_forward_or_finish(&comm) else {
             break;
         };
-        if msg.tag == TAG_FINISH {
-            break;
-        }
-        match requests::decode(&msg.data, width * height) {
-            Ok(decoded) => {
-                for request in &decoded.requests {
+        match msg.message {
+            Ok(Message::Forwarded(decoded)) => {
+                for request in decoded.requests.iter().filter(|r| r.pixel < width * height) {
                     compute_request(
                         &integrator,
                         request,
@@ -290,23 +294,17 @@ fn render_and_help(
                 }
                 // Refused requests are counted as computed (with nothing added) so the totals
                 // still close; the refusal is reported in the statistics.
+                let outside = decoded.requests.iter().filter(|r| r.pixel >= width * height).count();
                 helped += (decoded.requests.len() + decoded.rejected) as u64;
-                rejected += decoded.rejected as u64;
+                rejected += (decoded.rejected + outside) as u64;
             }
+            Ok(_) => break,
             Err(_) => rejected += 1,
         }
     }
     clock.stop(&mut stats);
 
-    comm.send(
-        0,
-        TAG_IMAGE,
-        &frame
-            .to_floats()
-            .iter()
-            .flat_map(|v| v.to_le_bytes())
-            .collect::<Vec<u8>>(),
-    );
+    comm.send(0, &Message::Image(frame.to_floats()));
     let mut threads = vec![stats.clone()];
     crate::render::add_prepass_work(&mut threads, setup.prepass);
     let mut report = rank_report(
@@ -326,6 +324,6 @@ fn render_and_help(
 }
 
 /// Waits for forwarded requests from any PA or the master's FINISH.
-fn wait_for_forward_or_finish(comm: &Comm<'_>) -> Option<crate::parallel::comm::Received> {
-    comm.receive_one_of(&[(Some(0), Some(TAG_FINISH)), (None, Some(TAG_FORWARDED))], None)
+fn wait_for_forward_or_finish(comm: &Comm<'_>) -> Option<Envelope> {
+    comm.receive_one_of(&[kind(Some(0), Kind::Finish), kind(None, Kind::Forwarded)], None)
 }

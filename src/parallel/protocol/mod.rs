@@ -1,0 +1,533 @@
+//! What ranks say to each other, every mode's messages in one type. A message travels as one
+//! MPI message whose tag names its kind (and, for replies to one rendering thread, the thread);
+//! its bytes start with the protocol's version and are little-endian after that. Nothing a
+//! message says is trusted blindly: a message is read exactly (too short, too long or a count
+//! that does not fit is an error), records and requests are checked one by one (bad ones are
+//! dropped and counted), and nothing in it is a pointer or a process-local id (tiles are
+//! indices into the tile list every rank computes alike; records are self-contained values).
+
+mod requests;
+pub mod wire;
+
+#[cfg(test)]
+pub(crate) use requests::sample_request;
+pub use requests::{REQUEST_BYTES, Requests};
+
+use crate::image::components::Components;
+use crate::image::framebuffer::{Layer, PixelValue};
+use crate::irradiance::codec::{self, RECORD_BYTES};
+use crate::irradiance::record::Record;
+use crate::shading::request::RequestResult;
+use crate::stats::RankReport;
+use mpi::Tag;
+use std::sync::OnceLock;
+use wire::{Put, Reader};
+
+/// The first byte of every message; a rank of another build is refused, not misread.
+pub const PROTOCOL_VERSION: u8 = 2;
+
+/// Replies to one rendering thread carry the thread in their tag: base + thread.
+const WORK_BASE: Tag = 1000;
+const RECORDS_DOWN_BASE: Tag = 2000;
+/// The most rendering threads a rank may have (their reply tags must not overlap).
+pub const MAX_THREADS: u32 = 999;
+
+/// Every message's kind and its MPI tag, in one place.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Kind {
+    Heartbeat = 1,
+    InitialRecords = 2,
+    PrepassStart = 3,
+    PrepassRound = 4,
+    WorkRequest = 5,
+    RecordsUp = 6,
+    RecordsBroadcast = 7,
+    FinalRecords = 8,
+    Stats = 9,
+    Requests = 10,
+    Forwarded = 11,
+    Idle = 12,
+    PaStatus = 13,
+    ForwardOrder = 14,
+    Finish = 15,
+    Image = 16,
+    Results = 17,
+    /// Tags WORK_BASE + thread.
+    Work = WORK_BASE as isize,
+    /// Tags RECORDS_DOWN_BASE + thread.
+    RecordsDown = RECORDS_DOWN_BASE as isize,
+}
+
+impl Kind {
+    /// The tag of this kind (for the per-thread kinds, thread 0's).
+    pub fn tag(self) -> Tag {
+        self as Tag
+    }
+
+    /// The tag of a reply to rendering thread `thread`.
+    pub fn for_thread(self, thread: u32) -> Tag {
+        debug_assert!(matches!(self, Kind::Work | Kind::RecordsDown));
+        self.tag() + thread as Tag
+    }
+
+    /// The kind a tag names, and the thread for the per-thread kinds.
+    pub fn of_tag(tag: Tag) -> Option<(Kind, u32)> {
+        use Kind::*;
+        let plain = [
+            Heartbeat,
+            InitialRecords,
+            PrepassStart,
+            PrepassRound,
+            WorkRequest,
+            RecordsUp,
+            RecordsBroadcast,
+            FinalRecords,
+            Stats,
+            Requests,
+            Forwarded,
+            Idle,
+            PaStatus,
+            ForwardOrder,
+            Finish,
+            Image,
+            Results,
+        ];
+        if let Some(&kind) = plain.iter().find(|k| k.tag() == tag) {
+            return Some((kind, 0));
+        }
+        for base in [Work, RecordsDown] {
+            let thread = tag - base.tag();
+            if (0..=MAX_THREADS as Tag).contains(&thread) {
+                return Some((base, thread as u32));
+            }
+        }
+        None
+    }
+}
+
+/// Records that passed validation, and how many did not.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Records {
+    pub records: Vec<Record>,
+    pub rejected: usize,
+}
+
+impl From<Vec<Record>> for Records {
+    fn from(records: Vec<Record>) -> Self {
+        Records { records, rejected: 0 }
+    }
+}
+
+/// A tile a worker finished: its index, the requests it sent for it (component mode's PRs;
+/// 0 elsewhere) and its pixels.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FinishedTile {
+    pub tile: u32,
+    pub requests: u32,
+    pub pixels: Vec<PixelValue>,
+}
+
+/// Every message of every mode. MC: the master (rank 0); worker: any other rank; PR and PA:
+/// component mode's workers (paper, section 5).
+#[derive(Clone, Debug, PartialEq)]
+pub enum Message {
+    /// Either way, every few seconds while a job runs: this rank is alive.
+    Heartbeat,
+    /// MC -> worker at the start: the records of the cache file.
+    InitialRecords(Records),
+    /// MC -> worker before the prepass: the records every rank starts the prepass from.
+    PrepassStart(Records),
+    /// Worker -> MC, the records of its share of a prepass round's sites; MC -> worker, the
+    /// round's records from every worker. Every rank must insert exactly the same records, so
+    /// one invalid record fails the whole message.
+    PrepassRound(Vec<(u32, Record)>),
+    /// Worker -> MC: give me a tile, with the tile finished before, if any.
+    WorkRequest {
+        thread: u32,
+        finished: Option<FinishedTile>,
+    },
+    /// MC -> the asking thread: a tile or none left, and (component mode) the records the
+    /// worker lacks.
+    Work {
+        thread: u32,
+        tile: Option<u32>,
+        records: Records,
+    },
+    /// Worker -> MC (centralised mode, helping PRs): new records; answered by `RecordsDown`.
+    RecordsUp { thread: u32, records: Records },
+    /// MC -> worker thread: the records it lacks (also the answer to a PA's status).
+    RecordsDown { thread: u32, records: Records },
+    /// Worker -> every other rank (broadcast mode): new records; `last` marks the sender's last.
+    RecordsBroadcast { records: Records, last: bool },
+    /// Worker -> MC at the end (no sharing, with -af): the rank's records, for the file.
+    FinalRecords(Records),
+    /// Worker -> MC at the end: the rank's statistics.
+    Stats(RankReport),
+    /// PR -> PA: a request buffer.
+    Requests(Requests),
+    /// PA -> helper (an idle PR, or a PA that ran dry): a share of the PA's queue.
+    Forwarded(Requests),
+    /// PR -> MC: no tile left; requests sent and computed as a helper so far, new records.
+    Idle { sent: u64, helped: u64, records: Records },
+    /// PA -> MC: queue length, requests computed, new records; answered by `RecordsDown`.
+    PaStatus { queue: u64, done: u64, records: Records },
+    /// MC -> PA: hand `count` queued requests to rank `to` (a PA when `to_pa`).
+    ForwardOrder { to: u32, count: u32, to_pa: bool },
+    /// MC -> every worker (component mode): every request is computed; send your image.
+    Finish,
+    /// Worker -> MC (component mode): the rank's image, every layer.
+    Image(Vec<f32>),
+    /// PA or helper -> MC (with --checkpoint): indirect light computed for requests.
+    Results(Vec<RequestResult>),
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct ProtocolError(pub String);
+
+impl std::fmt::Display for ProtocolError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl Message {
+    pub fn kind(&self) -> Kind {
+        match self {
+            Message::Heartbeat => Kind::Heartbeat,
+            Message::InitialRecords(_) => Kind::InitialRecords,
+            Message::PrepassStart(_) => Kind::PrepassStart,
+            Message::PrepassRound(_) => Kind::PrepassRound,
+            Message::WorkRequest { .. } => Kind::WorkRequest,
+            Message::Work { .. } => Kind::Work,
+            Message::RecordsUp { .. } => Kind::RecordsUp,
+            Message::RecordsDown { .. } => Kind::RecordsDown,
+            Message::RecordsBroadcast { .. } => Kind::RecordsBroadcast,
+            Message::FinalRecords(_) => Kind::FinalRecords,
+            Message::Stats(_) => Kind::Stats,
+            Message::Requests(_) => Kind::Requests,
+            Message::Forwarded(_) => Kind::Forwarded,
+            Message::Idle { .. } => Kind::Idle,
+            Message::PaStatus { .. } => Kind::PaStatus,
+            Message::ForwardOrder { .. } => Kind::ForwardOrder,
+            Message::Finish => Kind::Finish,
+            Message::Image(_) => Kind::Image,
+            Message::Results(_) => Kind::Results,
+        }
+    }
+
+    /// The MPI tag the message travels with.
+    pub fn tag(&self) -> Tag {
+        match self {
+            Message::Work { thread, .. } | Message::RecordsDown { thread, .. } => self.kind().for_thread(*thread),
+            _ => self.kind().tag(),
+        }
+    }
+
+    pub fn encode(&self) -> Vec<u8> {
+        let mut out = vec![PROTOCOL_VERSION];
+        match self {
+            Message::Heartbeat | Message::Finish => {}
+            Message::InitialRecords(r)
+            | Message::PrepassStart(r)
+            | Message::FinalRecords(r)
+            | Message::Work { records: r, .. }
+            | Message::RecordsDown { records: r, .. } => {
+                if let Message::Work { tile, .. } = self {
+                    put_option(&mut out, *tile);
+                }
+                put_records(&mut out, &r.records);
+            }
+            Message::PrepassRound(round) => {
+                out.put_u32(round.len() as u32);
+                for (index, record) in round {
+                    out.put_u32(*index);
+                    codec::encode(record, &mut out);
+                }
+            }
+            Message::WorkRequest { thread, finished } => {
+                out.put_u32(*thread);
+                out.put_u8(finished.is_some() as u8);
+                if let Some(f) = finished {
+                    out.put_u32(f.tile);
+                    out.put_u32(f.requests);
+                    out.put_u32(f.pixels.len() as u32);
+                    encode_pixels(&f.pixels, &mut out);
+                }
+            }
+            Message::RecordsUp { thread, records } => {
+                out.put_u32(*thread);
+                put_records(&mut out, &records.records);
+            }
+            Message::RecordsBroadcast { records, last } => {
+                out.put_u8(*last as u8);
+                put_records(&mut out, &records.records);
+            }
+            Message::Stats(report) => out.extend(serde_json::to_vec(report).unwrap_or_default()),
+            Message::Requests(r) | Message::Forwarded(r) => requests::put(&mut out, &r.requests),
+            Message::Idle {
+                sent: a,
+                helped: b,
+                records,
+            }
+            | Message::PaStatus {
+                queue: a,
+                done: b,
+                records,
+            } => {
+                out.put_u64(*a);
+                out.put_u64(*b);
+                put_records(&mut out, &records.records);
+            }
+            Message::ForwardOrder { to, count, to_pa } => {
+                out.put_u32(*to);
+                out.put_u32(*count);
+                out.put_u8(*to_pa as u8);
+            }
+            Message::Image(floats) => {
+                out.put_u32(floats.len() as u32);
+                floats.iter().for_each(|&f| out.put_f32(f));
+            }
+            Message::Results(results) => {
+                out.put_u32(results.len() as u32);
+                put_results(&mut out, results);
+            }
+        }
+        out
+    }
+
+    pub fn decode(tag: Tag, bytes: &[u8]) -> Result<Message, ProtocolError> {
+        let (kind, thread) = Kind::of_tag(tag).ok_or_else(|| ProtocolError(format!("unknown message tag {tag}")))?;
+        let mut r = Reader::new(bytes, kind_name(kind));
+        let version = r.u8()?;
+        if version != PROTOCOL_VERSION {
+            return Err(r.error(format_args!(
+                "protocol version {version}, this build speaks {PROTOCOL_VERSION} (mixed builds?)"
+            )));
+        }
+        let message = match kind {
+            Kind::Heartbeat => Message::Heartbeat,
+            Kind::Finish => Message::Finish,
+            Kind::InitialRecords => Message::InitialRecords(take_records(&mut r)?),
+            Kind::PrepassStart => Message::PrepassStart(take_records(&mut r)?),
+            Kind::FinalRecords => Message::FinalRecords(take_records(&mut r)?),
+            Kind::PrepassRound => {
+                let count = r.count(4 + RECORD_BYTES)?;
+                let mut round = Vec::with_capacity(count);
+                for _ in 0..count {
+                    let index = r.u32()?;
+                    let record = codec::decode(r.take(RECORD_BYTES)?)
+                        .map_err(|e| r.error(format_args!("record for site {index} refused: {e:?}")))?;
+                    round.push((index, record));
+                }
+                Message::PrepassRound(round)
+            }
+            Kind::WorkRequest => {
+                let thread = r.u32()?;
+                let finished = if r.flag()? {
+                    let tile = r.u32()?;
+                    let requests = r.u32()?;
+                    let count = r.count(PIXEL_FLOATS * 4)?;
+                    let pixels = decode_pixels(r.take(count * PIXEL_FLOATS * 4)?);
+                    if !pixels.iter().all(healthy) {
+                        return Err(r.error("a pixel is negative or not finite"));
+                    }
+                    Some(FinishedTile { tile, requests, pixels })
+                } else {
+                    None
+                };
+                Message::WorkRequest { thread, finished }
+            }
+            Kind::Work => Message::Work {
+                thread,
+                tile: take_option(&mut r)?,
+                records: take_records(&mut r)?,
+            },
+            Kind::RecordsUp => Message::RecordsUp {
+                thread: r.u32()?,
+                records: take_records(&mut r)?,
+            },
+            Kind::RecordsDown => Message::RecordsDown {
+                thread,
+                records: take_records(&mut r)?,
+            },
+            Kind::RecordsBroadcast => Message::RecordsBroadcast {
+                last: r.flag()?,
+                records: take_records(&mut r)?,
+            },
+            Kind::Stats => {
+                let report = serde_json::from_slice(r.rest()).map_err(|e| ProtocolError(format!("statistics: {e}")))?;
+                Message::Stats(report)
+            }
+            Kind::Requests => Message::Requests(requests::take(&mut r)?),
+            Kind::Forwarded => Message::Forwarded(requests::take(&mut r)?),
+            Kind::Idle => Message::Idle {
+                sent: r.u64()?,
+                helped: r.u64()?,
+                records: take_records(&mut r)?,
+            },
+            Kind::PaStatus => Message::PaStatus {
+                queue: r.u64()?,
+                done: r.u64()?,
+                records: take_records(&mut r)?,
+            },
+            Kind::ForwardOrder => Message::ForwardOrder {
+                to: r.u32()?,
+                count: r.u32()?,
+                to_pa: r.flag()?,
+            },
+            Kind::Image => {
+                let count = r.count(4)?;
+                let floats: Vec<f32> = (0..count).map(|_| r.f32()).collect::<Result<_, _>>()?;
+                if !floats.iter().all(|v| v.is_finite()) {
+                    return Err(r.error("a value is not finite"));
+                }
+                Message::Image(floats)
+            }
+            Kind::Results => {
+                let count = r.count(RESULT_BYTES)?;
+                Message::Results(take_results(&mut r, count)?)
+            }
+        };
+        r.finish()?;
+        Ok(message)
+    }
+}
+
+fn kind_name(kind: Kind) -> &'static str {
+    match kind {
+        Kind::Heartbeat => "heartbeat",
+        Kind::InitialRecords => "initial records",
+        Kind::PrepassStart => "prepass start",
+        Kind::PrepassRound => "prepass round",
+        Kind::WorkRequest => "work request",
+        Kind::Work => "work",
+        Kind::RecordsUp => "records up",
+        Kind::RecordsDown => "records down",
+        Kind::RecordsBroadcast => "record broadcast",
+        Kind::FinalRecords => "final records",
+        Kind::Stats => "statistics",
+        Kind::Requests => "request buffer",
+        Kind::Forwarded => "forwarded requests",
+        Kind::Idle => "idle report",
+        Kind::PaStatus => "PA status",
+        Kind::ForwardOrder => "forward order",
+        Kind::Finish => "finish",
+        Kind::Image => "image",
+        Kind::Results => "results",
+    }
+}
+
+/// The bytes of an empty request buffer, for the PRs' delivery markers (a synchronous send
+/// needs bytes that outlive it).
+pub fn empty_requests() -> &'static [u8] {
+    static EMPTY: OnceLock<Vec<u8>> = OnceLock::new();
+    EMPTY.get_or_init(|| Message::Requests(Requests::default()).encode())
+}
+
+fn put_option(out: &mut Vec<u8>, value: Option<u32>) {
+    out.put_u8(value.is_some() as u8);
+    out.put_u32(value.unwrap_or(0));
+}
+
+fn take_option(r: &mut Reader<'_>) -> Result<Option<u32>, ProtocolError> {
+    let some = r.flag()?;
+    let value = r.u32()?;
+    Ok(some.then_some(value))
+}
+
+fn put_records(out: &mut Vec<u8>, records: &[Record]) {
+    out.reserve(4 + records.len() * RECORD_BYTES);
+    out.put_u32(records.len() as u32);
+    records.iter().for_each(|record| codec::encode(record, out));
+}
+
+fn take_records(r: &mut Reader<'_>) -> Result<Records, ProtocolError> {
+    let count = r.count(RECORD_BYTES)?;
+    let mut out = Records {
+        records: Vec::with_capacity(count),
+        rejected: 0,
+    };
+    for _ in 0..count {
+        match codec::decode(r.take(RECORD_BYTES)?) {
+            Ok(record) => out.records.push(record),
+            Err(_) => out.rejected += 1,
+        }
+    }
+    Ok(out)
+}
+
+/// Floats of one pixel on the wire (and in the checkpoint journal): four RGB layers, records.
+pub const PIXEL_FLOATS: usize = 13;
+
+/// A pixel that is not finite and non-negative cannot come from a healthy renderer.
+fn healthy(p: &PixelValue) -> bool {
+    p.components
+        .as_array()
+        .iter()
+        .flat_map(|v| v.to_array())
+        .chain([p.records])
+        .all(|v| v.is_finite() && v >= 0.0)
+}
+
+/// Appends pixels as little-endian floats, PIXEL_FLOATS each.
+pub fn encode_pixels(pixels: &[PixelValue], out: &mut Vec<u8>) {
+    for p in pixels {
+        p.components.as_array().into_iter().for_each(|v| out.put_vec3(v));
+        out.put_f32(p.records);
+    }
+}
+
+/// The inverse of [`encode_pixels`] for a body of whole pixels (the caller checks the length);
+/// the values are not judged here.
+pub fn decode_pixels(body: &[u8]) -> Vec<PixelValue> {
+    body.chunks_exact(PIXEL_FLOATS * 4)
+        .map(|chunk| {
+            let mut r = Reader::new(chunk, "pixel");
+            let mut v = || r.vec3().expect("a whole pixel");
+            let components = Components {
+                emission: v(),
+                direct: v(),
+                specular: v(),
+                indirect: v(),
+            };
+            PixelValue {
+                components,
+                records: r.f32().expect("a whole pixel"),
+            }
+        })
+        .collect()
+}
+
+/// Bytes of one request's result: pixel, layer, RGB.
+pub const RESULT_BYTES: usize = 20;
+
+/// Results as bytes, without a count (the journal's entries and the `Results` message alike).
+pub fn put_results(out: &mut Vec<u8>, results: &[RequestResult]) {
+    for result in results {
+        out.put_u32(result.pixel);
+        out.put_u32(result.layer.index() as u32);
+        out.put_vec3(result.value);
+    }
+}
+
+/// The inverse of [`put_results`]: `count` results.
+pub fn take_results(r: &mut Reader<'_>, count: usize) -> Result<Vec<RequestResult>, ProtocolError> {
+    (0..count)
+        .map(|_| {
+            let pixel = r.u32()?;
+            let layer = r.u32()?;
+            let layer = Layer::ALL
+                .get(layer as usize)
+                .copied()
+                .ok_or_else(|| r.error(format_args!("layer {layer}")))?;
+            Ok(RequestResult {
+                pixel,
+                layer,
+                value: r.vec3()?,
+            })
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests;

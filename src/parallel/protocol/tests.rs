@@ -1,0 +1,220 @@
+use super::*;
+use crate::irradiance::record::tests::flat_record;
+use glam::Vec3;
+
+fn record(i: u32) -> Record {
+    let mut r = flat_record(0.1 + i as f32, 0.5);
+    r.position = Vec3::new(i as f32, 2.0, -1.0);
+    r
+}
+
+fn pixel(v: f32) -> PixelValue {
+    PixelValue {
+        components: Components {
+            emission: Vec3::splat(v),
+            direct: Vec3::X,
+            specular: Vec3::Y,
+            indirect: Vec3::Z,
+        },
+        records: 2.0,
+    }
+}
+
+/// One message of every kind, with content in every field.
+fn every_message() -> Vec<Message> {
+    let records = || Records::from(vec![record(1), record(2)]);
+    let mut report = RankReport {
+        rank: 3,
+        role: "pa".into(),
+        ..Default::default()
+    };
+    report.queue_lengths = vec![(0.5, 7)];
+    vec![
+        Message::Heartbeat,
+        Message::InitialRecords(records()),
+        Message::PrepassStart(Records::default()),
+        Message::PrepassRound(vec![(3, record(0)), (9, record(4))]),
+        Message::WorkRequest {
+            thread: 2,
+            finished: None,
+        },
+        Message::WorkRequest {
+            thread: 1,
+            finished: Some(FinishedTile {
+                tile: 7,
+                requests: 11,
+                pixels: vec![pixel(0.5), pixel(1.5)],
+            }),
+        },
+        Message::Work {
+            thread: 3,
+            tile: Some(42),
+            records: records(),
+        },
+        Message::Work {
+            thread: 0,
+            tile: None,
+            records: Records::default(),
+        },
+        Message::RecordsUp {
+            thread: 5,
+            records: records(),
+        },
+        Message::RecordsDown {
+            thread: 5,
+            records: records(),
+        },
+        Message::RecordsBroadcast {
+            records: records(),
+            last: true,
+        },
+        Message::FinalRecords(records()),
+        Message::Stats(report),
+        Message::Requests(Requests::from(vec![sample_request(5), sample_request(99)])),
+        Message::Forwarded(Requests::default()),
+        Message::Idle {
+            sent: 10,
+            helped: 3,
+            records: records(),
+        },
+        Message::PaStatus {
+            queue: 4,
+            done: 1 << 40,
+            records: Records::default(),
+        },
+        Message::ForwardOrder {
+            to: 4,
+            count: 17,
+            to_pa: true,
+        },
+        Message::Finish,
+        Message::Image(vec![0.0, 1.5, 3.25]),
+        Message::Results(vec![RequestResult {
+            pixel: 9,
+            layer: Layer::Specular,
+            value: Vec3::new(0.1, 0.2, 0.3),
+        }]),
+    ]
+}
+
+#[test]
+fn every_message_round_trips() {
+    for message in every_message() {
+        let bytes = message.encode();
+        let back = Message::decode(message.tag(), &bytes).unwrap_or_else(|e| panic!("{message:?}: {e}"));
+        assert_eq!(back, message);
+    }
+}
+
+#[test]
+fn tags_are_distinct_and_name_their_kind() {
+    let messages = every_message();
+    for m in &messages {
+        assert_eq!(Kind::of_tag(m.tag()).map(|(k, _)| k), Some(m.kind()));
+    }
+    assert_eq!(Kind::of_tag(Kind::Work.for_thread(7)), Some((Kind::Work, 7)));
+    assert_eq!(
+        Kind::of_tag(Kind::RecordsDown.for_thread(MAX_THREADS)),
+        Some((Kind::RecordsDown, MAX_THREADS))
+    );
+    assert_eq!(Kind::of_tag(0), None);
+    assert_eq!(Kind::of_tag(999), None);
+    assert!(Message::decode(999, &[PROTOCOL_VERSION]).is_err());
+}
+
+#[test]
+fn truncated_or_padded_messages_are_refused() {
+    for message in every_message() {
+        let bytes = message.encode();
+        for cut in 0..bytes.len() {
+            // A statistics message is JSON: every cut of it is malformed JSON too.
+            assert!(
+                Message::decode(message.tag(), &bytes[..cut]).is_err(),
+                "{message:?} cut at {cut} of {}",
+                bytes.len()
+            );
+        }
+        let mut padded = bytes.clone();
+        padded.push(0);
+        assert!(
+            Message::decode(message.tag(), &padded).is_err(),
+            "{message:?} with a byte more"
+        );
+    }
+}
+
+#[test]
+fn another_protocol_version_is_refused() {
+    let mut bytes = Message::Finish.encode();
+    bytes[0] = PROTOCOL_VERSION + 1;
+    let e = Message::decode(Kind::Finish.tag(), &bytes).unwrap_err();
+    assert!(e.0.contains("version"), "{e}");
+}
+
+#[test]
+fn a_corrupted_record_is_dropped_and_counted_but_fails_a_prepass_round() {
+    let message = Message::InitialRecords(Records::from(vec![record(1), record(2)]));
+    let mut bytes = message.encode();
+    // Version, count, then the records: damage the second one.
+    bytes[1 + 4 + RECORD_BYTES + 5] ^= 0xff;
+    match Message::decode(message.tag(), &bytes).unwrap() {
+        Message::InitialRecords(r) => assert_eq!((r.records, r.rejected), (vec![record(1)], 1)),
+        other => panic!("{other:?}"),
+    }
+    let round = Message::PrepassRound(vec![(0, record(1)), (1, record(2))]);
+    let mut bytes = round.encode();
+    bytes[1 + 4 + (4 + RECORD_BYTES) + 4 + 5] ^= 0xff;
+    assert!(Message::decode(round.tag(), &bytes).is_err());
+}
+
+#[test]
+fn bad_requests_are_refused_one_by_one() {
+    let message = Message::Requests(Requests::from(vec![sample_request(5), sample_request(6)]));
+    let mut bytes = message.encode();
+    // The first request's shading normal (after pixel, layer, depth, position, geometric
+    // normal) becomes NaN.
+    let normal = 1 + 4 + 12 + 24;
+    bytes[normal..normal + 4].copy_from_slice(&f32::NAN.to_le_bytes());
+    match Message::decode(message.tag(), &bytes).unwrap() {
+        Message::Requests(r) => {
+            assert_eq!(r.rejected, 1);
+            assert_eq!(r.requests.len(), 1);
+            assert_eq!(r.requests[0].pixel, 6);
+        }
+        other => panic!("{other:?}"),
+    }
+    assert_eq!(
+        empty_requests(),
+        Message::Requests(Requests::default()).encode().as_slice()
+    );
+}
+
+#[test]
+fn unhealthy_pixels_and_images_are_refused() {
+    let request = |v: f32| Message::WorkRequest {
+        thread: 0,
+        finished: Some(FinishedTile {
+            tile: 1,
+            requests: 0,
+            pixels: vec![pixel(v)],
+        }),
+    };
+    for bad in [f32::NAN, -1.0, f32::INFINITY] {
+        assert!(Message::decode(Kind::WorkRequest.tag(), &request(bad).encode()).is_err());
+        assert!(
+            Message::decode(
+                Kind::Image.tag(),
+                &Message::Image(vec![1.0, bad.abs() * f32::NAN]).encode()
+            )
+            .is_err()
+        );
+    }
+    let results = Message::Results(vec![RequestResult {
+        pixel: 1,
+        layer: Layer::Indirect,
+        value: Vec3::ONE,
+    }]);
+    let mut bytes = results.encode();
+    bytes[1 + 4 + 4] = 9; // no layer 9
+    assert!(Message::decode(results.tag(), &bytes).is_err());
+}
