@@ -146,9 +146,10 @@ pub struct RenderArgs {
     /// Ranks that act as PAs in component mode (default: half the workers).
     #[arg(long = "pa")]
     pub pa: Option<u32>,
-    /// Seconds the master controller waits for any message, or for a rank to take one of its
-    /// messages, before it gives up on the job.
-    #[arg(long = "timeout", default_value_t = 600.0)]
+    /// Seconds a rank may stay silent under mpirun (ranks send heartbeats every 2 s) before the
+    /// master ends the job naming it, or a worker whose master is that silent ends itself; also
+    /// how long the master waits for a rank to take one of its messages.
+    #[arg(long = "timeout", default_value_t = 30.0)]
     pub timeout: f64,
     /// Add a debug layer `ic_records` counting the records each pixel made.
     #[arg(long = "ic-records")]

@@ -94,7 +94,7 @@ pub struct RankReport {
     pub t_notamb_s: f64,
     /// Time waiting for work or messages.
     pub idle_s: f64,
-    /// Messages and bytes this rank sent.
+    /// Messages and bytes this rank sent (its heartbeats apart: see `heartbeats`).
     pub messages: u64,
     pub bytes: u64,
     pub messages_received: u64,
@@ -120,6 +120,11 @@ pub struct RankReport {
     pub queue_lengths: Vec<(f64, u32)>,
     /// PA: the longest its request queue ever was.
     pub queue_max: u64,
+    /// Heartbeats this rank sent (one byte and MPI's envelope each, every 2 s; see
+    /// `parallel::liveness`). Not in `messages`: a rank's last heartbeats may still be on their
+    /// way when the reports are added up.
+    #[serde(default)]
+    pub heartbeats: u64,
 }
 
 #[derive(Clone, Debug, Default, Serialize)]

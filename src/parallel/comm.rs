@@ -3,6 +3,7 @@
 //! MPI's blocking calls spin: on an oversubscribed machine a waiting rank would steal the core
 //! from the rank it waits for.
 
+use super::liveness::Silence;
 use super::protocol::{Kind, Message, ProtocolError, empty_requests};
 use mpi::Tag;
 use mpi::point_to_point::{Destination, MatchedReceiveVec, Source};
@@ -167,11 +168,6 @@ impl<'c> Comm<'c> {
         }
     }
 
-    fn count_received(&self, bytes: usize) {
-        self.counters.messages_received.fetch_add(1, Ordering::Relaxed);
-        self.counters.bytes_received.fetch_add(bytes as u64, Ordering::Relaxed);
-    }
-
     /// A message with `tag` (any tag when None) from `source` (anyone when None), if one is
     /// waiting now.
     pub fn try_receive(&self, source: Option<i32>, tag: Option<Tag>) -> Option<Envelope> {
@@ -183,7 +179,14 @@ impl<'c> Comm<'c> {
         };
         probe.map(|matched| {
             let (data, status) = matched.matched_receive_vec::<u8>();
-            self.count_received(data.len());
+            // Heartbeats are counted apart, whoever takes them in (see `liveness`).
+            let counters = match super::liveness::counters() {
+                Some(pulse) if status.tag() == Kind::Heartbeat.tag() => pulse,
+                _ => self.counters,
+            };
+            counters.messages_received.fetch_add(1, Ordering::Relaxed);
+            counters.bytes_received.fetch_add(data.len() as u64, Ordering::Relaxed);
+            super::liveness::heard(status.source_rank());
             Envelope {
                 source: status.source_rank(),
                 message: Message::decode(status.tag(), &data),
@@ -215,6 +218,25 @@ impl<'c> Comm<'c> {
             .idle_ns
             .fetch_add(start.elapsed().as_nanos() as u64, Ordering::Relaxed);
         result
+    }
+
+    /// Like `receive_one_of`, for a master that must notice a lost rank: every second without
+    /// a message it checks whether a rank `awaited` holds true for has been silent for `limit`
+    /// (see `liveness`), and gives up with that rank if so.
+    pub fn receive_live(
+        &self,
+        filters: &[Filter],
+        limit: Duration,
+        awaited: impl Fn(i32) -> bool,
+    ) -> Result<Envelope, Silence> {
+        loop {
+            if let Some(envelope) = self.receive_one_of(filters, Some(limit.min(Duration::from_secs(1)))) {
+                return Ok(envelope);
+            }
+            if let Some(silence) = super::liveness::lost(self.size(), limit, &awaited) {
+                return Err(silence);
+            }
+        }
     }
 
     /// Every rank's host (MPI processor) name, by rank. A collective: every rank calls it.

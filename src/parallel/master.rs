@@ -3,7 +3,8 @@
 //! owns the -af cache file, and gathers the ranks' statistics. It renders nothing itself.
 
 use super::Mode;
-use super::comm::{Comm, Counters};
+use super::comm::Comm;
+use super::liveness::Silence;
 use super::master_sends::MasterSends;
 use super::protocol::{FinishedTile, Message, Records};
 use super::relay::RecordRelay;
@@ -98,17 +99,9 @@ pub fn run(comm: &Comm<'_>, plan: &Plan<'_>) -> Result<MasterResult, MasterError
             && (mode != Mode::Broadcast || ends == workers)
     };
     while !done(finished_requesters, &reports, end_markers) {
-        let Some(msg) = comm.receive(None, None, Some(timeout)) else {
-            let silent: Vec<String> = (1..size)
-                .filter(|&r| reports[r].is_none())
-                .map(|r| format!("{r} (host {})", hosts.get(r).map_or("?", String::as_str)))
-                .collect();
-            return Err(MasterError(format!(
-                "no message from any worker for {:.0} s; still waiting for rank(s) {}",
-                timeout.as_secs_f64(),
-                silent.join(", ")
-            )));
-        };
+        let msg = comm
+            .receive_live(&[(None, None)], timeout, |r| reports[r as usize].is_none())
+            .map_err(|silence| MasterError(lost_rank(&silence, hosts)))?;
         let source = msg.source as usize;
         let message = msg
             .message
@@ -177,20 +170,23 @@ pub fn run(comm: &Comm<'_>, plan: &Plan<'_>) -> Result<MasterResult, MasterError
         return Err(MasterError(format!("tile {missing} was never rendered")));
     }
     let render_s = start.elapsed().as_secs_f64();
-    let counters: &Counters = comm.counters;
     let mut ranks = vec![RankReport {
-        rank: 0,
-        role: "mc".into(),
-        idle_s: counters.idle_s(),
-        messages: counters.messages_sent.load(std::sync::atomic::Ordering::Relaxed),
-        bytes: counters.bytes_sent.load(std::sync::atomic::Ordering::Relaxed),
-        messages_received: counters.messages_received.load(std::sync::atomic::Ordering::Relaxed),
-        bytes_received: counters.bytes_received.load(std::sync::atomic::Ordering::Relaxed),
         records_received: relay.received,
         records_rejected: relay.rejected,
         wall_s: render_s,
-        ..Default::default()
+        ..super::traffic_report(0, "mc", &[comm.counters], comm.counters.idle_s())
     }];
     ranks.extend(reports.into_iter().skip(1).flatten());
     Ok(MasterResult { frame, ranks, render_s })
+}
+
+/// The line that ends a job when a rank has fallen silent.
+pub fn lost_rank(silence: &Silence, hosts: &[String]) -> String {
+    format!(
+        "rank {} (host {}) has been silent for {:.0} s: its host or link is gone, or it hangs; the cache \
+         file keeps every record synced before",
+        silence.rank,
+        hosts.get(silence.rank as usize).map_or("?", String::as_str),
+        silence.seconds
+    )
 }

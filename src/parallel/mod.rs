@@ -6,6 +6,7 @@
 pub mod comm;
 pub mod component;
 pub mod link_bench;
+pub mod liveness;
 pub mod master;
 pub mod master_sends;
 pub mod prepass;
@@ -68,14 +69,10 @@ impl From<ModeArg> for Mode {
 /// A rank's report from its rendering threads and its message counters. `idle_s` is the
 /// waiting of the rendering threads (not of helper threads that wait by design).
 pub fn rank_report(rank: i32, role: &str, threads: &[ThreadStats], counters: &[&Counters], idle_s: f64) -> RankReport {
-    use std::sync::atomic::Ordering::Relaxed;
     // Waiting is counted per rank; each rendering thread waited for its own replies.
     let idle_per_thread = idle_s / threads.len().max(1) as f64;
     let reports: Vec<ThreadReport> = threads.iter().map(|t| ThreadReport::new(t, idle_per_thread)).collect();
-    let sum = |f: &dyn Fn(&Counters) -> u64| counters.iter().map(|c| f(c)).sum::<u64>();
     RankReport {
-        rank: rank as u32,
-        role: role.into(),
         threads: threads.len(),
         tiles: reports.iter().map(|t| t.tiles).sum(),
         records_computed: reports.iter().map(|t| t.records_computed).sum(),
@@ -84,11 +81,23 @@ pub fn rank_report(rank: i32, role: &str, threads: &[ThreadStats], counters: &[&
         hits: reports.iter().map(|t| t.hits).sum(),
         t_amb_s: reports.iter().map(|t| t.t_amb_s).sum(),
         t_notamb_s: reports.iter().map(|t| t.t_notamb_s).sum(),
+        ..traffic_report(rank, role, counters, idle_s)
+    }
+}
+
+/// A rank's report of its messages and waiting alone: the master's.
+pub fn traffic_report(rank: i32, role: &str, counters: &[&Counters], idle_s: f64) -> RankReport {
+    use std::sync::atomic::Ordering::Relaxed;
+    let sum = |f: &dyn Fn(&Counters) -> u64| counters.iter().map(|c| f(c)).sum::<u64>();
+    RankReport {
+        rank: rank as u32,
+        role: role.into(),
         idle_s,
         messages: sum(&|c| c.messages_sent.load(Relaxed)),
         bytes: sum(&|c| c.bytes_sent.load(Relaxed)),
         messages_received: sum(&|c| c.messages_received.load(Relaxed)),
         bytes_received: sum(&|c| c.bytes_received.load(Relaxed)),
+        heartbeats: liveness::counters().map_or(0, |c| c.messages_sent.load(Relaxed)),
         ..Default::default()
     }
 }
@@ -193,6 +202,13 @@ fn check_layout(args: &RenderArgs, mode: Mode, size: i32, tile_count: usize, thr
     Ok(())
 }
 
+/// MPI for this process and the heartbeats that run while it is up, ended in that order (a
+/// field's drop runs in declaration order): no thread may use MPI once it is finalized.
+struct MpiSession {
+    _pulse: Option<liveness::Pulse>,
+    _universe: mpi::environment::Universe,
+}
+
 /// Ends a job that every rank stops together: each rank says its `line` if it has one (for a
 /// verdict all ranks share, rank 0 alone has one), then all meet at a barrier before any exits.
 /// A rank that exits with an error first makes mpirun kill the job, rank 0 included, before its
@@ -239,6 +255,23 @@ pub fn run(args: &RenderArgs, mode: Mode) -> CommandResult {
         return fail(e);
     }
     let hosts = comm.host_names();
+    // Heartbeats from here on (see `liveness`): every rank hears from its master and the
+    // master from every rank while the job runs. The pulse stops (dropped) before the universe
+    // ends MPI.
+    liveness::begin(size as usize);
+    let silence_limit = Duration::from_secs_f64(args.timeout.max(1.0));
+    let host_of = |r: i32| hosts.get(r as usize).map_or("?", String::as_str).to_string();
+    let lost_master = format!(
+        "rank {rank} on {}: no word from the master (rank 0 on {}) for {:.0} s: it is gone or hangs; this rank ends",
+        host_of(rank),
+        host_of(0),
+        silence_limit.as_secs_f64()
+    );
+    let pulse = (granted == Threading::Multiple).then(|| liveness::Pulse::start(silence_limit, lost_master));
+    let universe = MpiSession {
+        _pulse: pulse,
+        _universe: universe,
+    };
     // From here on a failure may hit one rank only (its files, its file system): that rank says
     // why and ends the whole job, or the others would wait for it for ever.
     let outputs = if rank == 0 {
@@ -395,7 +428,7 @@ fn run_component(
     hosts: &[String],
     outputs: Option<Outputs>,
     wall: Instant,
-    universe: mpi::environment::Universe,
+    universe: MpiSession,
     resume: Option<(&Checkpoint, &Restored)>,
     prepass: Option<crate::prepass::PrepassOutcome>,
 ) -> CommandResult {

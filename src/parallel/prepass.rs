@@ -35,22 +35,23 @@ pub fn run(comm: &Comm<'_>, job: &Job, timeout: Duration, hosts: &[String]) -> R
             }
             let mut round = Vec::new();
             for worker in 1..size {
-                let message = comm.receive_one_of(&[kind(Some(worker), Kind::PrepassRound)], Some(timeout));
+                let message = comm.receive_live(&[kind(Some(worker), Kind::PrepassRound)], timeout, |_| true);
                 match message.map(|m| m.message) {
-                    Some(Ok(Message::PrepassRound(records))) => round.extend(records),
-                    Some(other) => {
+                    Ok(Ok(Message::PrepassRound(records))) => round.extend(records),
+                    Ok(other) => {
                         failure = Some(format!(
                             "prepass: rank {worker} on {} sent a bad round: {}",
                             host(worker),
                             other.err().map_or_else(|| "not a round".into(), |e| e.0)
                         ))
                     }
-                    None => {
+                    Err(lost) => {
                         failure = Some(format!(
-                            "prepass: rank {worker} on {} sent no records for {} s (lost, or stalled); the cache file keeps \
+                            "prepass: rank {} on {} has been silent for {:.0} s (lost, or stalled); the cache file keeps \
                              every record of the rounds before",
-                            host(worker),
-                            timeout.as_secs()
+                            lost.rank,
+                            host(lost.rank),
+                            lost.seconds
                         ))
                     }
                 }

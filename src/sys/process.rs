@@ -29,3 +29,12 @@ pub fn die_with_parent(launcher: Option<u32>) -> Result<(), String> {
     let _ = launcher;
     Ok(())
 }
+
+/// Ends this process at once with `code`, running no exit handlers: a rank that has lost its
+/// master must not wait in the MPI library's own teardown, which may wait for the lost peer.
+pub fn exit_now(code: i32) -> ! {
+    use std::io::Write;
+    let _ = std::io::stderr().flush();
+    // SAFETY: _exit takes any status and never returns.
+    unsafe { libc::_exit(code) }
+}

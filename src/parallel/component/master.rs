@@ -10,6 +10,8 @@ use crate::checkpoint::{Checkpoint, Restored};
 use crate::image::framebuffer::FrameBuffer;
 use crate::irradiance::IrradianceCache;
 use crate::parallel::comm::Comm;
+use crate::parallel::liveness::{self, Silence};
+use crate::parallel::master::lost_rank;
 use crate::parallel::master_sends::MasterSends;
 use crate::parallel::protocol::{FinishedTile, Message, Records};
 use crate::parallel::relay::RecordRelay;
@@ -29,8 +31,6 @@ pub struct ComponentResult {
 struct PaLog {
     done: u64,
     samples: Vec<(f64, u32)>,
-    /// When it last reported (seconds since the start).
-    last_report: f64,
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -89,9 +89,9 @@ pub fn run(
     };
 
     while !ledger.complete() {
-        let Some(msg) = comm.receive(None, None, Some(timeout)) else {
-            return Err(silence(timeout, start, &pa_logs, &balancer, &ledger, &host));
-        };
+        let msg = comm
+            .receive_live(&[(None, None)], timeout, |_| true)
+            .map_err(|lost| silence(&lost, &pa_logs, &balancer, &ledger, &host))?;
         let source = msg.source;
         let message = msg
             .message
@@ -149,7 +149,6 @@ pub fn run(
                 let now = start.elapsed().as_secs_f64();
                 let log = pa_logs.get_mut(&source).expect("a PA, or pa_done refused it");
                 log.done = done;
-                log.last_report = now;
                 log.samples.push((now, queue as u32));
                 balancer.report(source, queue, next_tile >= todo.len());
                 for share in balancer.rebalance() {
@@ -176,14 +175,13 @@ pub fn run(
         None => FrameBuffer::new(width, height),
     };
     let mut images = 0;
+    let mut has_image = vec![false; size];
     let mut reports: Vec<Option<RankReport>> = vec![None; size];
     while images < size - 1 || reports[1..].iter().any(Option::is_none) {
-        let Some(msg) = comm.receive(None, None, Some(timeout)) else {
-            return Err(format!(
-                "ranks did not send their images within {:.0} s",
-                timeout.as_secs_f64()
-            ));
-        };
+        let awaited = |r: i32| !has_image[r as usize] || reports[r as usize].is_none();
+        let msg = comm
+            .receive_live(&[(None, None)], timeout, awaited)
+            .map_err(|lost| format!("{}; its image is missing", lost_rank(&lost, hosts)))?;
         let source = msg.source;
         match msg.message {
             Ok(Message::Image(floats)) => {
@@ -191,6 +189,7 @@ pub fn run(
                     .ok_or_else(|| format!("rank {source} sent an image of the wrong size"))?;
                 frame.accumulate(&part);
                 images += 1;
+                has_image[source as usize] = true;
             }
             Ok(Message::Stats(mut report)) => {
                 if let Some(log) = pa_logs.get(&source)
@@ -221,46 +220,35 @@ pub fn run(
             }
         }
     }
-    use std::sync::atomic::Ordering::Relaxed;
-    let counters = comm.counters;
     let mut ranks = vec![RankReport {
-        rank: 0,
-        role: "mc".into(),
-        idle_s: counters.idle_s(),
-        messages: counters.messages_sent.load(Relaxed),
-        bytes: counters.bytes_sent.load(Relaxed),
-        messages_received: counters.messages_received.load(Relaxed),
-        bytes_received: counters.bytes_received.load(Relaxed),
         records_received: relay.received,
         records_rejected: relay.rejected,
         wall_s: start.elapsed().as_secs_f64(),
-        ..Default::default()
+        ..crate::parallel::traffic_report(0, "mc", &[comm.counters], comm.counters.idle_s())
     }];
     ranks.extend(reports.into_iter().skip(1).flatten());
     Ok(ComponentResult { frame, ranks, render_s })
 }
 
-/// Why the job stops when no rank has said anything for `timeout`: who went quiet and what is
-/// missing (a lost PA takes its queue with it, a PR that never finished leaves its tiles'
-/// pixels undelivered).
+/// Why the job stops when a rank has been silent too long: which rank, who else went quiet,
+/// and what is missing (a lost PA takes its queue with it, a PR that never finished leaves its
+/// tiles' pixels undelivered).
 fn silence(
-    timeout: Duration,
-    start: Instant,
+    lost: &Silence,
     pa_logs: &BTreeMap<i32, PaLog>,
     balancer: &LoadBalancer,
     ledger: &TerminationLedger,
     host: &dyn Fn(i32) -> String,
 ) -> String {
-    let now = start.elapsed().as_secs_f64();
     let quiet: Vec<String> = pa_logs
-        .iter()
-        .filter(|(_, log)| now - log.last_report >= timeout.as_secs_f64() * 0.9)
-        .map(|(r, log)| {
+        .keys()
+        .filter(|&&r| liveness::silent_for(r).as_secs_f64() >= lost.seconds * 0.9)
+        .map(|r| {
             format!(
                 "PA {r} (rank {r}, host {}, last queue {}, computed {})",
                 host(*r),
                 balancer.queue(*r),
-                log.done
+                pa_logs[r].done
             )
         })
         .collect();
@@ -277,9 +265,11 @@ fn silence(
         }
     };
     format!(
-        "no message from any rank for {:.0} s; {}{}missing: the indirect light of every pixel whose \
+        "rank {} (host {}) has been silent for {:.0} s; {}{}missing: the indirect light of every pixel whose \
          requests those ranks held, and the pixels of unfinished PRs (requests reported sent {}, computed {})",
-        timeout.as_secs_f64(),
+        lost.rank,
+        host(lost.rank),
+        lost.seconds,
         list("silent", &quiet),
         list("unfinished", &unfinished),
         ledger.sent(),
