@@ -265,8 +265,62 @@ bool data_uri_payload_size(const std::string &uri, uint64_t *size) {
     return false;
 }
 
+// Where and why nlohmann's parser stopped, without its "[json.exception...]" tag: "line L,
+// column C: reason".
+std::string json_error_place(const nlohmann::json::parse_error &e) {
+    std::string what = e.what();
+    const std::string marker = "parse error at ";
+    size_t at = what.find(marker);
+    if (at != std::string::npos) return what.substr(at + marker.size());
+    return "byte " + std::to_string(e.byte) + ": " + what;
+}
+
+// A glTF 2.0 file is a JSON object with an "asset" object whose "version" is "<major>.<minor>"
+// (glTF 2.0, section 3.2): files of another major version, or whose "minVersion" asks for more
+// than 2.0, cannot be read as glTF 2.0 and are refused rather than half-read.
+void check_asset(const nlohmann::json &doc) {
+    if (!doc.is_object()) fail("not a glTF file: the JSON is not an object");
+    auto asset = doc.find("asset");
+    if (asset == doc.end()) fail("not a glTF file: no \"asset\" object (every glTF file has one)");
+    if (!asset->is_object()) fail("\"asset\" is not an object");
+    auto parse_version = [](const nlohmann::json &v, unsigned long *major, unsigned long *minor) {
+        if (!v.is_string()) return false;
+        const std::string &text = v.get_ref<const std::string &>();
+        size_t dot = text.find('.');
+        if (dot == 0 || dot == std::string::npos || dot + 1 == text.size()) return false;
+        for (size_t i = 0; i < text.size(); ++i)
+            if (i != dot && !(text[i] >= '0' && text[i] <= '9')) return false;
+        if (dot > 9 || text.size() - dot - 1 > 9) return false;
+        *major = std::stoul(text.substr(0, dot));
+        *minor = std::stoul(text.substr(dot + 1));
+        return true;
+    };
+    unsigned long major = 0, minor = 0;
+    auto version = asset->find("version");
+    if (version == asset->end()) fail("\"asset\" has no \"version\" (a glTF 2.0 file says \"2.0\")");
+    if (!parse_version(*version, &major, &minor))
+        fail("asset.version " + shorten(version->dump(), 32) + " is not a version of the form \"2.0\"");
+    if (major != 2)
+        fail("asset.version \"" + std::to_string(major) + "." + std::to_string(minor) +
+             "\": only glTF 2.x files can be read");
+    auto min_version = asset->find("minVersion");
+    if (min_version != asset->end()) {
+        unsigned long min_major = 0, min_minor = 0;
+        if (!parse_version(*min_version, &min_major, &min_minor))
+            fail("asset.minVersion " + shorten(min_version->dump(), 32) + " is not a version of the form \"2.0\"");
+        if (min_major != 2 || min_minor > 0)
+            fail("asset.minVersion \"" + std::to_string(min_major) + "." + std::to_string(min_minor) +
+                 "\": this loader reads glTF 2.0");
+        if (min_minor > minor)
+            fail("asset.minVersion is above asset.version");
+    }
+}
+
 // Checks made on the JSON before tinygltf sees it, where tinygltf itself would misbehave or give
 // an unreadable message:
+// - Text that is not JSON at all (a stray file, a .obj renamed): tinygltf passes on the JSON
+//   parser's raw exception text; here the file is said not to be glTF, with the line and
+//   column where parsing stopped. The asset object and version are checked (check_asset).
 // - tinygltf 2.7 forms &buffer.data[bufferView.byteOffset] for an image stored in a bufferView
 //   before anything checks that range; under _GLIBCXX_ASSERTIONS (hardened toolchains) that
 //   alone aborts the process. Such files are refused first. Once tinygltf accepts a buffer its
@@ -280,13 +334,18 @@ void screen_json(const unsigned char *text, size_t n) {
     json::parser_callback_t keep_needed = [](int depth, json::parse_event_t event, json &parsed) {
         if (event != json::parse_event_t::key || !parsed.is_string()) return true;
         const std::string &k = parsed.get_ref<const std::string &>();
-        if (depth == 1) return k == "images" || k == "bufferViews" || k == "buffers";
+        if (depth == 1) return k == "asset" || k == "images" || k == "bufferViews" || k == "buffers";
         if (depth == 3)
             return k == "bufferView" || k == "buffer" || k == "byteOffset" || k == "byteLength" || k == "uri";
         return true;
     };
-    json doc = json::parse(text, text + n, keep_needed, /*allow_exceptions=*/false);
-    if (!doc.is_object()) return;  // tinygltf reports malformed JSON in its own words
+    json doc;
+    try {
+        doc = json::parse(text, text + n, keep_needed);
+    } catch (const json::parse_error &e) {
+        fail("not a glTF file: not valid JSON (" + json_error_place(e) + ")");
+    }
+    check_asset(doc);
     auto array = [&](const char *key) -> const json * {
         auto it = doc.find(key);
         return it != doc.end() && it->is_array() ? &*it : nullptr;
@@ -1578,7 +1637,8 @@ icr_scene *load_scene(const std::string &path, uint32_t flags) {
         }
     }
     check_json_depth(json_text, json_len);
-    screen_json(json_text, json_len);
+    // A GLB whose header gives no JSON chunk is left for tinygltf to describe.
+    if (!binary || json_len > 0) screen_json(json_text, json_len);
 
     std::string base_dir = base_dir_of(path);
     FileAccess access;
