@@ -5,7 +5,7 @@ use clap::{Args, Parser, Subcommand};
 use std::path::PathBuf;
 
 /// Radiance-style multi-letter options taking a single dash.
-const RADIANCE_OPTIONS: &[&str] = &[
+pub const RADIANCE_OPTIONS: &[&str] = &[
     "ab", "aa", "ad", "as", "ar", "af", "av", "st", "lr", "lw", "vp", "vd", "vu", "vh", "vv", "vtv", "vtl",
 ];
 
