@@ -1458,7 +1458,7 @@ class Converter {
                 if (mi < 0) continue;
                 icr_instance inst{};
                 inst.mesh = uint32_t(mi);
-                for (size_t i = 0; i < 16; ++i) inst.world[i] = float(world[i]);
+                for (size_t i = 0; i < 16; ++i) inst.world[i] = world[i];
                 s_.instances.push_back(inst);
             }
         } else if (node.mesh < -1) {
@@ -1524,7 +1524,7 @@ class Converter {
         } else {
             fail(label + ": camera type '" + shorten(cam.type) + "' is neither perspective nor orthographic");
         }
-        for (int i = 0; i < 3; ++i) out.position[i] = float(world[size_t(12 + i)]);
+        for (int i = 0; i < 3; ++i) out.position[i] = world[size_t(12 + i)];
         transform_dir(world, 0, 0, -1, out.forward);
         transform_dir(world, 0, 1, 0, out.up);
         s_.cameras.push_back(out);
@@ -1560,7 +1560,7 @@ class Converter {
             out.inner_cone = float(light.spot.innerConeAngle);
             out.outer_cone = float(light.spot.outerConeAngle);
         }
-        for (int i = 0; i < 3; ++i) out.position[i] = float(world[size_t(12 + i)]);
+        for (int i = 0; i < 3; ++i) out.position[i] = world[size_t(12 + i)];
         transform_dir(world, 0, 0, -1, out.direction);
         s_.lights.push_back(out);
     }

@@ -284,9 +284,9 @@ pub enum MetricArg {
 
 #[derive(Args, Debug, Clone, Default)]
 pub struct ViewArgs {
-    /// -vp x y z: view point.
+    /// -vp x y z: view point (read in double precision: a scene may sit far from the origin).
     #[arg(long = "vp", num_args = 3, allow_negative_numbers = true)]
-    pub vp: Option<Vec<f32>>,
+    pub vp: Option<Vec<f64>>,
     /// -vd x y z: view direction.
     #[arg(long = "vd", num_args = 3, allow_negative_numbers = true)]
     pub vd: Option<Vec<f32>>,

@@ -215,7 +215,7 @@ impl Outputs {
             ("icrender/command".to_string(), command_line.join(" ")),
             ("icrender/scene".to_string(), args.scene.display().to_string()),
             ("icrender/options".to_string(), options_line(args)),
-            ("icrender/view".to_string(), job.view.radiance_options()),
+            ("icrender/view".to_string(), job.view.radiance_options(job.scene.origin)),
             ("icrender/mode".to_string(), stats.mode.to_string()),
             ("icrender/ranks".to_string(), stats.ranks.to_string()),
             ("icrender/render_time_s".to_string(), format!("{:.3}", stats.render_s)),

@@ -1,12 +1,14 @@
 //! Which view a render uses: the glTF camera if the scene has one, else an automatic view of
 //! the bounds; then every Radiance view option given on the command line overrides its part.
+//! Positions given (cameras, -vp) are in world coordinates; the view holds them relative to
+//! the scene's tracing origin.
 
 use crate::cli::ViewArgs;
 use crate::scene::Scene;
 use crate::scene::auto_view::{Probe, auto_view};
 use crate::scene::view::{Projection, View};
 use crate::tracer::Tracer;
-use glam::Vec3;
+use glam::{DVec3, Vec3};
 
 fn vec3(v: &[f32]) -> Vec3 {
     Vec3::new(v[0], v[1], v[2])
@@ -19,7 +21,7 @@ pub fn choose_view(scene: &Scene, tracer: &Tracer, args: &ViewArgs, width: u32, 
             let vertical = c.yfov.to_degrees();
             View {
                 projection: Projection::Perspective,
-                position: Vec3::from(c.position),
+                position: scene.to_tracing(DVec3::from(c.position)),
                 direction: Vec3::from(c.forward),
                 up: Vec3::from(c.up),
                 horizontal: View::horizontal_for_aspect(Projection::Perspective, vertical, aspect),
@@ -28,7 +30,7 @@ pub fn choose_view(scene: &Scene, tracer: &Tracer, args: &ViewArgs, width: u32, 
         }
         Some(c) => View {
             projection: Projection::Parallel,
-            position: Vec3::from(c.position),
+            position: scene.to_tracing(DVec3::from(c.position)),
             direction: Vec3::from(c.forward),
             up: Vec3::from(c.up),
             horizontal: 2.0 * c.ymag * aspect,
@@ -44,7 +46,7 @@ pub fn choose_view(scene: &Scene, tracer: &Tracer, args: &ViewArgs, width: u32, 
         view.projection = Projection::Perspective;
     }
     if let Some(p) = &args.vp {
-        view.position = vec3(p);
+        view.position = scene.to_tracing(DVec3::new(p[0], p[1], p[2]));
     }
     if let Some(d) = &args.vd {
         view.direction = vec3(d);
