@@ -760,6 +760,12 @@ fn make_corpus(root: &Path) -> Vec<Case> {
         &doc,
         Expect::Error(&["mode 9 is not a glTF primitive mode"]),
     );
+    fs::write(scenes.join("spec_short.bin"), &tri[..20]).unwrap();
+    w.json(
+        "spec_buffer_file_shorter.gltf",
+        &triangle(Some("spec_short.bin")),
+        Expect::Error(&["spec_short.bin", "requestedBytes 44, but got 20"]),
+    );
     let mut doc = embedded_triangle();
     doc["buffers"][0].as_object_mut().unwrap().remove("byteLength");
     w.json(
