@@ -659,7 +659,9 @@ fn furnaces_in_every_mode_give_the_closed_form_answer() {
     let view = [
         "-vp", "0.5", "0.5", "0.5", "-vd", "0.3", "-0.2", "-1", "-vh", "80", "-vv", "80", "-av", &av, &av, &av,
     ];
-    let cases: [(&PathBuf, &[&str], Vec<(&str, f64)>); 2] = [
+    // (scene, options, expected mean of each layer)
+    type Case<'a> = (&'a PathBuf, &'a [&'a str], Vec<(&'a str, f64)>);
+    let cases: [Case; 2] = [
         (
             &grey,
             &["-ab", "2"],

@@ -169,6 +169,16 @@ impl Camera {
     }
 }
 
+/// A world coordinate as text: as the f32 it is when it is one (every scene around glTF's
+/// origin, written as before), else in full double precision (a scene far out).
+pub fn world_coordinate(v: f64) -> String {
+    if (v as f32) as f64 == v {
+        (v as f32).to_string()
+    } else {
+        v.to_string()
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -208,15 +218,5 @@ mod tests {
     fn square_pixels_angle() {
         let h = View::horizontal_for_aspect(Projection::Perspective, 90.0, 2.0);
         assert!((h - 2.0 * 2f32.atan().to_degrees()).abs() < 1e-4);
-    }
-}
-
-/// A world coordinate as text: as the f32 it is when it is one (every scene around glTF's
-/// origin, written as before), else in full double precision (a scene far out).
-pub fn world_coordinate(v: f64) -> String {
-    if (v as f32) as f64 == v {
-        (v as f32).to_string()
-    } else {
-        v.to_string()
     }
 }
