@@ -16,7 +16,12 @@ fn room(b: &mut GltfBuilder, lo: [f32; 3], hi: [f32; 3]) {
     let s = 0.5;
     b.quad(
         facing(
-            [[cx - s, y, cz - s], [cx + s, y, cz - s], [cx + s, y, cz + s], [cx - s, y, cz + s]],
+            [
+                [cx - s, y, cz - s],
+                [cx + s, y, cz - s],
+                [cx + s, y, cz + s],
+                [cx - s, y, cz + s],
+            ],
             [cx, 0.0, cz],
         ),
         Some(lamp),
