@@ -118,6 +118,7 @@ def main():
     parser.add_argument("--docs", default=os.path.join(common.ROOT, "docs", "cluster"),
                         help="where the CSVs and the plot are kept in the repository (copies of --out's)")
     args = parser.parse_args()
+    common.require("bench/cluster_bench.py", ["matplotlib"], ["mpirun", "ip"])
     # A termination still tears the test bed down (the finally below).
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))
     os.makedirs(args.out, exist_ok=True)

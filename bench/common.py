@@ -5,8 +5,10 @@ Benchmarks print figures and write CSVs and plots; they assert nothing (tests do
 
 import csv
 import importlib
+import importlib.util
 import json
 import os
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -22,13 +24,26 @@ def build():
     return BINARY
 
 
+# One command that installs every bench's Python dependencies at the versions they were run with.
+INSTALL_HINT = "python3 -m venv .venv && . .venv/bin/activate && pip install -r bench/requirements.txt"
+
+
+def require(script, modules=(), commands=()):
+    """Stops at once, with one line, when a Python package or a program the bench needs is
+    missing, so that no bench renders for minutes and then fails at its first plot."""
+    missing = [m for m in modules if importlib.util.find_spec(m) is None]
+    if missing:
+        sys.exit(f"{script}: needs the Python package(s) {', '.join(missing)}, not installed for {sys.executable}; "
+                 f"install the benches' pinned dependencies with: {INSTALL_HINT}")
+    absent = [c for c in commands if shutil.which(c) is None]
+    if absent:
+        sys.exit(f"{script}: needs {', '.join(absent)} on the PATH (bash scripts/install-deps.sh installs Open MPI)")
+
+
 def ensure_module(name, package=None):
-    """Imports a module, installing it with pip first if needed (bench-only dependencies)."""
-    try:
-        return importlib.import_module(name)
-    except ImportError:
-        subprocess.run([sys.executable, "-m", "pip", "install", "--quiet", package or name], check=True)
-        return importlib.import_module(name)
+    """Imports a module the bench has checked with require() before starting its work."""
+    del package  # the pip name; require() names it in its message
+    return importlib.import_module(name)
 
 
 # The paper's modes make their records as they render (the renderer's default, the prepass,

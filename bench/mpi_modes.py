@@ -45,6 +45,7 @@ def main():
                         help="render options shared by every run")
     parser.add_argument("--out", default=os.path.join(common.ROOT, "bench", "out"))
     args = parser.parse_args()
+    common.require("bench/mpi_modes.py", ["matplotlib"], ["mpirun"])
     os.makedirs(args.out, exist_ok=True)
     common.build()
     width, height = args.size.split("x")

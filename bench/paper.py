@@ -411,6 +411,7 @@ def main():
     parser.add_argument("--docs", default=DOCS, help="where RESULTS.md and results/ go")
     parser.add_argument("--timeout", type=int, default=900, help="seconds before one mpirun is given up")
     args = parser.parse_args()
+    common.require("bench/paper.py", ["matplotlib", "pyradiance"], ["mpirun"])
     started = time.perf_counter()
     command = "python3 bench/paper.py" + ("" if len(sys.argv) == 1 else " " + " ".join(shlex.quote(a) for a in sys.argv[1:]))
     ranks = [int(r) for r in (args.ranks or ("3,5,9" if args.full else "3,4,5")).split(",")]

@@ -40,9 +40,17 @@ import subprocess
 import sys
 import time
 
-import numpy as np
-
 import common
+
+# Checked before anything is imported or rendered (the flags leave a peer out).
+common.require(
+    "bench/peers.py",
+    ["numpy", "matplotlib", "OpenEXR"]
+    + ([] if "--no-mitsuba" in sys.argv else ["mitsuba"])
+    + ([] if "--no-cycles" in sys.argv else ["bpy"]),
+)
+
+import numpy as np  # noqa: E402
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 
@@ -375,10 +383,6 @@ def main():
             report_targets(label(name, view), rows)
         return
     common.build()
-    if not args.no_mitsuba:
-        common.ensure_module("mitsuba")
-    if not args.no_cycles:
-        common.ensure_module("bpy")
     os.makedirs(args.plots, exist_ok=True)
     load = os.getloadavg()
     log(f"load average at start {load[0]:.2f} {load[1]:.2f} {load[2]:.2f} on {os.cpu_count()} cores")

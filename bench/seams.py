@@ -48,6 +48,7 @@ def main():
     parser.add_argument("--out", default=os.path.join(common.ROOT, "bench", "out", "seams"))
     parser.add_argument("--docs", default=os.path.join(common.ROOT, "docs", "SEAMS.md"))
     args = parser.parse_args()
+    common.require("bench/seams.py", [], ["mpirun"])
     common.build()
     os.makedirs(args.out, exist_ok=True)
     rows = []

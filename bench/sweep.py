@@ -36,6 +36,7 @@ def main():
     parser.add_argument("--noise", type=float, default=0.003, help="reference noise target")
     parser.add_argument("--out", default=os.path.join(common.ROOT, "bench", "out"))
     args = parser.parse_args()
+    common.require("bench/sweep.py", ["matplotlib"])
 
     scene = SCENES.get(args.scene, args.scene)
     name = os.path.splitext(os.path.basename(scene))[0]

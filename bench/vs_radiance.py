@@ -17,7 +17,7 @@ What it does (all files go to --out, default target/vs_radiance/<scene>_<x>x<y>/
   6. checks units and orientation (means and block means of rpict's image against the
      reference) and prints a table with the time and error ratios icrender/rpict.
 
-Radiance comes from the PyPI package `pyradiance` (installed with pip when missing); its binaries
+Radiance comes from the PyPI package `pyradiance` (bench/requirements.txt; checked before any work); its binaries
 are in the package's bin/ and need RAYPATH to point at its lib/. Standard library only otherwise.
 Times: "wall" is the whole process as the script sees it (start-up, scene, render, writing the
 image; the error is measured afterwards by `icrender compare`, for both renderers); "work" is, for
@@ -65,12 +65,9 @@ def radiance_tools():
     """Directory of pyradiance's binaries and the environment (PATH, RAYPATH) to run them."""
     spec = importlib.util.find_spec("pyradiance")
     if spec is None:
-        say("pyradiance is missing: pip install pyradiance")
-        subprocess.run([sys.executable, "-m", "pip", "install", "pyradiance"], check=True)
-        importlib.invalidate_caches()
-        spec = importlib.util.find_spec("pyradiance")
-        if spec is None:
-            sys.exit("vs_radiance: pyradiance could not be installed")
+        sys.exit("vs_radiance: needs the Python package pyradiance (Radiance's binaries), not installed for "
+                 f"{sys.executable}; install the benches' pinned dependencies with: python3 -m venv .venv && "
+                 ". .venv/bin/activate && pip install -r bench/requirements.txt")
     package = Path(next(iter(spec.submodule_search_locations)))
     bin_dir, lib_dir = package / "bin", package / "lib"
     for tool in ("oconv", "rpict", "lookamb", "getinfo", "pvalue"):

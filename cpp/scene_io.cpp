@@ -71,6 +71,7 @@ constexpr uint64_t kMaxNodeVisits = uint64_t(1) << 26;
 // tinygltf converts "extensions" objects to its Value type recursively; deep nesting there would
 // overflow the stack, so the JSON is screened before tinygltf sees it.
 constexpr size_t kMaxJsonDepth = 256;
+constexpr double kHalfPi = 1.57079632679489661923;
 
 // tinygltf messages are newline-terminated lines; callers want single lines.
 std::vector<std::string> split_lines(const std::string &text) {
@@ -265,8 +266,63 @@ bool data_uri_payload_size(const std::string &uri, uint64_t *size) {
     return false;
 }
 
+// Where and why nlohmann's parser stopped, without its "[json.exception...]" tag: "line L,
+// column C: reason".
+std::string json_error_place(const nlohmann::json::parse_error &e) {
+    std::string what = e.what();
+    const std::string marker = "parse error at ";
+    size_t at = what.find(marker);
+    if (at != std::string::npos) return what.substr(at + marker.size());
+    return "byte " + std::to_string(e.byte) + ": " + what;
+}
+
+// A glTF 2.0 file is a JSON object with an "asset" object whose "version" is "<major>.<minor>":
+// files of another major version, or whose "minVersion" asks for more than 2.0, cannot be read
+// as glTF 2.0 and are refused rather than half-read.
+void check_asset(const nlohmann::json &doc) {
+    if (!doc.is_object()) fail("not a glTF file: the JSON is not an object");
+    auto asset = doc.find("asset");
+    if (asset == doc.end()) fail("not a glTF file: no \"asset\" object (every glTF file has one)");
+    if (!asset->is_object()) fail("\"asset\" is not an object");
+    auto parse_version = [](const nlohmann::json &v, unsigned long *major, unsigned long *minor) {
+        if (!v.is_string()) return false;
+        const std::string &text = v.get_ref<const std::string &>();
+        size_t dot = text.find('.');
+        if (dot == 0 || dot == std::string::npos || dot + 1 == text.size()) return false;
+        for (size_t i = 0; i < text.size(); ++i)
+            if (i != dot && !(text[i] >= '0' && text[i] <= '9')) return false;
+        if (dot > 9 || text.size() - dot - 1 > 9) return false;
+        *major = std::stoul(text.substr(0, dot));
+        *minor = std::stoul(text.substr(dot + 1));
+        return true;
+    };
+    unsigned long major = 0, minor = 0;
+    auto version = asset->find("version");
+    if (version == asset->end()) fail("\"asset\" has no \"version\" (a glTF 2.0 file says \"2.0\")");
+    if (!parse_version(*version, &major, &minor))
+        fail("asset.version " + shorten(version->dump(), 32) + " is not a version of the form \"2.0\"");
+    if (major != 2)
+        fail("asset.version \"" + std::to_string(major) + "." + std::to_string(minor) +
+             "\": only glTF 2.x files can be read");
+    auto min_version = asset->find("minVersion");
+    if (min_version != asset->end()) {
+        unsigned long min_major = 0, min_minor = 0;
+        if (!parse_version(*min_version, &min_major, &min_minor))
+            fail("asset.minVersion " + shorten(min_version->dump(), 32) + " is not a version of the form \"2.0\"");
+        if (min_major != 2 || min_minor > 0)
+            fail("asset.minVersion \"" + std::to_string(min_major) + "." + std::to_string(min_minor) +
+                 "\": this loader reads glTF 2.0");
+        if (min_minor > minor)
+            fail("asset.minVersion is above asset.version");
+    }
+}
+
 // Checks made on the JSON before tinygltf sees it, where tinygltf itself would misbehave or give
 // an unreadable message:
+// - A node with both a matrix and TRS: tinygltf keeps the matrix and drops the rest silently.
+// - Text that is not JSON at all (a stray file, a .obj renamed): tinygltf passes on the JSON
+//   parser's raw exception text; here the file is said not to be glTF, with the line and
+//   column where parsing stopped. The asset object and version are checked (check_asset).
 // - tinygltf 2.7 forms &buffer.data[bufferView.byteOffset] for an image stored in a bufferView
 //   before anything checks that range; under _GLIBCXX_ASSERTIONS (hardened toolchains) that
 //   alone aborts the process. Such files are refused first. Once tinygltf accepts a buffer its
@@ -280,18 +336,35 @@ void screen_json(const unsigned char *text, size_t n) {
     json::parser_callback_t keep_needed = [](int depth, json::parse_event_t event, json &parsed) {
         if (event != json::parse_event_t::key || !parsed.is_string()) return true;
         const std::string &k = parsed.get_ref<const std::string &>();
-        if (depth == 1) return k == "images" || k == "bufferViews" || k == "buffers";
+        if (depth == 1) return k == "asset" || k == "images" || k == "bufferViews" || k == "buffers" || k == "nodes";
         if (depth == 3)
-            return k == "bufferView" || k == "buffer" || k == "byteOffset" || k == "byteLength" || k == "uri";
+            return k == "bufferView" || k == "buffer" || k == "byteOffset" || k == "byteLength" || k == "uri" ||
+                   k == "matrix" || k == "translation" || k == "rotation" || k == "scale";
         return true;
     };
-    json doc = json::parse(text, text + n, keep_needed, /*allow_exceptions=*/false);
-    if (!doc.is_object()) return;  // tinygltf reports malformed JSON in its own words
+    json doc;
+    try {
+        doc = json::parse(text, text + n, keep_needed);
+    } catch (const json::parse_error &e) {
+        fail("not a glTF file: not valid JSON (" + json_error_place(e) + ")");
+    }
+    check_asset(doc);
     auto array = [&](const char *key) -> const json * {
         auto it = doc.find(key);
         return it != doc.end() && it->is_array() ? &*it : nullptr;
     };
     const json *images = array("images"), *views = array("bufferViews"), *buffers = array("buffers");
+    // glTF 2.0: a node has a matrix or translation/rotation/scale, not both; tinygltf
+    // would drop the latter without a word.
+    if (const json *nodes = array("nodes")) {
+        for (size_t i = 0; i < nodes->size(); ++i) {
+            const json &node = (*nodes)[i];
+            if (node.is_object() && node.contains("matrix") &&
+                (node.contains("translation") || node.contains("rotation") || node.contains("scale")))
+                fail("node " + std::to_string(i) +
+                     ": has both a matrix and translation/rotation/scale (glTF allows one or the other)");
+        }
+    }
     auto unsigned_member = [](const json &o, const char *key, uint64_t dflt) -> uint64_t {
         auto it = o.find(key);
         return it != o.end() && it->is_number_unsigned() ? it->get<uint64_t>() : dflt;
@@ -706,6 +779,17 @@ AccessorView view_accessor(const tinygltf::Model &model, int index, const std::s
     if (stride < elem)
         fail(what + ": byteStride " + std::to_string(stride) + " is smaller than the element size " +
              std::to_string(elem));
+    // glTF 2.0: an accessor's start in its buffer is aligned to its component size;
+    // a misaligned one would be read as shifted bytes (garbage indices and positions).
+    if ((bv.byteOffset + acc.byteOffset) % uint64_t(csize) != 0)
+        fail(what + ": byteOffset " + std::to_string(acc.byteOffset) + " in bufferView " +
+             std::to_string(acc.bufferView) + " (offset " + std::to_string(bv.byteOffset) +
+             ") is not a multiple of its component size " + std::to_string(csize));
+    if (acc.count == 0) fail(what + ": count is 0 (an accessor holds at least one element)");
+    if (acc.normalized && (acc.componentType == TINYGLTF_COMPONENT_TYPE_FLOAT ||
+                           acc.componentType == TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT))
+        fail(what + ": normalized is true for " + component_name(acc.componentType) +
+             " components (only 8- and 16-bit integers may be normalized)");
 
     uint64_t view_end = add_checked(bv.byteOffset, bv.byteLength, what);
     if (view_end > buf.data.size())
@@ -1220,6 +1304,8 @@ class Converter {
     }
 
     int64_t convert_primitive(const tinygltf::Primitive &prim, const std::string &ctx) {
+        if (prim.mode < TINYGLTF_MODE_POINTS || prim.mode > TINYGLTF_MODE_TRIANGLE_FAN)
+            fail(ctx + ": mode " + std::to_string(prim.mode) + " is not a glTF primitive mode (0-6)");
         if (prim.mode != TINYGLTF_MODE_TRIANGLES) {
             warnings.push_back(ctx + ": mode " + std::to_string(prim.mode) + " is not TRIANGLES, skipped");
             return -1;
@@ -1399,7 +1485,7 @@ class Converter {
                 if (mi < 0) continue;
                 icr_instance inst{};
                 inst.mesh = uint32_t(mi);
-                for (size_t i = 0; i < 16; ++i) inst.world[i] = float(world[i]);
+                for (size_t i = 0; i < 16; ++i) inst.world[i] = world[i];
                 s_.instances.push_back(inst);
             }
         } else if (node.mesh < -1) {
@@ -1465,7 +1551,7 @@ class Converter {
         } else {
             fail(label + ": camera type '" + shorten(cam.type) + "' is neither perspective nor orthographic");
         }
-        for (int i = 0; i < 3; ++i) out.position[i] = float(world[size_t(12 + i)]);
+        for (int i = 0; i < 3; ++i) out.position[i] = world[size_t(12 + i)];
         transform_dir(world, 0, 0, -1, out.forward);
         transform_dir(world, 0, 1, 0, out.up);
         s_.cameras.push_back(out);
@@ -1495,13 +1581,25 @@ class Converter {
         }
         if (!light.color.empty() && light.color.size() != 3) fail(label + ": light color must have 3 elements");
         for (int c = 0; c < 3; ++c) out.color[c] = light.color.empty() ? 1.0f : float(light.color[size_t(c)]);
+        // KHR_lights_punctual: intensity >= 0; a spot's cone angles 0 <= inner < outer <= pi/2.
+        if (!(light.intensity >= 0.0)) {
+            char buf[64];
+            std::snprintf(buf, sizeof buf, "%g", light.intensity);
+            fail(label + ": light intensity " + buf + " is negative");
+        }
         out.intensity = float(light.intensity);
         out.range = float(light.range);
         if (out.type == ICR_LIGHT_SPOT) {
-            out.inner_cone = float(light.spot.innerConeAngle);
-            out.outer_cone = float(light.spot.outerConeAngle);
+            const double inner = light.spot.innerConeAngle, outer = light.spot.outerConeAngle;
+            if (!(inner >= 0.0 && inner < outer && outer <= kHalfPi + 1e-9)) {
+                char buf[128];
+                std::snprintf(buf, sizeof buf, "spot cone angles inner %g, outer %g", inner, outer);
+                fail(label + ": " + buf + " (glTF requires 0 <= inner < outer <= pi/2)");
+            }
+            out.inner_cone = float(inner);
+            out.outer_cone = float(outer);
         }
-        for (int i = 0; i < 3; ++i) out.position[i] = float(world[size_t(12 + i)]);
+        for (int i = 0; i < 3; ++i) out.position[i] = world[size_t(12 + i)];
         transform_dir(world, 0, 0, -1, out.direction);
         s_.lights.push_back(out);
     }
@@ -1539,6 +1637,9 @@ const char *const kSupportedRequired[] = {
 std::string unsupported_required(const tinygltf::Model &model) {
     std::vector<std::string> bad;
     for (const std::string &ext : model.extensionsRequired) {
+        // glTF 2.0: every required extension is also listed as used.
+        if (std::find(model.extensionsUsed.begin(), model.extensionsUsed.end(), ext) == model.extensionsUsed.end())
+            return "extensionsRequired lists " + shorten(ext) + ", which extensionsUsed does not";
         bool ok = false;
         for (const char *s : kSupportedRequired) ok = ok || ext == s;
         if (!ok && std::find(bad.begin(), bad.end(), ext) == bad.end()) bad.push_back(ext);
@@ -1560,6 +1661,9 @@ icr_scene *load_scene(const std::string &path, uint32_t flags) {
     const unsigned char *json_text = data.data();
     size_t json_len = size;
     if (binary) {
+        // glTF 2.0: the GLB header's version is 2.
+        if (size >= 8 && load<uint32_t>(data.data() + 4) != 2)
+            fail("GLB version " + std::to_string(load<uint32_t>(data.data() + 4)) + ": only version 2 can be read");
         // Other malformed headers are left for tinygltf to report.
         json_len = 0;
         if (size >= 20) {
@@ -1578,7 +1682,8 @@ icr_scene *load_scene(const std::string &path, uint32_t flags) {
         }
     }
     check_json_depth(json_text, json_len);
-    screen_json(json_text, json_len);
+    // A GLB whose header gives no JSON chunk is left for tinygltf to describe.
+    if (!binary || json_len > 0) screen_json(json_text, json_len);
 
     std::string base_dir = base_dir_of(path);
     FileAccess access;

@@ -30,7 +30,7 @@ typedef struct icr_mesh {
 /* A placement of a mesh primitive in the world. */
 typedef struct icr_instance {
     uint32_t mesh;           /* index into meshes */
-    float world[16];         /* column-major 4x4, as glTF stores matrices */
+    double world[16];         /* column-major 4x4, as glTF stores matrices */
 } icr_instance;
 
 enum icr_alpha_mode { ICR_ALPHA_OPAQUE = 0, ICR_ALPHA_MASK = 1, ICR_ALPHA_BLEND = 2 };
@@ -73,7 +73,7 @@ typedef struct icr_light {
     float range;                  /* 0 when unbounded */
     float inner_cone;             /* radians, spot only */
     float outer_cone;
-    float position[3];            /* world */
+    double position[3];           /* world; double: a scene may sit 1e7 units from the origin */
     float direction[3];           /* world, unit: where the light points (node's -Z) */
 } icr_light;
 
@@ -84,7 +84,7 @@ typedef struct icr_camera {
     float yfov;                   /* radians (perspective) */
     float aspect;                 /* 0 when the file leaves it to the viewport */
     float xmag, ymag;             /* orthographic half extents */
-    float position[3];            /* world */
+    double position[3];           /* world; double, as a light's */
     float forward[3];             /* world, unit (node's -Z) */
     float up[3];                  /* world, unit (node's +Y) */
 } icr_camera;

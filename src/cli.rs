@@ -5,7 +5,7 @@ use clap::{Args, Parser, Subcommand};
 use std::path::PathBuf;
 
 /// Radiance-style multi-letter options taking a single dash.
-const RADIANCE_OPTIONS: &[&str] = &[
+pub const RADIANCE_OPTIONS: &[&str] = &[
     "ab", "aa", "ad", "as", "ar", "af", "av", "st", "lr", "lw", "vp", "vd", "vu", "vh", "vv", "vtv", "vtl",
 ];
 
@@ -34,7 +34,9 @@ pub struct Cli {
 
 #[derive(Subcommand, Debug)]
 pub enum Command {
-    /// Render a glTF scene to a layered OpenEXR and a PNG preview.
+    /// Render a glTF scene to a layered OpenEXR and a PNG preview (-o is optional: by default
+    /// ./SCENE-NAME.exr and ./SCENE-NAME.png).
+    #[command(override_usage = "icrender render <SCENE> [-o OUT.exr] [OPTIONS]")]
     Render(Box<RenderArgs>),
     /// Describe a scene: triangles, materials, lights, bounds, and the components it needs.
     Info(InfoArgs),
@@ -57,10 +59,10 @@ pub struct ReferenceArgs {
     #[command(flatten)]
     pub render: RenderArgs,
     /// Stop when the estimated relative noise (RMS, of the composite) falls below this.
-    #[arg(long = "noise", default_value_t = 0.005)]
+    #[arg(long = "noise", default_value_t = 0.005, allow_negative_numbers = true)]
     pub noise: f64,
     /// Stop after this many seconds even if the noise target is not reached.
-    #[arg(long = "max-seconds", default_value_t = 600.0)]
+    #[arg(long = "max-seconds", default_value_t = 600.0, allow_negative_numbers = true)]
     pub max_seconds: f64,
 }
 
@@ -86,31 +88,33 @@ pub struct ExportArgs {
 pub struct RenderArgs {
     /// The glTF 2.0 scene (.gltf or .glb).
     pub scene: PathBuf,
-    /// Output EXR; the PNG preview is written beside it with the extension .png.
-    #[arg(short = 'o', long = "output")]
+    /// Output EXR, a name ending in .exr. Optional: by default the scene's file name with .exr,
+    /// in the current directory (`icrender render dir/room.gltf` writes ./room.exr). The PNG
+    /// preview is written beside it with the extension .png.
+    #[arg(short = 'o', long = "output", value_name = "OUT.exr")]
     pub output: Option<PathBuf>,
     /// Image width in pixels.
-    #[arg(short = 'x', default_value_t = 512)]
+    #[arg(short = 'x', default_value_t = 512, allow_negative_numbers = true)]
     pub width: u32,
     /// Image height in pixels.
-    #[arg(short = 'y', default_value_t = 512)]
+    #[arg(short = 'y', default_value_t = 512, allow_negative_numbers = true)]
     pub height: u32,
     /// -ab: ambient (indirect diffuse) bounces.
-    #[arg(long = "ab", default_value_t = 1)]
+    #[arg(long = "ab", default_value_t = 1, allow_negative_numbers = true)]
     pub ambient_bounces: u32,
     /// -aa: ambient accuracy; larger means larger record radii and fewer records. 0 turns the
     /// irradiance cache off (brute force at every point).
-    #[arg(long = "aa", default_value_t = 0.2)]
+    #[arg(long = "aa", default_value_t = 0.2, allow_negative_numbers = true)]
     pub ambient_accuracy: f32,
     /// -ad: hemisphere samples of a new record (brute force: at the first bounce).
-    #[arg(long = "ad", default_value_t = 512)]
+    #[arg(long = "ad", default_value_t = 512, allow_negative_numbers = true)]
     pub ambient_divisions: u32,
     /// -as: extra hemisphere samples where the first ones vary most.
-    #[arg(long = "as", default_value_t = 128)]
+    #[arg(long = "as", default_value_t = 128, allow_negative_numbers = true)]
     pub ambient_supersamples: u32,
     /// -ar: ambient resolution; the smallest record radius is the scene's cube size / ar (0: no
     /// limit), as in Radiance.
-    #[arg(long = "ar", default_value_t = 64)]
+    #[arg(long = "ar", default_value_t = 64, allow_negative_numbers = true)]
     pub ambient_resolution: u32,
     /// -af FILE: persistent irradiance cache, loaded at start and appended to while rendering.
     #[arg(long = "af")]
@@ -134,22 +138,22 @@ pub struct RenderArgs {
     #[arg(long = "mode", value_enum)]
     pub mode: Option<ModeArg>,
     /// Records a rank gathers before it shares them (default: 50; 8 for PAs in component mode).
-    #[arg(long = "sync")]
+    #[arg(long = "sync", allow_negative_numbers = true)]
     pub sync: Option<u32>,
     /// Requests a PR gathers before it sends them to a PA (component mode).
-    #[arg(long = "send", default_value_t = 32)]
+    #[arg(long = "send", default_value_t = 32, allow_negative_numbers = true)]
     pub send: u32,
     /// Most requests a PA keeps queued (component mode); while its queue is this long it takes
     /// no more in, and PRs wait before sending (back-pressure instead of unbounded growth).
-    #[arg(long = "pa-queue", default_value_t = 65536)]
+    #[arg(long = "pa-queue", default_value_t = 65536, allow_negative_numbers = true)]
     pub pa_queue: u32,
     /// Ranks that act as PAs in component mode (default: half the workers).
-    #[arg(long = "pa")]
+    #[arg(long = "pa", allow_negative_numbers = true)]
     pub pa: Option<u32>,
     /// Seconds a rank may stay silent under mpirun (ranks send heartbeats every 2 s) before the
     /// master ends the job naming it, or a worker whose master is that silent ends itself; also
     /// how long the master waits for a rank to take one of its messages.
-    #[arg(long = "timeout", default_value_t = 30.0)]
+    #[arg(long = "timeout", default_value_t = 30.0, allow_negative_numbers = true)]
     pub timeout: f64,
     /// Add a debug layer `ic_records` counting the records each pixel made.
     #[arg(long = "ic-records")]
@@ -158,17 +162,17 @@ pub struct RenderArgs {
     #[arg(long = "av", num_args = 3, value_names = ["R", "G", "B"], allow_negative_numbers = true)]
     pub ambient_value: Option<Vec<f32>>,
     /// -st: specular threshold; no specular ray below this reflectance.
-    #[arg(long = "st", default_value_t = crate::scene::material::DEFAULT_SPECULAR_THRESHOLD)]
+    #[arg(long = "st", default_value_t = crate::scene::material::DEFAULT_SPECULAR_THRESHOLD, allow_negative_numbers = true)]
     pub specular_threshold: f32,
     /// -lr: maximum specular path length.
-    #[arg(long = "lr", default_value_t = 8)]
+    #[arg(long = "lr", default_value_t = 8, allow_negative_numbers = true)]
     pub max_specular_depth: u32,
     /// -lw: minimum path weight before a specular path is cut.
-    #[arg(long = "lw", default_value_t = 1e-3)]
+    #[arg(long = "lw", default_value_t = 1e-3, allow_negative_numbers = true)]
     pub min_weight: f32,
     /// Shadow rays to area emitters per shading point on the eye path (stratified). Shadow rays
     /// are cheap next to the noise one ray leaves in penumbrae and with many emitters.
-    #[arg(long = "light-samples", default_value_t = 16)]
+    #[arg(long = "light-samples", default_value_t = 16, allow_negative_numbers = true)]
     pub light_samples: u32,
     /// How area lights are integrated. analytic: their unshadowed irradiance exactly (Lambert's
     /// formula, in scenes with few emitting triangles) and the shadow rays only for how much of
@@ -177,28 +181,28 @@ pub struct RenderArgs {
     #[arg(long = "direct", value_enum, default_value_t = DirectArg::Analytic)]
     pub direct: DirectArg,
     /// Samples per pixel (stratified over the pixel's area).
-    #[arg(long = "spp", default_value_t = 1)]
+    #[arg(long = "spp", default_value_t = 1, allow_negative_numbers = true)]
     pub spp: u32,
     /// Extra primary rays per pixel gathering only the emission seen straight from the eye,
     /// in pixels where an emitter can appear (used when above --spp). They integrate a light's
     /// edges over the pixel's area at the cost of one ray each, without shading.
-    #[arg(long = "emission-samples", default_value_t = 16)]
+    #[arg(long = "emission-samples", default_value_t = 16, allow_negative_numbers = true)]
     pub emission_samples: u32,
     /// Before a tile's pixels, make the cache records that the first surfaces on a grid of
     /// this spacing (pixels) need; the pixels then interpolate between records on all their
     /// sides instead of extrapolating from the records earlier pixels made. 0: none. In
     /// component mode a PA computes its queued requests at this grid's pixels first instead
     /// (a PR's misses go to the PAs). Default 3.
-    #[arg(long = "overture")]
+    #[arg(long = "overture", allow_negative_numbers = true)]
     pub overture: Option<u32>,
     /// Random seed; the same seed gives the same image.
-    #[arg(long = "seed", default_value_t = 1)]
+    #[arg(long = "seed", default_value_t = 1, allow_negative_numbers = true, value_parser = whole_number::<u64>)]
     pub seed: u64,
     /// Tile size, WxH.
     #[arg(long = "tile", default_value = "32x32")]
     pub tile: String,
     /// Rendering threads (default: every core).
-    #[arg(long = "threads")]
+    #[arg(long = "threads", allow_negative_numbers = true, value_parser = whole_number::<usize>)]
     pub threads: Option<usize>,
     /// Every material becomes a two-sided Lambertian of its base colour (emitters unchanged).
     #[arg(long = "lambertian")]
@@ -224,7 +228,7 @@ pub struct RenderArgs {
     pub overwrite: bool,
     /// Memory one process may use (MiB, or with a K, M, G or T suffix): a render estimated to
     /// need more is refused before it starts, with the estimate.
-    #[arg(long = "max-memory", value_name = "SIZE", value_parser = parse_memory)]
+    #[arg(long = "max-memory", value_name = "SIZE", value_parser = parse_memory, allow_negative_numbers = true)]
     pub max_memory: Option<u64>,
     /// Journal finished tiles and the irradiance cache in DIR, so that a render killed at any
     /// moment and started again with the same command resumes instead of starting over.
@@ -281,9 +285,9 @@ pub enum MetricArg {
 
 #[derive(Args, Debug, Clone, Default)]
 pub struct ViewArgs {
-    /// -vp x y z: view point.
+    /// -vp x y z: view point (read in double precision: a scene may sit far from the origin).
     #[arg(long = "vp", num_args = 3, allow_negative_numbers = true)]
-    pub vp: Option<Vec<f32>>,
+    pub vp: Option<Vec<f64>>,
     /// -vd x y z: view direction.
     #[arg(long = "vd", num_args = 3, allow_negative_numbers = true)]
     pub vd: Option<Vec<f32>>,
@@ -374,7 +378,27 @@ pub enum BenchCommand {
     },
 }
 
-/// Parses "WxH" (or a single number for square tiles).
+/// A count too large for u32 (seeds, threads): clap's own parser of these says only "invalid
+/// digit", so the range is spelled out as clap does for the u32 options.
+pub fn whole_number<T: std::str::FromStr + std::fmt::Display + num_bounds::Max>(text: &str) -> Result<T, String> {
+    text.trim()
+        .parse()
+        .map_err(|_| format!("{text} is not in 0..={} (a whole number)", T::MAX))
+}
+
+mod num_bounds {
+    /// The largest value of an unsigned count type.
+    pub trait Max {
+        const MAX: Self;
+    }
+    impl Max for u64 {
+        const MAX: u64 = u64::MAX;
+    }
+    impl Max for usize {
+        const MAX: usize = usize::MAX;
+    }
+}
+
 /// A memory size in bytes from "512" (MiB), "512M", "1.5G", "800K" or "2T".
 pub fn parse_memory(text: &str) -> Result<u64, String> {
     let text = text.trim();
@@ -400,6 +424,7 @@ pub fn parse_memory(text: &str) -> Result<u64, String> {
     Ok(bytes as u64)
 }
 
+/// Parses "WxH" (or a single number for square tiles).
 pub fn parse_tile(text: &str) -> Result<(u32, u32), String> {
     let bad = || format!("--tile {text}: expected WxH with positive whole numbers, e.g. 32x32");
     let (w, h) = match text.split_once(['x', 'X']) {

@@ -201,8 +201,12 @@ impl Job {
         let build_start = Instant::now();
         let tracer = Tracer::new(&scene).map_err(|e| CommandError(format!("{}: {e}", args.scene.display())))?;
         let build_s = build_start.elapsed().as_secs_f64();
-        let view = crate::commands::view::choose_view(&scene, &tracer, &args.view, args.width, args.height)
-            .map_err(|e| CommandError(format!("{}: view: {e}", args.scene.display())))?;
+        let (view, view_note) =
+            crate::commands::view::choose_view(&scene, &tracer, &args.view, args.width, args.height)
+                .map_err(|e| CommandError(format!("{}: view: {e}", args.scene.display())))?;
+        if let Some(note) = view_note {
+            warn(&format!("{}: {note}", args.scene.display()));
+        }
         let camera = view.camera(args.width, args.height);
         let (tile_width, tile_height) = parse_tile(&args.tile)?;
         let threads = args

@@ -325,3 +325,191 @@ fn existing_outputs_are_never_replaced_without_overwrite() {
     run_ok(&args);
     assert!(read_exr(&out).width == 8);
 }
+
+/// Runs `render` expecting a refusal before any work: one error line (the last line), naming
+/// everything in `must_mention`, no clap tip about `--`, and nothing written into `dir`.
+fn expect_refusal(args: &[&str], dir: &Path, must_mention: &[&str]) -> String {
+    let before: Vec<_> = std::fs::read_dir(dir)
+        .unwrap()
+        .flatten()
+        .map(|e| e.file_name())
+        .collect();
+    let result = run(args);
+    let err = stderr(&result);
+    assert!(!result.status.success(), "expected a refusal for {args:?}:\n{err}");
+    assert!(!err.contains("panicked"), "panic:\n{err}");
+    let errors: Vec<&str> = err.lines().filter(|l| l.contains("error:")).collect();
+    assert_eq!(errors.len(), 1, "expected one error line for {args:?}, got:\n{err}");
+    for word in must_mention {
+        assert!(
+            errors[0].contains(word),
+            "{args:?}: the error should mention {word:?}: {err}"
+        );
+    }
+    assert!(
+        !err.contains("'-- "),
+        "{args:?}: clap's tip about '--' instead of the option's range:\n{err}"
+    );
+    let after: Vec<_> = std::fs::read_dir(dir)
+        .unwrap()
+        .flatten()
+        .map(|e| e.file_name())
+        .collect();
+    assert_eq!(before, after, "{args:?}: files were written or removed");
+    errors[0].to_string()
+}
+
+/// `-o out.png` would put the preview over the EXR, `-o out.jpg --no-preview` would write an
+/// EXR named .jpg, `-o out` an EXR with no extension, `--stats` naming an image output would
+/// overwrite it: each is refused at once with one line saying to give a .exr name.
+#[test]
+fn output_names_that_would_lose_or_mislabel_the_exr_are_refused() {
+    let c = Case::new();
+    let mut b = GltfBuilder::new();
+    valid_scene(&mut b);
+    let scene = b.write(c.dir.path(), "ok");
+    let scene = scene.to_str().unwrap();
+    let work = c.path("work");
+    std::fs::create_dir(&work).unwrap();
+    let name = |n: &str| work.join(n).to_string_lossy().into_owned();
+    let base = ["render", scene, "-x", "8", "-y", "8", "-ad", "4", "-q"];
+    for (output, extra) in [
+        ("out.png", &[][..]),
+        ("out.png", &["--no-preview"][..]),
+        ("out.jpg", &["--no-preview"][..]),
+        ("out.jpg", &[][..]),
+        ("out", &[][..]),
+        ("out.exr.tmp", &["--overwrite"][..]),
+    ] {
+        let out = name(output);
+        let mut args = base.to_vec();
+        args.extend_from_slice(&["-o", &out]);
+        args.extend_from_slice(extra);
+        args.extend_from_slice(&VIEW);
+        let line = expect_refusal(&args, &work, &[&out, ".exr"]);
+        assert!(
+            line.contains(&name(&format!("{}.exr", output.split('.').next().unwrap()))),
+            "{line}"
+        );
+    }
+    // The statistics must not be written over the EXR or its preview.
+    for stats in ["out.exr", "out.png"] {
+        let (out, stats) = (name("out.exr"), name(stats));
+        let mut args = base.to_vec();
+        args.extend_from_slice(&["-o", &out, "--stats", &stats, "--overwrite"]);
+        args.extend_from_slice(&VIEW);
+        expect_refusal(&args, &work, &["--stats", &stats]);
+    }
+    // The extension is matched without regard to case, and a good name still renders both files.
+    let out = name("upper.EXR");
+    let mut args = base.to_vec();
+    args.extend_from_slice(&["-o", &out]);
+    args.extend_from_slice(&VIEW);
+    run_ok(&args);
+    assert_eq!(read_exr(Path::new(&out)).width, 8);
+    assert!(work.join("upper.png").exists());
+}
+
+/// A directory given as `-o` is said to be a directory at once, with or without --overwrite
+/// (not "already exists (give --overwrite ...)" first), and is left as it was.
+#[test]
+fn a_directory_as_output_is_called_a_directory() {
+    let c = Case::new();
+    let mut b = GltfBuilder::new();
+    valid_scene(&mut b);
+    let scene = b.write(c.dir.path(), "ok");
+    let target = c.path("renders");
+    std::fs::create_dir(&target).unwrap();
+    for name in ["renders", "renders/"] {
+        let out = format!("{}/{name}", c.dir.path().display());
+        for overwrite in [false, true] {
+            let mut args = vec!["render", scene.to_str().unwrap(), "-o", &out, "-x", "8", "-y", "8"];
+            if overwrite {
+                args.push("--overwrite");
+            }
+            args.extend_from_slice(&VIEW);
+            let line = expect_refusal(&args, &target, &["renders", "is a directory"]);
+            assert!(!line.contains("already exists"), "{line}");
+        }
+    }
+    assert!(target.is_dir());
+}
+
+/// A negative value for an option that takes a count (Radiance's `-ab -1` included) is named
+/// with what the option accepts, as `--ab=-1` is, instead of clap's tip to write `-- -1`.
+#[test]
+fn negative_counts_say_what_the_option_accepts() {
+    let c = Case::new();
+    let mut b = GltfBuilder::new();
+    valid_scene(&mut b);
+    let scene = b.write(c.dir.path(), "ok");
+    let out = c.out();
+    for option in [
+        "-ab",
+        "-ad",
+        "-as",
+        "-ar",
+        "-lr",
+        "-x",
+        "-y",
+        "--spp",
+        "--light-samples",
+        "--seed",
+        "--threads",
+    ] {
+        let args = [
+            "render",
+            scene.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+            option,
+            "-1",
+        ];
+        let line = expect_refusal(&args, c.dir.path(), &["'-1'", option.trim_start_matches('-'), "0.."]);
+        assert!(line.contains("not in 0.."), "{option}: {line}");
+    }
+    // Options taking a number that may not be negative: refused by the render's own checks.
+    for option in ["-aa", "-st", "-lw"] {
+        let args = [
+            "render",
+            scene.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+            option,
+            "-1",
+        ];
+        expect_refusal(&args, c.dir.path(), &[option]);
+    }
+}
+
+/// Text that is not glTF, whatever its extension: the file is named, said not to be a glTF
+/// file, and where the JSON parse stopped is given (not the parser's raw exception text).
+#[test]
+fn a_text_file_that_is_not_gltf_is_named_as_such() {
+    let c = Case::new();
+    for (name, text, place) in [
+        ("notes.txt", "hello, world\n", "line 1, column 1"),
+        ("scene.gltf", "hello, world\n", "line 1, column 1"),
+        ("model.obj", "v 0 0 0\nv 1 0 0\nf 1 2 3\n", "line 1, column 1"),
+        (
+            "cut.gltf",
+            "{\"asset\": {\"version\": \"2.0\"},\n  \"meshes\": [1,}",
+            "line 2, column 16",
+        ),
+    ] {
+        std::fs::write(c.path(name), text).unwrap();
+        let line = expect_failure(&c.path(name), &VIEW, &c.out(), &[name, "not a glTF file", place]);
+        assert!(!line.contains("json.exception"), "{line}");
+        let info = run(&["info", c.path(name).to_str().unwrap()]);
+        assert!(!info.status.success());
+        assert!(stderr(&info).contains("not a glTF file"), "{}", stderr(&info));
+    }
+    // JSON, but not a glTF document.
+    for (name, text, says) in [
+        ("array.gltf", "[1, 2, 3]", "not an object"),
+        ("package.json", "{\"name\": \"left-pad\"}", "no \"asset\" object"),
+    ] {
+        std::fs::write(c.path(name), text).unwrap();
+        expect_failure(&c.path(name), &VIEW, &c.out(), &[name, "not a glTF file", says]);
+    }
+}

@@ -44,7 +44,6 @@ struct Bed {
     state: PathBuf,
     /// The namespaces' inode numbers, to find them even if their names were gone.
     namespaces: Vec<u64>,
-    links_before: Vec<String>,
 }
 
 impl Bed {
@@ -55,7 +54,6 @@ impl Bed {
             std::process::id(),
             INSTANCES.fetch_add(1, Ordering::Relaxed)
         );
-        let links_before = root_links();
         let out = testbed_command(&id)
             .arg("up")
             .arg(hosts.to_string())
@@ -88,7 +86,6 @@ impl Bed {
             id,
             state: PathBuf::from(state),
             namespaces,
-            links_before,
         })
     }
 
@@ -138,7 +135,7 @@ impl Bed {
     fn finish(self) {
         let out = self.command(&["down"]).output().unwrap();
         assert!(out.status.success(), "down: {}", String::from_utf8_lossy(&out.stderr));
-        assert_clean(&self.id, &self.namespaces, &self.state, &self.links_before);
+        assert_clean(&self.id, &self.namespaces, &self.state);
     }
 }
 
@@ -148,19 +145,29 @@ impl Drop for Bed {
     }
 }
 
-/// The root namespace's veth and bridge links.
-fn root_links() -> Vec<String> {
-    let mut names = Vec::new();
-    for kind in ["veth", "bridge"] {
-        if let Ok(out) = Command::new("ip").args(["-o", "link", "show", "type", kind]).output() {
-            names.extend(
-                String::from_utf8_lossy(&out.stdout)
-                    .lines()
-                    .filter_map(|l| l.split(':').nth(1).map(|n| n.trim().to_string())),
-            );
-        }
-    }
-    names
+/// Links in the root namespace that belong to test bed instance `id`: named with its prefix, or
+/// the root end of a pair whose other end is in one of its namespaces (`link-netns ID-...`).
+/// The test bed makes its links inside its own namespaces, so any such link is a leak; links,
+/// bridges and namespaces of anything else on the machine are never counted.
+fn own_root_links(id: &str) -> Vec<String> {
+    let prefix = format!("{id}-");
+    let out = Command::new("ip")
+        .args(["-o", "link", "show"])
+        .output()
+        .expect("ip runs");
+    String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .filter_map(|line| {
+            let name = line.split(':').nth(1)?.trim();
+            let name = name.split('@').next().unwrap_or(name);
+            let peer_is_ours = line
+                .split_whitespace()
+                .skip_while(|w| *w != "link-netns")
+                .nth(1)
+                .is_some_and(|ns| ns.starts_with(&prefix));
+            (name.starts_with(&prefix) || peer_is_ours).then(|| name.to_string())
+        })
+        .collect()
 }
 
 /// Processes inside a network namespace, found by its inode.
@@ -178,7 +185,9 @@ fn pids_in_namespace(inode: u64) -> Vec<u32> {
     pids
 }
 
-fn assert_clean(id: &str, namespaces: &[u64], state: &Path, links_before: &[String]) {
+/// Only what instance `id` made is looked at (its own name prefix and namespace inodes): other
+/// programs' namespaces, veth links and bridges may come and go during a test.
+fn assert_clean(id: &str, namespaces: &[u64], state: &Path) {
     let list = Command::new("ip").args(["netns", "list"]).output().unwrap();
     let left: Vec<String> = String::from_utf8_lossy(&list.stdout)
         .lines()
@@ -194,8 +203,8 @@ fn assert_clean(id: &str, namespaces: &[u64], state: &Path, links_before: &[Stri
         );
     }
     assert!(!state.exists(), "state left behind: {}", state.display());
-    let new: Vec<String> = root_links().into_iter().filter(|l| !links_before.contains(l)).collect();
-    assert!(new.is_empty(), "links left in the root namespace: {new:?}");
+    let own = own_root_links(id);
+    assert!(own.is_empty(), "links of {id} left in the root namespace: {own:?}");
 }
 
 /// Runs `body` with a test bed of `hosts` hosts, or says why it cannot run.
@@ -800,7 +809,6 @@ fn a_refusal_on_rank_zero_ends_the_job_across_hosts() {
 fn the_test_bed_always_cleans_up() {
     let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let id = format!("icrt{}-w", std::process::id());
-    let links_before = root_links();
     let state = |id: &str| {
         let root = if Path::new("/run/icrender-testbed").exists() {
             PathBuf::from("/run/icrender-testbed")
@@ -836,7 +844,7 @@ fn the_test_bed_always_cleans_up() {
         return;
     }
     assert_eq!(out.status.code(), Some(3), "{}", String::from_utf8_lossy(&out.stderr));
-    assert_clean(&id, &[], &state(&id), &links_before);
+    assert_clean(&id, &[], &state(&id));
 
     // Terminated while its command runs (a killed CI job): it still removes everything.
     let mut child = testbed_command(&id)
@@ -865,7 +873,7 @@ fn the_test_bed_always_cleans_up() {
         start.elapsed() < Duration::from_secs(20),
         "`with` did not stop promptly"
     );
-    assert_clean(&id, &inodes, &state(&id), &links_before);
+    assert_clean(&id, &inodes, &state(&id));
 
     // A run that crashed without tearing down (its owner is gone): the next `up` of any
     // instance removes it, and an `up` of the same instance starts clean.
@@ -883,10 +891,10 @@ fn the_test_bed_always_cleans_up() {
         assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
         assert_eq!(namespaces_of(&id).len(), 2, "a second up starts clean");
     }
-    assert_clean(&crashed, &crashed_inodes, &state(&crashed), &links_before);
+    assert_clean(&crashed, &crashed_inodes, &state(&crashed));
     let inodes = namespaces_of(&id);
     assert!(testbed_command(&id).arg("down").status().unwrap().success());
-    assert_clean(&id, &inodes, &state(&id), &links_before);
+    assert_clean(&id, &inodes, &state(&id));
 
     // Not root: one line that says so, and the code that means "skipped", never success.
     if Command::new("setpriv").arg("--version").output().is_ok() {
@@ -912,4 +920,91 @@ fn rank_names_are_recognised() {
     assert!(!names_rank("process rank 20 with PID 2", 2));
     assert!(!names_rank("MPI_ABORT was invoked on rank 0 in communicator", 2));
     assert!(!names_rank("unfinished: PR 2, PR 3", 1));
+}
+
+/// Removes what the leak-check test made, also when it fails.
+struct Made(Vec<Vec<String>>);
+
+impl Drop for Made {
+    fn drop(&mut self) {
+        for undo in self.0.iter().rev() {
+            let _ = Command::new("ip").args(undo).output();
+        }
+    }
+}
+
+/// The leak check counts this instance's own leftovers (a link whose far end is in one of its
+/// namespaces, a namespace of its prefix) and nothing else: another program's veth links,
+/// bridge and namespaces, made while the test runs, never fail it.
+#[test]
+fn the_leak_check_counts_only_this_instances_links_and_namespaces() {
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let pid = std::process::id();
+    let (id, other) = (format!("icrt{pid}-lk"), format!("icrf{pid}"));
+    let mut made = Made(Vec::new());
+    let ip = |args: &[&str]| Command::new("ip").args(args).output().map(|o| (o.status.success(), o));
+    let (own_ns, other_ns) = (format!("{id}-h0"), format!("{other}-h0"));
+    match ip(&["netns", "add", &own_ns]) {
+        Ok((true, _)) => made.0.push(vec!["netns".into(), "delete".into(), own_ns.clone()]),
+        Ok((false, out)) => {
+            println!(
+                "SKIPPED: cannot create namespaces: {}",
+                String::from_utf8_lossy(&out.stderr).trim()
+            );
+            return;
+        }
+        Err(e) => {
+            println!("SKIPPED: no ip command: {e}");
+            return;
+        }
+    }
+    // Another program's namespace, veth pair into it and bridge, in the root namespace.
+    let (foreign_veth, foreign_bridge, leaked) = (format!("fv{pid}"), format!("fb{pid}"), format!("lk{pid}"));
+    for (args, undo) in [
+        (vec!["netns", "add", &other_ns], vec!["netns", "delete", &other_ns]),
+        (
+            vec![
+                "link",
+                "add",
+                &foreign_veth,
+                "type",
+                "veth",
+                "peer",
+                "name",
+                "eth0",
+                "netns",
+                &other_ns,
+            ],
+            vec!["link", "delete", &foreign_veth],
+        ),
+        (
+            vec!["link", "add", &foreign_bridge, "type", "bridge"],
+            vec!["link", "delete", &foreign_bridge],
+        ),
+    ] {
+        let (ok, out) = ip(&args).unwrap();
+        assert!(ok, "ip {args:?}: {}", String::from_utf8_lossy(&out.stderr));
+        made.0.push(undo.into_iter().map(String::from).collect());
+    }
+    let state = std::env::temp_dir().join(format!("icrender-no-state-{pid}"));
+    assert!(own_root_links(&id).is_empty(), "foreign links counted as ours");
+
+    // Our own leak: a veth pair left with one end in the root namespace and the other in one
+    // of our namespaces (named neutrally: found by where its peer is, not by its name).
+    let (ok, out) = ip(&[
+        "link", "add", &leaked, "type", "veth", "peer", "name", "eth0", "netns", &own_ns,
+    ])
+    .unwrap();
+    assert!(ok, "{}", String::from_utf8_lossy(&out.stderr));
+    made.0.push(vec!["link".into(), "delete".into(), leaked.clone()]);
+    assert_eq!(own_root_links(&id), vec![leaked.clone()]);
+    let caught = std::panic::catch_unwind(|| assert_clean(&id, &[], &state));
+    assert!(caught.is_err(), "the leak check missed its own namespace and link");
+    // The link removed, the namespace left behind is still ours and still caught.
+    assert!(ip(&["link", "delete", &leaked]).unwrap().0);
+    let caught = std::panic::catch_unwind(|| assert_clean(&id, &[], &state));
+    assert!(caught.is_err(), "the leak check missed its own namespace");
+    assert!(ip(&["netns", "delete", &own_ns]).unwrap().0);
+    // Ours all gone; the other program's namespace, veth link and bridge are still there.
+    assert_clean(&id, &[], &state);
 }

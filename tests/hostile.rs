@@ -627,6 +627,204 @@ fn make_corpus(root: &Path) -> Vec<Case> {
         Expect::Error(&["no valid triangles"]),
     );
 
+    // --- the glTF 2.0 specification's requirements on every asset (docs/GLTF_VALIDATION.md)
+    w.bytes(
+        "spec_not_json.gltf",
+        b"solid cube\n  facet normal 0 0 1\n",
+        Expect::Error(&["not a glTF file", "line 1, column 1"]),
+    );
+    w.bytes(
+        "spec_json_not_object.gltf",
+        b"[1, 2, 3]",
+        Expect::Error(&["not a glTF file", "not an object"]),
+    );
+    let mut doc = embedded_triangle();
+    doc.as_object_mut().unwrap().remove("asset");
+    w.json("spec_asset_missing.gltf", &doc, Expect::Error(&["no \"asset\" object"]));
+    let mut doc = embedded_triangle();
+    doc["asset"] = json!({"generator": "x"});
+    w.json(
+        "spec_asset_version_missing.gltf",
+        &doc,
+        Expect::Error(&["no \"version\""]),
+    );
+    let mut doc = embedded_triangle();
+    doc["asset"]["version"] = json!(2.0);
+    w.json(
+        "spec_asset_version_number.gltf",
+        &doc,
+        Expect::Error(&["asset.version", "not a version"]),
+    );
+    let mut doc = embedded_triangle();
+    doc["asset"]["version"] = json!("3.0");
+    w.json(
+        "spec_asset_version_3.gltf",
+        &doc,
+        Expect::Error(&["asset.version \"3.0\"", "2.x"]),
+    );
+    let mut doc = embedded_triangle();
+    doc["asset"] = json!({"version": "2.1", "minVersion": "2.1"});
+    w.json(
+        "spec_asset_min_version_2_1.gltf",
+        &doc,
+        Expect::Error(&["asset.minVersion \"2.1\""]),
+    );
+    let mut doc = embedded_triangle();
+    doc["asset"] = json!({"version": "2.0", "minVersion": "2.0"});
+    w.json("spec_asset_min_version_2_0.gltf", &doc, Expect::Loads);
+    let mut doc = embedded_triangle();
+    doc["asset"]["version"] = json!("2.7");
+    w.json("spec_asset_version_2_7.gltf", &doc, Expect::Loads);
+    let mut doc = embedded_triangle();
+    doc["extensionsRequired"] = json!(["KHR_materials_specular"]);
+    w.json(
+        "spec_required_not_used.gltf",
+        &doc,
+        Expect::Error(&["extensionsRequired", "extensionsUsed"]),
+    );
+    let mut doc = embedded_triangle();
+    doc["extensionsRequired"] = json!(["EXT_meshopt_compression"]);
+    doc["extensionsUsed"] = json!(["KHR_lights_punctual", "EXT_meshopt_compression"]);
+    w.json(
+        "spec_required_unsupported.gltf",
+        &doc,
+        Expect::Error(&["unsupported required extension EXT_meshopt_compression"]),
+    );
+    let mut version_1 = glb(&triangle(None), &tri);
+    version_1[4..8].copy_from_slice(&1u32.to_le_bytes());
+    w.bytes("spec_glb_version_1.glb", &version_1, Expect::Error(&["GLB version 1"]));
+    let mut doc = embedded_triangle();
+    doc["accessors"][1]["byteOffset"] = json!(1);
+    doc["bufferViews"][1]["byteLength"] = json!(8);
+    w.json(
+        "spec_accessor_misaligned.gltf",
+        &doc,
+        Expect::Error(&["byteOffset 1", "not a multiple of its component size 2"]),
+    );
+    let mut doc = embedded_triangle();
+    doc["accessors"][1]["count"] = json!(0);
+    w.json(
+        "spec_accessor_count_0.gltf",
+        &doc,
+        Expect::Error(&["accessor 1", "count is 0"]),
+    );
+    let mut doc = embedded_triangle();
+    doc["accessors"][0]["normalized"] = json!(true);
+    w.json(
+        "spec_accessor_float_normalized.gltf",
+        &doc,
+        Expect::Error(&["normalized", "float"]),
+    );
+    let mut doc = embedded_triangle();
+    doc["accessors"][0]["bufferView"] = json!(9);
+    w.json(
+        "spec_accessor_buffer_view_9.gltf",
+        &doc,
+        Expect::Error(&["bufferView 9 out of range"]),
+    );
+    let mut doc = embedded_triangle();
+    doc["accessors"][0]["type"] = json!("VEC5");
+    w.json("spec_accessor_type_vec5.gltf", &doc, Expect::Error(&["VEC5"]));
+    let mut doc = embedded_triangle();
+    doc["accessors"]
+        .as_array_mut()
+        .unwrap()
+        .push(json!({"bufferView": 0, "componentType": 5126, "count": 2, "type": "VEC3"}));
+    doc["meshes"][0]["primitives"][0]["attributes"]["NORMAL"] = json!(2);
+    w.json(
+        "spec_attribute_counts_differ.gltf",
+        &doc,
+        Expect::Error(&["NORMAL count 2 differs from POSITION count 3"]),
+    );
+    let mut doc = embedded_triangle();
+    doc["accessors"][1]["count"] = json!(2);
+    w.json(
+        "spec_indices_not_triangles.gltf",
+        &doc,
+        Expect::Error(&["index count 2 is not a multiple of 3"]),
+    );
+    let mut doc = embedded_triangle();
+    doc["meshes"][0]["primitives"][0]["attributes"]
+        .as_object_mut()
+        .unwrap()
+        .remove("POSITION");
+    w.json(
+        "spec_primitive_without_position.gltf",
+        &doc,
+        Expect::Error(&["no POSITION attribute"]),
+    );
+    let mut doc = embedded_triangle();
+    doc["meshes"][0]["primitives"][0]["mode"] = json!(9);
+    w.json(
+        "spec_primitive_mode_9.gltf",
+        &doc,
+        Expect::Error(&["mode 9 is not a glTF primitive mode"]),
+    );
+    fs::write(scenes.join("spec_short.bin"), &tri[..20]).unwrap();
+    w.json(
+        "spec_buffer_file_shorter.gltf",
+        &triangle(Some("spec_short.bin")),
+        Expect::Error(&["spec_short.bin", "requestedBytes 44, but got 20"]),
+    );
+    let mut doc = embedded_triangle();
+    doc["buffers"][0].as_object_mut().unwrap().remove("byteLength");
+    w.json(
+        "spec_buffer_without_byte_length.gltf",
+        &doc,
+        Expect::Error(&["byteLength", "Buffer"]),
+    );
+    let mut doc = embedded_triangle();
+    doc["nodes"][0]["matrix"] = json!([2, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1]);
+    doc["nodes"][0]["translation"] = json!([1, 0, 0]);
+    w.json(
+        "spec_node_matrix_and_trs.gltf",
+        &doc,
+        Expect::Error(&["node 0", "both a matrix"]),
+    );
+    let mut doc = embedded_triangle();
+    doc["nodes"][0]["camera"] = json!(3);
+    w.json(
+        "spec_node_camera_3.gltf",
+        &doc,
+        Expect::Error(&["camera 3 out of range"]),
+    );
+    let mut doc = embedded_triangle();
+    doc["nodes"][0]["children"] = json!([9]);
+    w.json("spec_node_child_9.gltf", &doc, Expect::Error(&["child 9 out of range"]));
+    let mut doc = embedded_triangle();
+    doc["scenes"][0]["nodes"] = json!([0, 9]);
+    w.json(
+        "spec_scene_root_9.gltf",
+        &doc,
+        Expect::Error(&["scene root node 9 out of range"]),
+    );
+    let mut doc = embedded_triangle();
+    doc["textures"] = json!([{"source": 5}]);
+    doc["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"] = json!({"index": 0});
+    w.json(
+        "spec_texture_image_5.gltf",
+        &doc,
+        Expect::Error(&["image 5 out of range"]),
+    );
+    let mut doc = embedded_triangle();
+    doc["extensions"]["KHR_lights_punctual"]["lights"][0]["intensity"] = json!(-5);
+    w.json(
+        "spec_light_negative_intensity.gltf",
+        &doc,
+        Expect::Error(&["light intensity -5 is negative"]),
+    );
+    let mut doc = embedded_triangle();
+    doc["extensions"]["KHR_lights_punctual"]["lights"][0] =
+        json!({"type": "spot", "intensity": 5, "spot": {"innerConeAngle": 1.0, "outerConeAngle": 0.5}});
+    w.json(
+        "spec_spot_inner_above_outer.gltf",
+        &doc,
+        Expect::Error(&["spot cone angles", "inner < outer"]),
+    );
+    let mut doc = embedded_triangle();
+    doc["extensions"]["KHR_lights_punctual"]["lights"][0]["type"] = json!("area");
+    w.json("spec_light_type_area.gltf", &doc, Expect::Error(&["light type 'area'"]));
+
     // --- node graphs
     let mut doc = embedded_triangle();
     doc["nodes"][0]["children"] = json!([2]);

@@ -171,14 +171,127 @@ fn radiance_view_options_override_the_gltf_camera() {
     );
 }
 
+/// An emitter's straight edge crossing a column of pixels, seen through a parallel view whose
+/// pixels are one unit wide: the edge lies at 0.3 of the way across its pixels, so they are
+/// 70 % covered. With one sample (the pixel centre) every pixel is wholly lit or dark; with N
+/// jittered samples each pixel is a whole number of N-ths, and the edge's pixels take
+/// fractional values whose mean converges to the covered area. Returns the emission layer
+/// (R) as rows of 8 pixels, in units of the emitter's radiance.
+fn edge_pixels(dir: &std::path::Path, spp: &str) -> Vec<Vec<f64>> {
+    let radiance = 2.0f32;
+    let mut b = GltfBuilder::new();
+    let light = b.material(emissive_lambertian("light", [0.0; 3], radiance));
+    b.quad(
+        facing(
+            [
+                [0.3, -50.0, 0.0],
+                [50.0, -50.0, 0.0],
+                [50.0, 50.0, 0.0],
+                [0.3, 50.0, 0.0],
+            ],
+            [0.0, 0.0, 1.0],
+        ),
+        Some(light),
+    );
+    let scene = b.write(dir, "edge");
+    let name = format!("edge-{spp}");
+    let (image, _) = render_to(
+        dir,
+        &scene,
+        &name,
+        &[
+            "-x",
+            "8",
+            "-y",
+            "32",
+            "-ab",
+            "0",
+            "-vtl",
+            "-vp",
+            "0",
+            "0",
+            "5",
+            "-vd",
+            "0",
+            "0",
+            "-1",
+            "-vu",
+            "0",
+            "1",
+            "0",
+            "-vh",
+            "8",
+            "-vv",
+            "32",
+            "--spp",
+            spp,
+            "--emission-samples",
+            "0",
+        ],
+    );
+    let [r, _, _] = rgb(&image, "emission");
+    r.chunks(8)
+        .map(|row| row.iter().map(|&v| v as f64 / radiance as f64).collect())
+        .collect()
+}
+
 #[test]
 fn spp_averages_jittered_samples_over_the_pixel() {
     let dir = tempfile::tempdir().unwrap();
-    let one = read_exr(&render_default(dir.path(), "one", &["--spp", "1"]));
-    let many = read_exr(&render_default(dir.path(), "many", &["--spp", "16"]));
-    // Same mean light, but edges are antialiased: some pixels lie between the one-sample values.
-    let (m1, m16) = (mean(&rgb(&one, "")[1]), mean(&rgb(&many, "")[1]));
-    assert!((m1 - m16).abs() / m1 < 0.05, "means {m1} {m16}");
+    let covered = 0.7;
+    // The column the edge crosses: the one whose pixels are neither dark nor fully lit at high
+    // sample counts (which side is which depends on the view's orientation, not on sampling).
+    let many = edge_pixels(dir.path(), "64");
+    let fractional: Vec<usize> = (0..8)
+        .filter(|&i| many.iter().all(|row| row[i] > 0.01 && row[i] < 0.99))
+        .collect();
+    assert_eq!(fractional.len(), 1, "one column holds the edge: {many:?}");
+    let edge = fractional[0];
+    for row in &many {
+        for (i, &v) in row.iter().enumerate() {
+            if i != edge {
+                assert!(
+                    v.abs() < 1e-6 || (v - 1.0).abs() < 1e-6,
+                    "column {i} is off the edge: {v}"
+                );
+            }
+        }
+    }
+    for (n, strata_wide) in [(1u32, 1.0), (4, 2.0), (64, 8.0)] {
+        let pixels = if n == 64 {
+            many.clone()
+        } else {
+            edge_pixels(dir.path(), &n.to_string())
+        };
+        let values: Vec<f64> = pixels.iter().map(|row| row[edge]).collect();
+        for &v in &values {
+            // Each sample adds 1/n of the emitter's radiance.
+            let samples = v * n as f64;
+            assert!(
+                (samples - samples.round()).abs() < 1e-3,
+                "--spp {n}: {v} is not a whole number of 1/{n}"
+            );
+            // Stratified: only the samples in the one column of strata the edge crosses can fall
+            // on either side, so a pixel is within one stratum's width of the covered area.
+            assert!((v - covered).abs() <= 1.0 / strata_wide + 1e-6, "--spp {n}: {v}");
+        }
+        let average = values.iter().sum::<f64>() / values.len() as f64;
+        match n {
+            // The pixel centre (0.5) lies on the emitter: every pixel of the column is lit.
+            1 => assert!(values.iter().all(|&v| (v - 1.0).abs() < 1e-6), "--spp 1: {values:?}"),
+            // 4 samples (2 x 2): 2 certain, 2 each lit with probability 0.4; 32 pixels.
+            4 => {
+                assert!(
+                    values.iter().any(|&v| v < 0.99),
+                    "--spp 4 gave no fractional pixel: {values:?}"
+                );
+                assert!((average - covered).abs() < 0.1, "--spp 4: mean {average}");
+            }
+            // 64 samples (8 x 8): per pixel 40 certain and 8 lit with probability 0.6, a
+            // standard deviation of 0.022; over 32 pixels 0.004. 0.015 is over 3.5 of those.
+            _ => assert!((average - covered).abs() < 0.015, "--spp 64: mean {average}"),
+        }
+    }
 }
 
 #[test]

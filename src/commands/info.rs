@@ -44,7 +44,7 @@ pub fn run(args: &InfoArgs) -> CommandResult {
             "directional": count(LightType::Directional),
         },
         "cameras": scene.cameras.len(),
-        "bounds": { "min": scene.bounds_min.to_array(), "max": scene.bounds_max.to_array(), "size": scene.size() },
+        "bounds": { "min": world_point(&scene, scene.bounds_min), "max": world_point(&scene, scene.bounds_max), "size": scene.size() },
         "specular_materials": specular_materials,
         "components": {
             "emission": needs.emission,
@@ -71,9 +71,9 @@ pub fn run(args: &InfoArgs) -> CommandResult {
     );
     println!("cameras      {}", d["cameras"]);
     println!(
-        "bounds       min {:?} max {:?} (size {:.4})",
-        scene.bounds_min.to_array(),
-        scene.bounds_max.to_array(),
+        "bounds       min {} max {} (size {:.4})",
+        world_text(&scene, scene.bounds_min),
+        world_text(&scene, scene.bounds_max),
         scene.size()
     );
     let yes = |b: bool| if b { "yes" } else { "no" };
@@ -86,4 +86,22 @@ pub fn run(args: &InfoArgs) -> CommandResult {
         yes(needs.transparency)
     );
     Ok(())
+}
+
+/// A point of the renderer's in world coordinates, as a JSON array: the f32 values themselves
+/// for a scene around glTF's origin (not re-centred), doubles for one far out.
+fn world_point(scene: &Scene, p: glam::Vec3) -> serde_json::Value {
+    if scene.origin == glam::DVec3::ZERO {
+        serde_json::json!(p.to_array())
+    } else {
+        serde_json::json!(scene.to_world(p).to_array())
+    }
+}
+
+fn world_text(scene: &Scene, p: glam::Vec3) -> String {
+    if scene.origin == glam::DVec3::ZERO {
+        format!("{:?}", p.to_array())
+    } else {
+        format!("{:?}", scene.to_world(p).to_array())
+    }
 }

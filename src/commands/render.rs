@@ -40,6 +40,50 @@ fn default_output(scene: &Path) -> PathBuf {
     PathBuf::from(format!("{stem}.exr"))
 }
 
+/// The render is always a layered OpenEXR, and its preview takes the same name with .png: any
+/// other extension would either put the preview over the EXR (`-o out.png`) or write an EXR
+/// under a name that says it is something else (`-o out.jpg`), so only .exr is accepted.
+fn check_exr_name(exr: &Path) -> Result<(), CommandError> {
+    let extension = exr.extension().map(|e| e.to_string_lossy().to_ascii_lowercase());
+    if extension.as_deref() == Some("exr") {
+        return Ok(());
+    }
+    let suggestion = exr.with_extension("exr");
+    let why = match extension.as_deref() {
+        Some("png") => "the PNG preview is written beside the EXR under the .png name, so the EXR would be lost",
+        Some(_) => "the render is written as a layered OpenEXR whatever the name says",
+        None => "the render is a layered OpenEXR and its name must say so",
+    };
+    Err(CommandError(format!(
+        "-o {}: the output must end in .exr ({why}); give -o {} (the preview goes beside it as .png)",
+        exr.display(),
+        suggestion.display()
+    )))
+}
+
+/// A directory is never replaced, with or without --overwrite: said before anything else.
+fn not_a_directory(path: &Path) -> Result<(), CommandError> {
+    if path.is_dir() {
+        return Err(CommandError(format!(
+            "{}: is a directory; give a file name (e.g. {})",
+            path.display(),
+            path.join("render.exr").display()
+        )));
+    }
+    Ok(())
+}
+
+/// Two names for one file (the same path, or the same file through links).
+fn same_file(a: &Path, b: &Path) -> bool {
+    if a == b {
+        return true;
+    }
+    match (std::fs::canonicalize(a), std::fs::canonicalize(b)) {
+        (Ok(x), Ok(y)) => x == y,
+        _ => false,
+    }
+}
+
 /// The options as a Radiance-style line for the EXR header (and for giving rpict the same).
 pub fn options_line(args: &RenderArgs) -> String {
     let av = args.ambient_value.as_deref().unwrap_or(&[0.0, 0.0, 0.0]);
@@ -121,16 +165,27 @@ pub struct Outputs {
 impl Outputs {
     pub fn check(args: &RenderArgs) -> Result<Outputs, CommandError> {
         let exr = args.output.clone().unwrap_or_else(|| default_output(&args.scene));
+        not_a_directory(&exr)?;
+        check_exr_name(&exr)?;
         let png = (!args.no_preview).then(|| exr.with_extension("png"));
         let outputs = Outputs {
             exr,
             png,
             stats: args.stats.clone(),
         };
+        if let Some(stats) = &outputs.stats
+            && (same_file(stats, &outputs.exr) || outputs.png.as_deref().is_some_and(|png| same_file(stats, png)))
+        {
+            return Err(CommandError(format!(
+                "--stats {}: is also an image output of this render; give the statistics a name of their own (e.g. .json)",
+                stats.display()
+            )));
+        }
         for path in std::iter::once(&outputs.exr)
             .chain(outputs.png.iter())
             .chain(outputs.stats.iter())
         {
+            not_a_directory(path)?;
             if path.exists() && !args.overwrite {
                 return Err(CommandError(format!(
                     "{}: already exists (give --overwrite to replace it)",
@@ -161,7 +216,7 @@ impl Outputs {
             ("icrender/command".to_string(), command_line.join(" ")),
             ("icrender/scene".to_string(), args.scene.display().to_string()),
             ("icrender/options".to_string(), options_line(args)),
-            ("icrender/view".to_string(), job.view.radiance_options()),
+            ("icrender/view".to_string(), job.view.radiance_options(job.scene.origin)),
             ("icrender/mode".to_string(), stats.mode.to_string()),
             ("icrender/ranks".to_string(), stats.ranks.to_string()),
             ("icrender/render_time_s".to_string(), format!("{:.3}", stats.render_s)),

@@ -1,25 +1,38 @@
 //! Which view a render uses: the glTF camera if the scene has one, else an automatic view of
 //! the bounds; then every Radiance view option given on the command line overrides its part.
+//! Positions given (cameras, -vp) are in world coordinates; the view holds them relative to
+//! the scene's tracing origin.
 
 use crate::cli::ViewArgs;
 use crate::scene::Scene;
-use crate::scene::auto_view::{Probe, auto_view};
+use crate::scene::auto_view::{Probe, auto_view_scored};
 use crate::scene::view::{Projection, View};
 use crate::tracer::Tracer;
-use glam::Vec3;
+use glam::{DVec3, Vec3};
 
 fn vec3(v: &[f32]) -> Vec3 {
     Vec3::new(v[0], v[1], v[2])
 }
 
-pub fn choose_view(scene: &Scene, tracer: &Tracer, args: &ViewArgs, width: u32, height: u32) -> Result<View, String> {
+/// Below this share of lit probe rays an automatic view is said to be mostly dark.
+const DARK_AUTO_VIEW: f32 = 0.1;
+
+/// The view, and a warning when it is an automatic view that sees little lit surface.
+pub fn choose_view(
+    scene: &Scene,
+    tracer: &Tracer,
+    args: &ViewArgs,
+    width: u32,
+    height: u32,
+) -> Result<(View, Option<String>), String> {
     let aspect = width as f32 / height as f32;
+    let mut note = None;
     let mut view = match scene.cameras.first() {
         Some(c) if c.perspective => {
             let vertical = c.yfov.to_degrees();
             View {
                 projection: Projection::Perspective,
-                position: Vec3::from(c.position),
+                position: scene.to_tracing(DVec3::from(c.position)),
                 direction: Vec3::from(c.forward),
                 up: Vec3::from(c.up),
                 horizontal: View::horizontal_for_aspect(Projection::Perspective, vertical, aspect),
@@ -28,15 +41,33 @@ pub fn choose_view(scene: &Scene, tracer: &Tracer, args: &ViewArgs, width: u32, 
         }
         Some(c) => View {
             projection: Projection::Parallel,
-            position: Vec3::from(c.position),
+            position: scene.to_tracing(DVec3::from(c.position)),
             direction: Vec3::from(c.forward),
             up: Vec3::from(c.up),
             horizontal: 2.0 * c.ymag * aspect,
             vertical: 2.0 * c.ymag,
         },
-        None => auto_view(scene.bounds_min, scene.bounds_max, aspect, |o, d| {
-            probe(scene, tracer, o, d)
-        }),
+        None => {
+            let (view, lit) = auto_view_scored(scene.bounds_min, scene.bounds_max, aspect, |o, d| {
+                probe(scene, tracer, o, d)
+            });
+            if lit < DARK_AUTO_VIEW && args.vp.is_none() {
+                let (lo, hi) = (scene.to_world(scene.bounds_min), scene.to_world(scene.bounds_max));
+                note = Some(format!(
+                    "the scene has no camera and the automatic view sees little lit surface ({:.0} % of its probe \
+                     rays): the image will be mostly dark; give a view inside the scene's bounds ({:.6}, {:.6}, \
+                     {:.6}) .. ({:.6}, {:.6}, {:.6}), e.g. -vp X Y Z -vd 1 0 0",
+                    100.0 * lit,
+                    lo.x,
+                    lo.y,
+                    lo.z,
+                    hi.x,
+                    hi.y,
+                    hi.z
+                ));
+            }
+            view
+        }
     };
     if args.vtl {
         view.projection = Projection::Parallel;
@@ -44,7 +75,7 @@ pub fn choose_view(scene: &Scene, tracer: &Tracer, args: &ViewArgs, width: u32, 
         view.projection = Projection::Perspective;
     }
     if let Some(p) = &args.vp {
-        view.position = vec3(p);
+        view.position = scene.to_tracing(DVec3::new(p[0], p[1], p[2]));
     }
     if let Some(d) = &args.vd {
         view.direction = vec3(d);
@@ -66,7 +97,7 @@ pub fn choose_view(scene: &Scene, tracer: &Tracer, args: &ViewArgs, width: u32, 
         (None, None) => {}
     }
     view.validate()?;
-    Ok(view)
+    Ok((view, note))
 }
 
 /// Light positions the automatic view tests visibility against: every punctual light and an

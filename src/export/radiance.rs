@@ -49,6 +49,7 @@ use crate::scene::Scene;
 use crate::scene::light::{PunctualLight, luminance};
 use crate::scene::material::{Material, SurfacePoint};
 use crate::scene::texture::Texture;
+use crate::scene::view::world_coordinate;
 use crate::sys::scene_io::LightType;
 use glam::{DVec3, Vec3};
 use std::f64::consts::PI;
@@ -241,12 +242,20 @@ fn write_material(out: &mut impl Write, name: &str, m: &RadMaterial) -> io::Resu
 }
 
 /// Writes one punctual light; false if it gives no light (nothing written).
-fn write_punctual(out: &mut impl Write, index: usize, light: &PunctualLight, radius: f32) -> io::Result<bool> {
+/// `origin`: the scene's tracing origin; what is written is in world coordinates.
+fn write_punctual(
+    out: &mut impl Write,
+    index: usize,
+    light: &PunctualLight,
+    radius: f32,
+    origin: DVec3,
+) -> io::Result<bool> {
     if light.intensity.max_element() <= 0.0 {
         return Ok(false);
     }
     let name = identifier(&format!("light{index}"), &light.name);
-    let p = light.position;
+    let p = origin + light.position.as_dvec3();
+    let p = p.to_array().map(world_coordinate);
     match light.kind {
         LightType::Point | LightType::Spot => {
             let l = sphere_radiance_for_intensity(light.intensity, radius);
@@ -273,7 +282,7 @@ fn write_punctual(out: &mut impl Write, index: usize, light: &PunctualLight, rad
             writeln!(
                 out,
                 "{name} sphere {name}.sphere\n0\n0\n4 {} {} {} {radius}\n",
-                p.x, p.y, p.z
+                p[0], p[1], p[2]
             )?;
         }
         LightType::Directional => {
@@ -363,7 +372,7 @@ pub fn write_scene(scene: &Scene, out: &mut impl Write) -> io::Result<ExportSumm
                 light.name
             ));
         }
-        if write_punctual(out, index, light, radius)? {
+        if write_punctual(out, index, light, radius, scene.origin)? {
             summary.light_sources += 1;
         } else {
             summary
@@ -376,7 +385,12 @@ pub fn write_scene(scene: &Scene, out: &mut impl Write) -> io::Result<ExportSumm
         let material = &names[mesh.material as usize];
         writeln!(out, "# mesh {mesh_index}: {} triangles", mesh.indices.len())?;
         for (tri, &[a, b, c]) in mesh.indices.iter().enumerate() {
-            let [pa, pb, pc] = [a, b, c].map(|i| mesh.positions[i as usize]);
+            let [pa, pb, pc] = [a, b, c].map(|i| {
+                scene
+                    .to_world(Vec3::from(mesh.positions[i as usize]))
+                    .to_array()
+                    .map(world_coordinate)
+            });
             writeln!(
                 out,
                 "{material} polygon t{mesh_index}.{tri}\n0\n0\n9 {} {} {}\n  {} {} {}\n  {} {} {}",
@@ -454,6 +468,7 @@ mod tests {
             punctual_lights: lights,
             emitters: EmitterSet::default(),
             cameras: Vec::new(),
+            origin: DVec3::ZERO,
             bounds_min: lo,
             bounds_max: hi,
             dropped_triangles: 0,

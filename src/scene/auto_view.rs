@@ -3,7 +3,10 @@
 //! viewer's "frame all" does. If the bounds are open on the near side (a Cornell box), the
 //! whole box is framed from outside. If they are closed (a room, a nave), the eye steps inside
 //! and takes the position from which it sees the most lit surface, farthest away (so it is
-//! neither behind a wall nor in the dark gap between an outer and an inner wall).
+//! neither behind a wall nor in the dark gap between an outer and an inner wall). When no eye
+//! on the bounds' centre line sees much lit surface (a building of many rooms, whose centre
+//! line runs through walls and the gaps between rooms), eyes on a grid over the bounds' floor
+//! plan, looking each of the four horizontal ways, are tried too: one of them stands in a room.
 
 use super::view::{Projection, View};
 use glam::Vec3;
@@ -13,6 +16,10 @@ const INSIDE_VERTICAL_ANGLE: f32 = 60.0;
 /// How far into the bounds (fractions of their depth) the eye may step when they are closed.
 const INSIDE_CANDIDATES: [f32; 7] = [0.02, 0.05, 0.1, 0.2, 0.3, 0.4, 0.5];
 const PROBE_GRID: u32 = 8;
+/// Below this share of lit probe rays the centre line is given up for the floor-plan grid.
+const POOR_LIT_FRACTION: f32 = 0.25;
+/// Eyes per horizontal axis of the floor-plan grid.
+const PLAN_GRID: u32 = 8;
 
 /// What a probe ray from the eye finds: the distance to the first surface, and whether a
 /// light source shines on that point.
@@ -24,6 +31,17 @@ pub struct Probe {
 
 /// `probe(origin, unit direction)` reports the first surface along a ray, if any.
 pub fn auto_view(bounds_min: Vec3, bounds_max: Vec3, aspect: f32, probe: impl Fn(Vec3, Vec3) -> Option<Probe>) -> View {
+    auto_view_scored(bounds_min, bounds_max, aspect, probe).0
+}
+
+/// The automatic view and the share of its probe rays that found a lit surface (low: the
+/// image will be mostly dark, and the caller says how to give a view).
+pub fn auto_view_scored(
+    bounds_min: Vec3,
+    bounds_max: Vec3,
+    aspect: f32,
+    probe: impl Fn(Vec3, Vec3) -> Option<Probe>,
+) -> (View, f32) {
     let centre = 0.5 * (bounds_min + bounds_max);
     let extent = (bounds_max - bounds_min).max(Vec3::splat(f32::MIN_POSITIVE));
     // Depth axis: Z unless X is clearly longer.
@@ -62,18 +80,47 @@ pub fn auto_view(bounds_min: Vec3, bounds_max: Vec3, aspect: f32, probe: impl Fn
     };
     let outside_view = make(outside, AUTO_VERTICAL_ANGLE);
     // Most of the frame lit from outside: the box is open on this side.
-    if score(&outside_view).0 >= 0.5 {
-        return outside_view;
+    let outside_score = score(&outside_view);
+    if outside_score.0 >= 0.5 {
+        return (outside_view, outside_score.0);
     }
-    let mut best = (score(&outside_view).1, outside_view);
+    let mut best = (outside_score.1, outside_score.0, outside_view);
     for fraction in INSIDE_CANDIDATES {
         let view = make(near_face - axis * (fraction * depth), INSIDE_VERTICAL_ANGLE);
-        let seen = score(&view).1;
+        let (lit, seen) = score(&view);
         if seen > best.0 * 1.05 {
-            best = (seen, view);
+            best = (seen, lit, view);
         }
     }
-    best.1
+    if best.1 >= POOR_LIT_FRACTION {
+        return (best.2, best.1);
+    }
+    // The floor-plan grid: eyes at mid-height, each looking along +-X and +-Z.
+    let mut plan_best: Option<(f32, f32, View)> = None;
+    for i in 0..PLAN_GRID {
+        for k in 0..PLAN_GRID {
+            let at = |n: u32| (n as f32 + 0.5) / PLAN_GRID as f32;
+            let eye = Vec3::new(
+                bounds_min.x + at(i) * extent.x,
+                centre.y,
+                bounds_min.z + at(k) * extent.z,
+            );
+            for direction in [-Vec3::X, Vec3::X, -Vec3::Z, Vec3::Z] {
+                let view = View {
+                    direction,
+                    ..make(eye, INSIDE_VERTICAL_ANGLE)
+                };
+                let (lit, seen) = score(&view);
+                if plan_best.as_ref().is_none_or(|b| (lit, seen) > (b.0, b.1)) {
+                    plan_best = Some((lit, seen, view));
+                }
+            }
+        }
+    }
+    match plan_best {
+        Some((lit, _, view)) if lit > best.1 => (view, lit),
+        _ => (best.2, best.1),
+    }
 }
 
 #[cfg(test)]

@@ -37,7 +37,8 @@ fn finite3(v: [f32; 3]) -> Option<Vec3> {
 impl PunctualLight {
     /// None when the file's numbers cannot describe a light (non-finite position, zero
     /// direction); the caller warns.
-    pub fn from_gltf(l: &GltfLight) -> Option<PunctualLight> {
+    /// `origin`: the scene's tracing origin, which the light's position is made relative to.
+    pub fn from_gltf(l: &GltfLight, origin: glam::DVec3) -> Option<PunctualLight> {
         let color = finite3(l.color)?.max(Vec3::ZERO);
         let intensity = if l.intensity.is_finite() {
             l.intensity.max(0.0)
@@ -45,7 +46,8 @@ impl PunctualLight {
             return None;
         };
         let direction = finite3(l.direction)?.try_normalize()?;
-        let position = finite3(l.position)?;
+        let position = (glam::DVec3::from(l.position) - origin).as_vec3();
+        let position = position.is_finite().then_some(position)?;
         let outer = l.outer_cone.clamp(0.0, std::f32::consts::FRAC_PI_2);
         let inner = l.inner_cone.clamp(0.0, outer);
         Some(PunctualLight {

@@ -7,11 +7,12 @@ pub mod lambert;
 pub mod light;
 pub mod light_tree;
 pub mod material;
+pub mod placement;
 pub mod texture;
 pub mod view;
 
 use crate::sys::scene_io::{self, GltfCamera, GltfScene};
-use glam::{Mat3, Mat4, Vec3};
+use glam::{DMat4, DVec3, Vec3};
 use light::{EmitterSet, EmitterTriangle, PunctualLight};
 use material::Material;
 use std::path::{Path, PathBuf};
@@ -70,7 +71,11 @@ pub struct Scene {
     pub textures: Vec<Texture>,
     pub punctual_lights: Vec<PunctualLight>,
     pub emitters: EmitterSet,
+    /// Cameras as the file places them, in world coordinates (`to_tracing` for the renderer's).
     pub cameras: Vec<GltfCamera>,
+    /// The world point the renderer's coordinates are relative to (the bounds' centre; see
+    /// `placement`): meshes, lights, bounds and views are all stored relative to it.
+    pub origin: DVec3,
     pub bounds_min: Vec3,
     pub bounds_max: Vec3,
     pub dropped_triangles: usize,
@@ -122,11 +127,12 @@ impl Scene {
         let mut emitter_triangles = Vec::new();
         let mut bounds_min = Vec3::splat(f32::INFINITY);
         let mut bounds_max = Vec3::splat(f32::NEG_INFINITY);
+        let origin = placement::tracing_origin(&gltf);
         for instance in &gltf.instances {
             let source = &gltf.meshes[instance.mesh];
             let material = source.material.map_or(default_material, |m| m as u32);
-            let world = Mat4::from_cols_array(&instance.world);
-            let (mesh, dropped_here) = place_mesh(source, world, material);
+            let world = DMat4::from_cols_array(&instance.world);
+            let (mesh, dropped_here) = placement::place_mesh(source, world, origin, material);
             dropped += dropped_here;
             if mesh.indices.is_empty() {
                 continue;
@@ -161,7 +167,7 @@ impl Scene {
         }
         let mut punctual_lights = Vec::new();
         for l in &gltf.lights {
-            match PunctualLight::from_gltf(l) {
+            match PunctualLight::from_gltf(l, origin) {
                 Some(light) => punctual_lights.push(light),
                 None => warnings.push(format!("light '{}' ignored: non-finite position or direction", l.name)),
             }
@@ -174,6 +180,7 @@ impl Scene {
             punctual_lights,
             emitters: EmitterSet::new(emitter_triangles),
             cameras: gltf.cameras,
+            origin,
             bounds_min,
             bounds_max,
             dropped_triangles: dropped,
@@ -198,6 +205,16 @@ impl Scene {
     }
 
     /// Length of the bounding box's diagonal: the scale every tolerance is relative to.
+    /// A world point (a camera, a -vp) in the renderer's coordinates.
+    pub fn to_tracing(&self, world: DVec3) -> Vec3 {
+        (world - self.origin).as_vec3()
+    }
+
+    /// A point of the renderer's in world coordinates (what the user gave and sees).
+    pub fn to_world(&self, p: Vec3) -> DVec3 {
+        self.origin + p.as_dvec3()
+    }
+
     pub fn size(&self) -> f32 {
         (self.bounds_max - self.bounds_min).length().max(f32::MIN_POSITIVE)
     }
@@ -242,52 +259,6 @@ impl Scene {
     }
 }
 
-fn valid_point(p: Vec3) -> bool {
-    p.is_finite() && p.abs().max_element() <= MAX_COORDINATE
-}
-
-/// Transforms a mesh into world space and drops triangles that cannot be traced: non-finite or
-/// out-of-range vertices, or zero area. A mirroring transform reverses the winding, so the
-/// front side (which emitters use) stays where glTF says it is.
-fn place_mesh(source: &scene_io::GltfMesh, world: Mat4, material: u32) -> (WorldMesh, usize) {
-    let mirrored = world.determinant() < 0.0;
-    let positions: Vec<Vec3> = source
-        .positions
-        .iter()
-        .map(|&p| world.transform_point3(Vec3::from(p)))
-        .collect();
-    let normal_matrix = Mat3::from_mat4(world).inverse().transpose();
-    let normals = source.normals.as_ref().filter(|_| normal_matrix.is_finite()).map(|ns| {
-        ns.iter()
-            .map(|&n| (normal_matrix * Vec3::from(n)).normalize_or_zero())
-            .collect::<Vec<_>>()
-    });
-    let mut indices = Vec::with_capacity(source.indices.len());
-    let mut dropped = 0;
-    for &[a, b, c] in &source.indices {
-        let (pa, pb, pc) = (positions[a as usize], positions[b as usize], positions[c as usize]);
-        let area2 = (pb - pa).cross(pc - pa).length_squared();
-        if valid_point(pa) && valid_point(pb) && valid_point(pc) && area2 > 0.0 && area2.is_finite() {
-            indices.push(if mirrored { [a, c, b] } else { [a, b, c] });
-        } else {
-            dropped += 1;
-        }
-    }
-    // Unreferenced vertices may hold NaN; Embree never reads them, but keep the buffer clean.
-    let positions = positions
-        .into_iter()
-        .map(|p| if valid_point(p) { p.to_array() } else { [0.0; 3] })
-        .collect();
-    let mesh = WorldMesh {
-        positions,
-        normals,
-        texcoords: source.texcoords.clone(),
-        indices,
-        material,
-    };
-    (mesh, dropped)
-}
-
 fn collect_emitters(mesh: &WorldMesh, radiance: Vec3, geom_id: u32, out: &mut Vec<EmitterTriangle>) {
     for (prim_id, &[a, b, c]) in mesh.indices.iter().enumerate() {
         let p0 = Vec3::from(mesh.positions[a as usize]);
@@ -314,6 +285,7 @@ fn collect_emitters(mesh: &WorldMesh, radiance: Vec3, geom_id: u32, out: &mut Ve
 mod tests {
     use super::*;
     use crate::sys::scene_io::GltfMesh;
+    use placement::place_mesh;
 
     fn quad_mesh() -> GltfMesh {
         GltfMesh {
@@ -333,7 +305,7 @@ mod tests {
 
     #[test]
     fn drops_degenerate_and_nan_triangles() {
-        let (mesh, dropped) = place_mesh(&quad_mesh(), Mat4::IDENTITY, 0);
+        let (mesh, dropped) = place_mesh(&quad_mesh(), DMat4::IDENTITY, DVec3::ZERO, 0);
         assert_eq!(mesh.indices.len(), 2);
         assert_eq!(dropped, 3);
         assert!(mesh.positions.iter().flatten().all(|v| v.is_finite()));
@@ -341,8 +313,8 @@ mod tests {
 
     #[test]
     fn mirroring_keeps_the_front_side() {
-        let mirror = Mat4::from_scale(Vec3::new(-1.0, 1.0, 1.0));
-        let (mesh, _) = place_mesh(&quad_mesh(), mirror, 0);
+        let mirror = DMat4::from_scale(DVec3::new(-1.0, 1.0, 1.0));
+        let (mesh, _) = place_mesh(&quad_mesh(), mirror, DVec3::ZERO, 0);
         let mut emitters = Vec::new();
         collect_emitters(&mesh, Vec3::ONE, 0, &mut emitters);
         // The unmirrored quad faces +Z by winding; mirroring in X must not turn it to -Z.

@@ -44,16 +44,29 @@ impl View {
         }
     }
 
-    /// Radiance's -vf-style one-line description, usable as rpict options.
-    pub fn radiance_options(&self) -> String {
+    /// Radiance's -vf-style one-line description, usable as rpict options, in world
+    /// coordinates: `origin` is the scene's tracing origin, which the view's position is
+    /// relative to.
+    pub fn radiance_options(&self, origin: glam::DVec3) -> String {
         let t = match self.projection {
             Projection::Perspective => "v",
             Projection::Parallel => "l",
         };
-        let (p, d, u) = (self.position, self.direction, self.up);
+        let (d, u) = (self.direction, self.up);
+        let p = origin + self.position.as_dvec3();
         format!(
             "-vt{t} -vp {} {} {} -vd {} {} {} -vu {} {} {} -vh {} -vv {}",
-            p.x, p.y, p.z, d.x, d.y, d.z, u.x, u.y, u.z, self.horizontal, self.vertical
+            world_coordinate(p.x),
+            world_coordinate(p.y),
+            world_coordinate(p.z),
+            d.x,
+            d.y,
+            d.z,
+            u.x,
+            u.y,
+            u.z,
+            self.horizontal,
+            self.vertical
         )
     }
 
@@ -153,6 +166,16 @@ impl Camera {
                 (o, self.forward)
             }
         }
+    }
+}
+
+/// A world coordinate as text: as the f32 it is when it is one (every scene around glTF's
+/// origin, written as before), else in full double precision (a scene far out).
+pub fn world_coordinate(v: f64) -> String {
+    if (v as f32) as f64 == v {
+        (v as f32).to_string()
+    } else {
+        v.to_string()
     }
 }
 

@@ -20,7 +20,7 @@ pub struct GltfMesh {
 pub struct GltfInstance {
     pub mesh: usize,
     /// Column-major 4x4 world matrix.
-    pub world: [f32; 16],
+    pub world: [f64; 16],
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -73,7 +73,7 @@ pub struct GltfLight {
     pub range: f32,
     pub inner_cone: f32,
     pub outer_cone: f32,
-    pub position: [f32; 3],
+    pub position: [f64; 3],
     pub direction: [f32; 3],
 }
 
@@ -85,7 +85,7 @@ pub struct GltfCamera {
     pub aspect: f32,
     pub xmag: f32,
     pub ymag: f32,
-    pub position: [f32; 3],
+    pub position: [f64; 3],
     pub forward: [f32; 3],
     pub up: [f32; 3],
 }
