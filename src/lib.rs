@@ -1,6 +1,9 @@
 //! icrender: a renderer for global illumination with Ward's irradiance cache, split into
 //! Radiance's components (emission, direct, specular, indirect diffuse).
 
+// Every `unsafe` block lives in `sys`, the wrappers of the foreign libraries.
+#![deny(unsafe_code)]
+
 pub mod checkpoint;
 pub mod cli;
 pub mod commands;
@@ -17,6 +20,7 @@ pub mod sampling;
 pub mod scene;
 pub mod shading;
 pub mod stats;
+#[allow(unsafe_code)]
 pub mod sys;
 pub mod tiles;
 pub mod tracer;

@@ -1,5 +1,7 @@
 //! The `icrender` command: parses arguments and runs one subcommand.
 
+#![deny(unsafe_code)]
+
 use icrender::{cli, commands};
 
 use clap::Parser;

@@ -774,6 +774,116 @@ fn losing_a_pa_host_stops_the_component_job_saying_what_is_missing() {
     });
 }
 
+/// The long render with the renderer's default liveness settings (no --timeout).
+fn long_render_defaults<'a>(mode: &'a str, cache: &'a str) -> Vec<&'a str> {
+    let mut render = long_render(mode, cache, "");
+    render.truncate(render.len() - 2);
+    render
+}
+
+#[test]
+fn with_default_settings_a_lost_host_ends_the_job_within_a_minute_and_the_job_resumes() {
+    // Heartbeats (every 2 s) make silence mean loss: a PR host cut off mid-render in component
+    // mode is noticed within the default --timeout (30 s) and the job ends within 60 s of the
+    // cut, naming rank and host; the same command, rerun, starts from the cache file.
+    with_bed(4, &[], |bed| {
+        let dir = tempfile::tempdir().unwrap();
+        let scene = project_dir().join("scenes/cornell.gltf");
+        let cache = dir.path().join("c.icc");
+        let (out, stats) = (dir.path().join("cut.exr"), dir.path().join("cut.json"));
+        let render = long_render_defaults("component", cache.to_str().unwrap());
+        let args = render_args(
+            scene.to_str().unwrap(),
+            out.to_str().unwrap(),
+            stats.to_str().unwrap(),
+            &render,
+        );
+        let mut job = Job::spawn(bed.mpirun(&[], 4, &args), dir.path().join("cut.log"));
+        wait_for_progress(&mut job, &cache, 32);
+        let cut = Instant::now();
+        bed.link(3, "down");
+        let ended = job.wait(Duration::from_secs(150));
+        let after_cut = cut.elapsed();
+        eprintln!("the job ended {:.1} s after the cut", after_cut.as_secs_f64());
+        let mut problems = fault_problems(&ended, Duration::from_secs(150), &out);
+        if after_cut > Duration::from_secs(60) {
+            problems.push(format!(
+                "the job ended {:.0} s after the cut (limit 60 s)",
+                after_cut.as_secs_f64()
+            ));
+        }
+        let line = ended
+            .output
+            .lines()
+            .find(|l| l.contains("icrender: error:"))
+            .unwrap_or("");
+        if !(names_rank(line, 3) && line.contains(&bed.host(3))) {
+            problems.push(format!(
+                "the error does not name rank 3 and its host {}: {line}",
+                bed.host(3)
+            ));
+        }
+        assert_no_problems("host 3's link down, default settings", &problems, &ended);
+        let kept = cache_records(&cache).unwrap();
+        bed.link(3, "up");
+        let rerun = Job::spawn(bed.mpirun(&[], 4, &args), dir.path().join("rerun.log")).wait(Duration::from_secs(150));
+        assert!(
+            rerun.status.is_some_and(|s| s.success()),
+            "the same command did not resume:\n{}",
+            rerun.output
+        );
+        let resumed = read_stats(&stats);
+        assert!(
+            u(&resumed, "records_loaded") >= kept as u64,
+            "the rerun loaded {} of the {kept} records in the file",
+            u(&resumed, "records_loaded")
+        );
+    });
+}
+
+#[test]
+fn a_rank_cut_off_from_its_master_ends_itself() {
+    // The host of rank 3 loses its link, then mpirun is killed (as a user or a scheduler does
+    // with a job that hangs): nothing can reach rank 3 any more, and it must end on its own
+    // once its master has been silent for --timeout (10 s here), leaving no process behind.
+    // Without heartbeats, Open MPI's runtime ended it after 32 s on this test bed (the issue
+    // saw such ranks run on); the bound of 20 s tells the rank's own ending from that.
+    with_bed(4, &[], |bed| {
+        let dir = tempfile::tempdir().unwrap();
+        let scene = project_dir().join("scenes/cornell.gltf");
+        let cache = dir.path().join("c.icc");
+        let (out, stats) = (dir.path().join("orphan.exr"), dir.path().join("orphan.json"));
+        let render = long_render("centralised", cache.to_str().unwrap(), "10");
+        let args = render_args(
+            scene.to_str().unwrap(),
+            out.to_str().unwrap(),
+            stats.to_str().unwrap(),
+            &render,
+        );
+        let mut job = Job::spawn(bed.mpirun(&[], 4, &args), dir.path().join("orphan.log"));
+        wait_for_progress(&mut job, &cache, 32);
+        let ns = bed.namespace(3);
+        assert!(
+            rank_pid(out.to_str().unwrap(), 3, ns).is_some(),
+            "rank 3 runs on host 3"
+        );
+        let cut = Instant::now();
+        bed.link(3, "down");
+        let _ = job.child.kill();
+        let _ = job.child.wait();
+        while rank_pid(out.to_str().unwrap(), 3, ns).is_some() {
+            assert!(
+                cut.elapsed() < Duration::from_secs(20),
+                "rank 3 still runs {:.0} s after its master was cut off (--timeout 10)",
+                cut.elapsed().as_secs_f64()
+            );
+            std::thread::sleep(Duration::from_millis(200));
+        }
+        eprintln!("rank 3 ended {:.1} s after the cut", cut.elapsed().as_secs_f64());
+        bed.link(3, "up");
+    });
+}
+
 #[test]
 fn a_refusal_on_rank_zero_ends_the_job_across_hosts() {
     // Rank 0 alone checks the outputs; when it refuses (an existing image without

@@ -66,6 +66,30 @@ impl From<ModeArg> for Mode {
     }
 }
 
+/// The paper's synchronisation threshold: how many new records a rank gathers before it
+/// shares them (`--sync`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct SyncThreshold(pub usize);
+
+impl SyncThreshold {
+    /// The traditional modes' default: every share is a round trip through the master (or a
+    /// message to every rank), paid out of rendering time.
+    pub const TRADITIONAL: SyncThreshold = SyncThreshold(50);
+    /// Component mode's PAs and helping PRs make every record and share them sooner: the
+    /// other PAs, and the PRs answering lookups themselves, work with fresher caches.
+    pub const COMPONENT: SyncThreshold = SyncThreshold(8);
+
+    /// `--sync` if given (at least 1), else the mode's default.
+    pub fn of(sync: Option<u32>, default: SyncThreshold) -> SyncThreshold {
+        sync.map_or(default, |n| SyncThreshold(n.max(1) as usize))
+    }
+
+    /// Whether `gathered` new records are to be shared now.
+    pub fn reached(self, gathered: usize) -> bool {
+        gathered >= self.0
+    }
+}
+
 /// A rank's report from its rendering threads and its message counters. `idle_s` is the
 /// waiting of the rendering threads (not of helper threads that wait by design).
 pub fn rank_report(rank: i32, role: &str, threads: &[ThreadStats], counters: &[&Counters], idle_s: f64) -> RankReport {
@@ -327,7 +351,7 @@ pub fn run(args: &RenderArgs, mode: Mode) -> CommandResult {
             args, &comm, job, &all_tiles, &hosts, outputs, wall, universe, resume, prepass,
         );
     }
-    let sync = args.sync.unwrap_or(50).max(1) as usize;
+    let sync = SyncThreshold::of(args.sync, SyncThreshold::TRADITIONAL);
     let persist_local = args.ambient_file.is_some();
     if rank != 0 {
         if let Some(cache) = job.cache.as_mut()
@@ -451,7 +475,7 @@ fn run_component(
         if roles.pas.contains(&rank) {
             component::pa::run(
                 &setup,
-                args.sync.unwrap_or(8).max(1) as usize,
+                SyncThreshold::of(args.sync, SyncThreshold::COMPONENT),
                 args.seed,
                 args.checkpoint.is_some(),
                 args.pa_queue.max(1) as usize,
@@ -462,7 +486,7 @@ fn run_component(
                 &setup,
                 &roles,
                 args.send.max(1) as usize,
-                args.sync.unwrap_or(8).max(1) as usize,
+                SyncThreshold::of(args.sync, SyncThreshold::COMPONENT),
                 args.seed,
                 args.checkpoint.is_some(),
             );

@@ -4,9 +4,9 @@
 //! thread that merges incoming records while the rendering threads go on).
 
 use super::Mode;
-use super::WorkerSetup;
 use super::comm::{Comm, Counters, kind};
 use super::protocol::{FinishedTile, Kind, Message, Records};
+use super::{SyncThreshold, WorkerSetup};
 use super::{rank_report, send_report};
 use crate::irradiance::IrradianceCache;
 use crate::render::{ThreadClock, ThreadStats, render_tile};
@@ -97,7 +97,7 @@ fn receive_broadcasts(
     }
 }
 
-pub fn run(setup: &WorkerSetup<'_>, mode: Mode, sync: usize, persist_local: bool) {
+pub fn run(setup: &WorkerSetup<'_>, mode: Mode, sync: SyncThreshold, persist_local: bool) {
     let counters = Counters::default();
     let listener_counters = Counters::default();
     let comm = Comm::new(&counters);
@@ -143,7 +143,7 @@ pub fn run(setup: &WorkerSetup<'_>, mode: Mode, sync: usize, persist_local: bool
                         let mut after_pixel = |_: &mut RayCounts| {
                             if let Some(cache) = cache
                                 && mode != Mode::Noshare
-                                && cache.outbox_len() >= sync
+                                && sync.reached(cache.outbox_len())
                                 && let Ok(_guard) = share_lock.try_lock()
                             {
                                 share(&comm, mode, cache, thread, received, rejected, false);

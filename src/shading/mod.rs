@@ -21,8 +21,7 @@ use crate::sys::embree::Coherence;
 use crate::tracer::{SurfaceHit, Tracer};
 use direct::LightStrata;
 use glam::Vec3;
-use request::AmbientRequest;
-use std::sync::Mutex;
+use request::{AmbientRequest, RequestBuffer};
 use std::time::Instant;
 
 /// The options that decide how each component is computed (Radiance names where they exist).
@@ -165,7 +164,7 @@ pub struct Integrator<'a> {
     pub cache: Option<&'a IrradianceCache>,
     /// Component mode's PR: indirect diffuse values that the cache cannot give are not
     /// computed here but become requests in this list (left out of the pixel).
-    pub defer: Option<&'a Mutex<Vec<AmbientRequest>>>,
+    pub defer: Option<&'a RequestBuffer>,
     /// The cache is complete (the prepass made it): a lookup that finds no record makes one
     /// for its own use and does not add it, so no pixel depends on another's timing.
     pub frozen: bool,
@@ -198,7 +197,7 @@ impl<'a> Integrator<'a> {
     }
 
     /// This integrator leaves indirect diffuse values the cache cannot give to `sink`.
-    pub fn deferring(mut self, sink: &'a Mutex<Vec<AmbientRequest>>) -> Self {
+    pub fn deferring(mut self, sink: &'a RequestBuffer) -> Self {
         self.defer = Some(sink);
         self
     }
@@ -528,7 +527,7 @@ impl<'a> Integrator<'a> {
     /// nothing in the pixel for now (the PA adds it to its own image, which is summed in).
     fn cached_or_requested(
         &self,
-        sink: &Mutex<Vec<AmbientRequest>>,
+        sink: &RequestBuffer,
         hit: &SurfaceHit,
         dir: Vec3,
         surface: &crate::scene::material::SurfacePoint,
@@ -560,7 +559,7 @@ impl<'a> Integrator<'a> {
             stream: (counts.pixel as u64) << 32 | (counts.sample as u64) << 16 | (counts.deferred & 0xffff),
         };
         counts.deferred += 1;
-        sink.lock().unwrap_or_else(|e| e.into_inner()).push(request);
+        sink.push(request);
         Vec3::ZERO
     }
 

@@ -40,3 +40,31 @@ pub struct RequestResult {
     pub layer: Layer,
     pub value: Vec3,
 }
+
+/// The paper's request buffer: the indirect diffuse values a PR's cache could not give,
+/// gathered as its pixels render until they are sent to a PA (`--send` at a time).
+#[derive(Debug, Default)]
+pub struct RequestBuffer(std::sync::Mutex<Vec<AmbientRequest>>);
+
+impl RequestBuffer {
+    fn requests(&self) -> std::sync::MutexGuard<'_, Vec<AmbientRequest>> {
+        self.0.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    pub fn push(&self, request: AmbientRequest) {
+        self.requests().push(request);
+    }
+
+    pub fn len(&self) -> usize {
+        self.requests().len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Everything buffered, leaving the buffer empty.
+    pub fn take(&self) -> Vec<AmbientRequest> {
+        std::mem::take(&mut *self.requests())
+    }
+}

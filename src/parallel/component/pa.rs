@@ -11,7 +11,7 @@ use crate::image::framebuffer::FrameBuffer;
 use crate::irradiance::IrradianceCache;
 use crate::parallel::comm::{Comm, Counters, kind};
 use crate::parallel::protocol::{Kind, Message, Records, Requests};
-use crate::parallel::{WorkerSetup, rank_report, send_report};
+use crate::parallel::{SyncThreshold, WorkerSetup, rank_report, send_report};
 use crate::render::{ThreadClock, ThreadStats};
 use crate::shading::Integrator;
 use crate::shading::request::AmbientRequest;
@@ -157,7 +157,7 @@ fn communicate(
 /// `journal`: --checkpoint is on, so computed requests are reported to the master.
 /// `bound`: the most requests the queue takes (see `communicate`).
 /// `grid`: the spacing in pixels of the requests computed first (see `order`); 0: arrival order.
-pub fn run(setup: &WorkerSetup<'_>, sync: usize, seed: u64, journal: bool, bound: usize, grid: u32) {
+pub fn run(setup: &WorkerSetup<'_>, sync: SyncThreshold, seed: u64, journal: bool, bound: usize, grid: u32) {
     let counters = Counters::default();
     let comm_counters = Counters::default();
     let comm = Comm::new(&counters);
@@ -258,7 +258,7 @@ pub fn run(setup: &WorkerSetup<'_>, sync: usize, seed: u64, journal: bool, bound
                 journal.then_some(&mut results),
             );
             done += 1;
-            if cache.map_or(0, |c| c.outbox_len()) >= sync {
+            if sync.reached(cache.map_or(0, |c| c.outbox_len())) {
                 let left = queue.lock().unwrap_or_else(|e| e.into_inner()).requests.len();
                 sync_with_master(left, done, &mut queue_samples, &mut results);
                 reported = done;

@@ -10,13 +10,12 @@ use crate::image::framebuffer::FrameBuffer;
 use crate::parallel::comm::kind;
 use crate::parallel::comm::{Comm, Counters, Envelope, Marker};
 use crate::parallel::protocol::{FinishedTile, Kind, Message, Records, Requests};
-use crate::parallel::{WorkerSetup, rank_report, send_report};
+use crate::parallel::{SyncThreshold, WorkerSetup, rank_report, send_report};
 use crate::render::{ThreadClock, ThreadStats, render_tile};
 use crate::shading::Integrator;
-use crate::shading::request::AmbientRequest;
+use crate::shading::request::RequestBuffer;
 use crate::tiles::store_tile;
 use std::collections::HashMap;
-use std::sync::Mutex;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::mpsc::{Receiver, SyncSender, TrySendError, sync_channel};
 use std::time::Instant;
@@ -50,9 +49,9 @@ impl Sender<'_> {
     }
 
     /// Sends the buffered requests to the current tile's PA.
-    fn send(&mut self, sink: &Mutex<Vec<AmbientRequest>>) {
+    fn send(&mut self, sink: &RequestBuffer) {
         let handling = Instant::now();
-        let batch = std::mem::take(&mut *sink.lock().unwrap_or_else(|e| e.into_inner()));
+        let batch = sink.take();
         let Some(outbox) = &self.outbox else { return };
         if batch.is_empty() || self.pas.is_empty() {
             return;
@@ -135,7 +134,7 @@ fn sync_records(
 
 /// `journal`: --checkpoint is on, so finished tiles and computed requests are reported to the
 /// master as they finish.
-pub fn run(setup: &WorkerSetup<'_>, roles: &Roles, send_at: usize, sync: usize, seed: u64, journal: bool) {
+pub fn run(setup: &WorkerSetup<'_>, roles: &Roles, send_at: usize, sync: SyncThreshold, seed: u64, journal: bool) {
     let courier_counters = Counters::default();
     let (outbox, inbox) = sync_channel(BATCHES_IN_FLIGHT);
     std::thread::scope(|scope| {
@@ -161,7 +160,7 @@ fn render_and_help(
     setup: &WorkerSetup<'_>,
     roles: &Roles,
     send_at: usize,
-    sync: usize,
+    sync: SyncThreshold,
     seed: u64,
     journal: bool,
     outbox: SyncSender<(i32, Message)>,
@@ -173,7 +172,7 @@ fn render_and_help(
     let start = Instant::now();
     let (width, height) = (setup.camera.width, setup.camera.height);
     let mut frame = FrameBuffer::new(width, height);
-    let sink = Mutex::new(Vec::new());
+    let sink = RequestBuffer::default();
     let mut integrator =
         Integrator::new(setup.scene, setup.tracer, setup.shading, setup.cache).cache_frozen(setup.settings.prepass);
     if !roles.pas.is_empty() {
@@ -230,7 +229,7 @@ fn render_and_help(
         // sent is the change in the count sent.
         let sent_before = sender.sent;
         let pixels = render_tile(&integrator, setup.camera, setup.settings, tile, &mut stats.rays, |_| {
-            if sink.lock().map_or(0, |s| s.len()) >= send_at {
+            if sink.len() >= send_at {
                 sender.send(&sink);
             }
         });
@@ -286,7 +285,7 @@ fn render_and_help(
                     );
                     // A helper shares its records as often as a PA does.
                     if let Some(cache) = setup.cache
-                        && cache.outbox_len() >= sync
+                        && sync.reached(cache.outbox_len())
                     {
                         send_results(&comm, &mut results);
                         sync_records(&comm, cache, cache.take_outbox(), &mut received, &mut rejected);
