@@ -43,8 +43,7 @@ def main():
     parser.add_argument("--out", default=os.path.join(common.ROOT, "bench", "out", "bias"))
     parser.add_argument("--docs", default=os.path.join(common.ROOT, "docs", "BIAS.md"))
     args = parser.parse_args()
-    for module, package in (("numpy", None), ("OpenEXR", None), ("Imath", "OpenEXR")):
-        common.ensure_module(module, package)
+    common.require("bench/bias.py", ["numpy", "OpenEXR"])
     common.build()
     os.makedirs(args.out, exist_ok=True)
     rows = []

@@ -7,7 +7,7 @@ use crate::commands::{CommandError, warn};
 use crate::irradiance::record::Metric;
 use crate::irradiance::{CacheSettings, IrradianceCache};
 use crate::memory;
-use crate::render::RenderSettings;
+use crate::render::pixel::RenderSettings;
 use crate::scene::footprint::EmitterFootprint;
 use crate::scene::view::{Camera, View};
 use crate::scene::{LoadOptions, Scene};
@@ -27,7 +27,7 @@ pub struct Job {
     pub load_s: f64,
     pub build_s: f64,
     /// What each thread did in an MPI prepass (see `parallel::prepass`), for the rank's report.
-    pub prepass_threads: Vec<crate::render::ThreadStats>,
+    pub prepass_threads: Vec<crate::render::pixel::ThreadStats>,
 }
 
 /// Largest image side we accept: beyond it framebuffers stop fitting in memory sensibly.

@@ -2,7 +2,7 @@
 //! written as JSON (`--stats`) and into the EXR header. The top-level keys `records_computed`,
 //! `lookups`, `hits`, `t_amb_s`, `t_notamb_s` and `wall_s` are relied on by scripts.
 
-use crate::render::ThreadStats;
+use crate::render::pixel::ThreadStats;
 use crate::shading::RayCounts;
 use serde::Serialize;
 

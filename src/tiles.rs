@@ -58,3 +58,72 @@ mod tests {
         assert!(seen.iter().all(|&c| c == 1));
     }
 }
+
+/// The one tile scheduler: hands out the tiles still to render, in order, one at a time, to
+/// whoever asks first (a rendering thread of the one-process renderer, or a worker through the
+/// master). Tiles an earlier run finished (--checkpoint) are not in it.
+#[derive(Debug)]
+pub struct TileQueue {
+    todo: Vec<usize>,
+    next: std::sync::atomic::AtomicUsize,
+}
+
+impl TileQueue {
+    /// The tiles whose indices are in `todo`, in that order.
+    pub fn new(todo: Vec<usize>) -> Self {
+        TileQueue {
+            todo,
+            next: std::sync::atomic::AtomicUsize::new(0),
+        }
+    }
+
+    /// The next tile's index, or None once every tile has been handed out.
+    pub fn next(&self) -> Option<usize> {
+        let i = self.next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        self.todo.get(i).copied()
+    }
+
+    /// Tiles in the queue from the start.
+    pub fn len(&self) -> usize {
+        self.todo.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.todo.is_empty()
+    }
+
+    /// How many tiles have been handed out.
+    pub fn handed_out(&self) -> usize {
+        self.next
+            .load(std::sync::atomic::Ordering::Relaxed)
+            .min(self.todo.len())
+    }
+
+    /// Every tile has been handed out.
+    pub fn all_out(&self) -> bool {
+        self.handed_out() == self.todo.len()
+    }
+}
+
+#[cfg(test)]
+mod queue_tests {
+    use super::*;
+
+    #[test]
+    fn every_tile_is_handed_out_once_across_threads() {
+        let queue = TileQueue::new((0..1000).rev().collect());
+        let taken: Vec<Vec<usize>> = std::thread::scope(|s| {
+            let workers: Vec<_> = (0..4)
+                .map(|_| s.spawn(|| std::iter::from_fn(|| queue.next()).collect::<Vec<_>>()))
+                .collect();
+            workers.into_iter().map(|w| w.join().unwrap()).collect()
+        });
+        let mut all: Vec<usize> = taken.concat();
+        all.sort();
+        assert_eq!(all, (0..1000).collect::<Vec<_>>());
+        assert!(queue.all_out());
+        assert_eq!(queue.next(), None);
+        // Each thread got its tiles in the queue's order.
+        assert!(taken.iter().all(|t| t.windows(2).all(|w| w[0] > w[1])));
+    }
+}

@@ -48,6 +48,8 @@ fn every_bench_says_what_it_needs_before_it_starts() {
         ("mpi_modes.py", "matplotlib", &[]),
         ("cluster_bench.py", "matplotlib", &[]),
         ("vs_radiance.py", "pyradiance", &["--no-build"]),
+        ("bias.py", "numpy", &[]),
+        ("bias.py", "OpenEXR", &[]),
     ];
     for (script, hidden, args) in cases {
         let (code, err, took) = run_without(script, hidden, args);

@@ -3,11 +3,12 @@
 
 use super::{CommandError, CommandResult, warn};
 use crate::checkpoint::{self, Checkpoint, Restored};
+use crate::cli::ModeArg;
 use crate::cli::RenderArgs;
 use crate::image::framebuffer::{FrameBuffer, Layer};
 use crate::image::{metrics, output};
 use crate::job::{Job, validate};
-use crate::parallel::{Mode, under_mpirun};
+use crate::parallel::{JobHost, Mode, ParallelJob, under_mpirun};
 use crate::progress::Progress;
 use crate::render::render_resumable;
 use crate::scene::SceneNeeds;
@@ -307,9 +308,90 @@ pub fn report_error(
     Ok(())
 }
 
+fn mode_of(arg: ModeArg) -> Mode {
+    match arg {
+        ModeArg::Serial => Mode::Serial,
+        ModeArg::Noshare => Mode::Noshare,
+        ModeArg::Centralised => Mode::Centralised,
+        ModeArg::Broadcast => Mode::Broadcast,
+        ModeArg::Component => Mode::Component,
+    }
+}
+
+/// The render command's side of a run under mpirun: its options, outputs and checkpoint.
+struct RenderHost<'a> {
+    args: &'a RenderArgs,
+    /// Rank 0's outputs, once checked.
+    outputs: std::sync::OnceLock<Outputs>,
+}
+
+impl JobHost for RenderHost<'_> {
+    fn validate(&self) -> Result<(), String> {
+        validate(self.args)
+    }
+
+    fn check_outputs(&self) -> Result<(), String> {
+        let outputs = Outputs::check(self.args).map_err(|e| e.0)?;
+        let _ = self.outputs.set(outputs);
+        Ok(())
+    }
+
+    fn open_checkpoint(&self, tiles: &[Tile]) -> Result<Option<(Checkpoint, Restored)>, String> {
+        open_checkpoint(self.args, tiles).map_err(|e| e.0)
+    }
+
+    fn prepare(&self, master: bool, threads: usize) -> Result<Job, String> {
+        // Only the master keeps the cache file (beside the checkpoint with --checkpoint).
+        let mut args = if master {
+            with_checkpoint_cache(self.args)
+        } else {
+            self.args.clone()
+        };
+        args.threads = Some(threads);
+        if !master {
+            args.ambient_file = None;
+        }
+        Job::prepare(&args, crate::memory::Role::AnyRank).map_err(|e| e.0)
+    }
+
+    fn job_stats(&self, job: &Job, mode: &'static str, ranks: usize, render_s: f64) -> RenderStats {
+        job_stats(self.args, job, mode, ranks, render_s)
+    }
+
+    fn write(&self, job: &Job, frame: &FrameBuffer, stats: &RenderStats) -> Result<(), String> {
+        let outputs = self.outputs.get().ok_or("the outputs were not checked")?;
+        outputs.write(self.args, job, frame, stats).map_err(|e| e.0)
+    }
+}
+
+fn run_parallel(args: &RenderArgs, mode: Mode) -> CommandResult {
+    let host = RenderHost {
+        args,
+        outputs: std::sync::OnceLock::new(),
+    };
+    let tile = crate::cli::parse_tile(&args.tile).map_err(CommandError)?;
+    crate::parallel::run(&ParallelJob {
+        mode,
+        width: args.width,
+        height: args.height,
+        tile,
+        threads: args.threads,
+        sync: args.sync,
+        send: args.send,
+        pa: args.pa,
+        pa_queue: args.pa_queue,
+        silence_limit: std::time::Duration::from_secs_f64(args.timeout.max(1.0)),
+        seed: args.seed,
+        journal: args.checkpoint.is_some(),
+        cache_file: args.ambient_file.is_some(),
+        quiet: args.quiet,
+        host: &host,
+    })
+}
+
 pub fn run(args: &RenderArgs) -> CommandResult {
     let mode = match args.mode {
-        Some(m) => Mode::from(m),
+        Some(m) => mode_of(m),
         None if under_mpirun() => Mode::Component,
         None => Mode::Serial,
     };
@@ -317,7 +399,7 @@ pub fn run(args: &RenderArgs) -> CommandResult {
         if args.trace_cache.is_some() {
             return Err(CommandError("--trace-cache traces the serial mode only".into()));
         }
-        return crate::parallel::run(args, mode);
+        return run_parallel(args, mode);
     }
     let wall = Instant::now();
     validate(args)?;

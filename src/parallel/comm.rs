@@ -3,6 +3,7 @@
 //! MPI's blocking calls spin: on an oversubscribed machine a waiting rank would steal the core
 //! from the rank it waits for.
 
+pub use super::counters::Counters;
 use super::liveness::Silence;
 use super::protocol::{Kind, Message, ProtocolError, empty_requests};
 use mpi::Tag;
@@ -10,7 +11,7 @@ use mpi::point_to_point::{Destination, MatchedReceiveVec, Source};
 use mpi::request::{Request, Scope, StaticScope};
 use mpi::topology::{Communicator, SimpleCommunicator};
 use std::convert::Infallible;
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
 /// Longest pause between polls: bounds the latency a waiting rank adds.
@@ -57,23 +58,6 @@ pub type Filter = (Option<i32>, Option<Tag>);
 /// A filter for messages of one kind (thread 0's tag for the per-thread kinds).
 pub fn kind(source: Option<i32>, kind: Kind) -> Filter {
     (source, Some(kind.tag()))
-}
-
-/// Traffic and waiting of one rank; shared by its threads.
-#[derive(Default, Debug)]
-pub struct Counters {
-    pub messages_sent: AtomicU64,
-    pub bytes_sent: AtomicU64,
-    pub messages_received: AtomicU64,
-    pub bytes_received: AtomicU64,
-    /// Nanoseconds spent waiting for messages.
-    pub idle_ns: AtomicU64,
-}
-
-impl Counters {
-    pub fn idle_s(&self) -> f64 {
-        self.idle_ns.load(Ordering::Relaxed) as f64 * 1e-9
-    }
 }
 
 /// The world communicator, seen from one thread. Cheap to make; every thread makes its own

@@ -1,6 +1,6 @@
 //! Liveness: every rank hears from its master, and the master from every rank, at least every
-//! `HEARTBEAT_INTERVAL` while a job runs. A pulse thread on each rank sends a heartbeat (one
-//! byte and MPI's envelope) that often and takes in the ones sent to it; every message a rank
+//! `HEARTBEAT_INTERVAL` while a job runs. A pulse thread on each rank (`pulse`) sends a heartbeat
+//! (one byte and MPI's envelope) that often and takes in the ones sent to it; every message a rank
 //! receives, heartbeat or not, counts as word from its sender (`Comm` notes it here). So a
 //! rank or host that is lost shows as silence, whatever the job is doing: the master ends the
 //! job once a rank it still waits for has been silent for `--timeout`, naming it (see
@@ -8,10 +8,9 @@
 //! else would tell it that its master is gone (a cut-off host's ranks otherwise ran on after
 //! mpirun was killed).
 
-use super::comm::{Comm, Counters};
-use super::protocol::{Kind, Message};
+use super::counters::Counters;
 use std::sync::OnceLock;
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
 /// How often a rank says it is alive.
@@ -80,61 +79,6 @@ pub fn lost(ranks: i32, limit: Duration, waiting_for: impl Fn(i32) -> bool) -> O
             rank,
             seconds: silent.as_secs_f64(),
         })
-}
-
-/// The pulse thread of a rank: heartbeats out (the master's to every worker, a worker's to the
-/// master) and in, until stopped. On a worker, it ends the process when the master has been
-/// silent for `master_lost_after`, with `lost_master` as the one line saying why.
-pub struct Pulse {
-    stop: std::sync::Arc<AtomicBool>,
-    thread: Option<std::thread::JoinHandle<()>>,
-}
-
-impl Pulse {
-    pub fn start(master_lost_after: Duration, lost_master: String) -> Pulse {
-        let stop = std::sync::Arc::new(AtomicBool::new(false));
-        let flag = stop.clone();
-        let thread = std::thread::spawn(move || {
-            let counters = counters().expect("liveness::begin runs first");
-            let comm = Comm::new(counters);
-            let rank = comm.rank();
-            let peers: Vec<i32> = if rank == 0 { (1..comm.size()).collect() } else { vec![0] };
-            let mut next_beat = Instant::now();
-            while !flag.load(Ordering::Relaxed) {
-                if Instant::now() >= next_beat {
-                    peers.iter().for_each(|&peer| comm.send(peer, &Message::Heartbeat));
-                    next_beat += HEARTBEAT_INTERVAL;
-                }
-                while comm.try_receive(None, Some(Kind::Heartbeat.tag())).is_some() {}
-                if rank != 0 && silent_for(0) >= master_lost_after {
-                    crate::commands::error(&lost_master);
-                    crate::sys::process::exit_now(1);
-                }
-                std::thread::sleep(Duration::from_millis(100));
-            }
-        });
-        Pulse {
-            stop,
-            thread: Some(thread),
-        }
-    }
-
-    /// Stops the heartbeats (before the rank leaves MPI: no thread may use it then).
-    pub fn stop(mut self) {
-        self.stop.store(true, Ordering::Relaxed);
-        if let Some(thread) = self.thread.take() {
-            let _ = thread.join();
-        }
-    }
-}
-
-impl Drop for Pulse {
-    fn drop(&mut self) {
-        self.stop.store(true, Ordering::Relaxed);
-        if let Some(thread) = self.thread.take() {
-            let _ = thread.join();
-        }
-    }
 }
 
 #[cfg(test)]

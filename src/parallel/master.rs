@@ -13,7 +13,7 @@ use crate::image::framebuffer::FrameBuffer;
 use crate::irradiance::IrradianceCache;
 use crate::irradiance::record::Record;
 use crate::stats::RankReport;
-use crate::tiles::{Tile, store_tile};
+use crate::tiles::{Tile, TileQueue, store_tile};
 use std::time::{Duration, Instant};
 
 pub struct MasterResult {
@@ -86,7 +86,7 @@ pub fn run(comm: &Comm<'_>, plan: &Plan<'_>) -> Result<MasterResult, MasterError
         sends.send(w as i32, &initial);
     }
 
-    let mut next_tile = 0usize;
+    let queue = TileQueue::new(todo);
     let mut finished_requesters = 0usize;
     let requesters = workers * threads_per_worker as usize;
     // Centralised sharing goes through the relay (the initial records every worker has).
@@ -129,12 +129,8 @@ pub fn run(comm: &Comm<'_>, plan: &Plan<'_>) -> Result<MasterResult, MasterError
                     store_tile(&mut frame, tile, &pixels);
                     tiles_done[index as usize] = true;
                 }
-                let assignment = todo.get(next_tile).map(|&i| i as u32);
-                if assignment.is_some() {
-                    next_tile += 1;
-                } else {
-                    finished_requesters += 1;
-                }
+                let assignment = queue.next().map(|i| i as u32);
+                finished_requesters += usize::from(assignment.is_none());
                 let work = Message::Work {
                     thread,
                     tile: assignment,

@@ -5,21 +5,22 @@
 
 pub mod comm;
 pub mod component;
+pub mod counters;
 pub mod link_bench;
 pub mod liveness;
 pub mod master;
 pub mod master_sends;
 pub mod prepass;
 pub mod protocol;
+pub mod pulse;
 pub mod relay;
 pub mod worker;
 
 use crate::checkpoint::{Checkpoint, Restored};
-use crate::cli::{ModeArg, RenderArgs};
-use crate::commands::render::{Outputs, job_stats, open_checkpoint, with_checkpoint_cache};
 use crate::commands::{CommandError, CommandResult, warn};
+use crate::image::framebuffer::FrameBuffer;
 use crate::irradiance::IrradianceCache;
-use crate::job::{Job, validate};
+use crate::job::Job;
 use crate::render::RenderSettings;
 use crate::render::ThreadStats;
 use crate::scene::Scene;
@@ -54,16 +55,46 @@ impl Mode {
     }
 }
 
-impl From<ModeArg> for Mode {
-    fn from(m: ModeArg) -> Mode {
-        match m {
-            ModeArg::Serial => Mode::Serial,
-            ModeArg::Noshare => Mode::Noshare,
-            ModeArg::Centralised => Mode::Centralised,
-            ModeArg::Broadcast => Mode::Broadcast,
-            ModeArg::Component => Mode::Component,
-        }
-    }
+/// What a parallel run is given by the command that starts it: typed settings, and the
+/// command's own work (its options, outputs and checkpoint) behind `JobHost`.
+pub struct ParallelJob<'a> {
+    pub mode: Mode,
+    pub width: u32,
+    pub height: u32,
+    pub tile: (u32, u32),
+    /// Rendering threads per rank (None: 1).
+    pub threads: Option<usize>,
+    /// --sync, --send, --pa, --pa-queue (see `SyncThreshold` and component mode).
+    pub sync: Option<u32>,
+    pub send: u32,
+    pub pa: Option<u32>,
+    pub pa_queue: u32,
+    /// How long a rank may be silent before it counts as lost (see `liveness`).
+    pub silence_limit: Duration,
+    pub seed: u64,
+    /// --checkpoint: finished tiles and computed requests are journalled by the master.
+    pub journal: bool,
+    /// -af: the master keeps a cache file (noshare workers send their records at the end).
+    pub cache_file: bool,
+    pub quiet: bool,
+    pub host: &'a dyn JobHost,
+}
+
+/// The command's side of a parallel run: what only it knows how to do.
+pub trait JobHost {
+    /// Checks the options (every rank, the same verdict).
+    fn validate(&self) -> Result<(), String>;
+    /// Rank 0: checks that the outputs can be written, before any work.
+    fn check_outputs(&self) -> Result<(), String>;
+    /// Rank 0: opens the --checkpoint journal, if any, and what an earlier run finished.
+    fn open_checkpoint(&self, tiles: &[Tile]) -> Result<Option<(Checkpoint, Restored)>, String>;
+    /// Loads the scene and prepares this rank's job with `threads` rendering threads; the
+    /// master's with the cache file, the others' without.
+    fn prepare(&self, master: bool, threads: usize) -> Result<Job, String>;
+    /// Rank 0: the statistics of the job itself, for `ranks` ranks and `render_s` seconds.
+    fn job_stats(&self, job: &Job, mode: &'static str, ranks: usize, render_s: f64) -> RenderStats;
+    /// Rank 0: writes the image, its preview and the statistics.
+    fn write(&self, job: &Job, frame: &FrameBuffer, stats: &RenderStats) -> Result<(), String>;
 }
 
 /// The paper's synchronisation threshold: how many new records a rank gathers before it
@@ -205,14 +236,15 @@ fn threading_name(t: Threading) -> &'static str {
 
 /// Checks that the layout can work; the same answer on every rank, so every rank can stop on
 /// its own and only rank 0 needs to say why.
-fn check_layout(args: &RenderArgs, mode: Mode, size: i32, tile_count: usize, threads: usize) -> Result<(), String> {
+fn check_layout(job: &ParallelJob<'_>, size: i32, tile_count: usize, threads: usize) -> Result<(), String> {
+    let mode = job.mode;
     if size < 2 {
         return Err(format!(
             "--mode {} needs at least 2 MPI ranks (a master and a worker); got {size}",
             mode.name()
         ));
     }
-    if args.sync == Some(0) {
+    if job.sync == Some(0) {
         return Err("--sync must be at least 1".into());
     }
     let workers = (size - 1) as usize * threads;
@@ -229,7 +261,7 @@ fn check_layout(args: &RenderArgs, mode: Mode, size: i32, tile_count: usize, thr
 /// MPI for this process and the heartbeats that run while it is up, ended in that order (a
 /// field's drop runs in declaration order): no thread may use MPI once it is finalized.
 struct MpiSession {
-    _pulse: Option<liveness::Pulse>,
+    _pulse: Option<pulse::Pulse>,
     _universe: mpi::environment::Universe,
 }
 
@@ -245,8 +277,10 @@ fn stop_together(comm: &Comm<'_>, line: Option<&str>) -> CommandResult {
     Err(CommandError(String::new()))
 }
 
-pub fn run(args: &RenderArgs, mode: Mode) -> CommandResult {
+pub fn run(job_in: &ParallelJob<'_>) -> CommandResult {
     let wall = Instant::now();
+    let mode = job_in.mode;
+    let host = job_in.host;
     // A rank never outlives its launcher (see sys::process).
     crate::sys::process::die_with_parent(launcher_pid()).map_err(CommandError)?;
     let Some((universe, granted)) = mpi::initialize_with_threading(Threading::Multiple) else {
@@ -256,7 +290,7 @@ pub fn run(args: &RenderArgs, mode: Mode) -> CommandResult {
     let comm = Comm::new(&counters);
     let (rank, size) = (comm.rank(), comm.size());
     let fail = |message: String| stop_together(&comm, (rank == 0).then_some(message.as_str()));
-    let threads = args.threads.unwrap_or(1);
+    let threads = job_in.threads.unwrap_or(1);
     if mode == Mode::Component && threads != 1 {
         return fail(
             "--mode component runs one rendering thread per rank (as in the paper): leave out --threads".into(),
@@ -270,12 +304,12 @@ pub fn run(args: &RenderArgs, mode: Mode) -> CommandResult {
             threading_name(granted)
         ));
     }
-    if let Err(e) = validate(args) {
+    if let Err(e) = host.validate() {
         return fail(e);
     }
-    let (tile_width, tile_height) = crate::cli::parse_tile(&args.tile).map_err(CommandError)?;
-    let all_tiles = tiles(args.width, args.height, tile_width, tile_height);
-    if let Err(e) = check_layout(args, mode, size, all_tiles.len(), threads) {
+    let (tile_width, tile_height) = job_in.tile;
+    let all_tiles = tiles(job_in.width, job_in.height, tile_width, tile_height);
+    if let Err(e) = check_layout(job_in, size, all_tiles.len(), threads) {
         return fail(e);
     }
     let hosts = comm.host_names();
@@ -283,7 +317,7 @@ pub fn run(args: &RenderArgs, mode: Mode) -> CommandResult {
     // master from every rank while the job runs. The pulse stops (dropped) before the universe
     // ends MPI.
     liveness::begin(size as usize);
-    let silence_limit = Duration::from_secs_f64(args.timeout.max(1.0));
+    let silence_limit = job_in.silence_limit;
     let host_of = |r: i32| hosts.get(r as usize).map_or("?", String::as_str).to_string();
     let lost_master = format!(
         "rank {rank} on {}: no word from the master (rank 0 on {}) for {:.0} s: it is gone or hangs; this rank ends",
@@ -291,39 +325,28 @@ pub fn run(args: &RenderArgs, mode: Mode) -> CommandResult {
         host_of(0),
         silence_limit.as_secs_f64()
     );
-    let pulse = (granted == Threading::Multiple).then(|| liveness::Pulse::start(silence_limit, lost_master));
+    let pulse = (granted == Threading::Multiple).then(|| pulse::Pulse::start(silence_limit, lost_master));
     let universe = MpiSession {
         _pulse: pulse,
         _universe: universe,
     };
     // From here on a failure may hit one rank only (its files, its file system): that rank says
     // why and ends the whole job, or the others would wait for it for ever.
-    let outputs = if rank == 0 {
+    if rank == 0 {
         // Rank 0 alone writes images; the other ranks never open the image library.
         crate::sys::image_io::open_in_background();
-        Some(Outputs::check(args).unwrap_or_else(|e| fatal(&comm, &e.0)))
-    } else {
-        None
-    };
+        host.check_outputs().unwrap_or_else(|e| fatal(&comm, &e));
+    }
 
     // Every rank loads the scene; only the master opens the cache file.
     // With --checkpoint the master also journals finished work and keeps the cache beside it.
     let checkpoint = if rank == 0 {
-        open_checkpoint(args, &all_tiles).unwrap_or_else(|e| fatal(&comm, &e.0))
+        host.open_checkpoint(&all_tiles).unwrap_or_else(|e| fatal(&comm, &e))
     } else {
         None
     };
-    let mut rank_args = if rank == 0 {
-        with_checkpoint_cache(args)
-    } else {
-        args.clone()
-    };
-    rank_args.threads = Some(threads);
-    if rank != 0 {
-        rank_args.ambient_file = None;
-    }
     // Every rank checks --max-memory for the hungriest role, so they all reach one verdict.
-    let prepared = Job::prepare(&rank_args, crate::memory::Role::AnyRank);
+    let prepared = host.prepare(rank == 0, threads);
     // Who could not prepare: if rank 0 could not, it alone says why (the others most likely
     // failed the same way on the same scene); else each failing rank says why. All then stop.
     let failed = comm.all_flags(prepared.is_err());
@@ -331,8 +354,8 @@ pub fn run(args: &RenderArgs, mode: Mode) -> CommandResult {
         Ok(job) if !failed.contains(&true) => job,
         outcome => {
             let line = match outcome {
-                Err(e) if rank == 0 => Some(e.0),
-                Err(e) if !failed[0] => Some(format!("rank {rank}: {}", e.0)),
+                Err(e) if rank == 0 => Some(e),
+                Err(e) if !failed[0] => Some(format!("rank {rank}: {e}")),
                 _ => None,
             };
             return stop_together(&comm, line.as_deref());
@@ -342,17 +365,14 @@ pub fn run(args: &RenderArgs, mode: Mode) -> CommandResult {
     // The prepass: every rank ends it with the same complete cache; the modes then only read
     // it (a gap's record stays with the pixel that needed it).
     let prepass = job.settings.prepass.then(|| {
-        let timeout = Duration::from_secs_f64(args.timeout.max(1.0));
-        prepass::run(&comm, &job, timeout, &hosts).unwrap_or_else(|e| end_job(&comm, job.cache.as_ref(), &e))
+        prepass::run(&comm, &job, silence_limit, &hosts).unwrap_or_else(|e| end_job(&comm, job.cache.as_ref(), &e))
     });
     job.prepass_threads = prepass.as_ref().map(|p| p.threads.clone()).unwrap_or_default();
     if mode == Mode::Component {
-        return run_component(
-            args, &comm, job, &all_tiles, &hosts, outputs, wall, universe, resume, prepass,
-        );
+        return run_component(job_in, &comm, job, &all_tiles, &hosts, wall, universe, resume, prepass);
     }
-    let sync = SyncThreshold::of(args.sync, SyncThreshold::TRADITIONAL);
-    let persist_local = args.ambient_file.is_some();
+    let sync = SyncThreshold::of(job_in.sync, SyncThreshold::TRADITIONAL);
+    let persist_local = job_in.cache_file;
     if rank != 0 {
         if let Some(cache) = job.cache.as_mut()
             && (mode != Mode::Noshare || persist_local)
@@ -365,15 +385,14 @@ pub fn run(args: &RenderArgs, mode: Mode) -> CommandResult {
         return Ok(());
     }
 
-    let timeout = Duration::from_secs_f64(args.timeout.max(1.0));
     let plan = master::Plan {
         mode,
         tiles: &all_tiles,
-        width: args.width,
-        height: args.height,
+        width: job_in.width,
+        height: job_in.height,
         threads_per_worker: threads as u32,
         cache: job.cache.as_ref(),
-        timeout,
+        timeout: silence_limit,
         hosts: &hosts,
         resume,
         workers_have_cache: prepass.is_some(),
@@ -384,15 +403,13 @@ pub fn run(args: &RenderArgs, mode: Mode) -> CommandResult {
         Err(e) => end_job(&comm, job.cache.as_ref(), &e.0),
     };
     finish_master(
-        args,
+        job_in,
         &job,
         size,
-        mode,
         threads,
         result.frame,
         result.ranks,
         result.render_s,
-        outputs,
         wall,
         resume.map_or(0, |(_, r)| r.count()),
         prepass.as_ref(),
@@ -404,15 +421,13 @@ pub fn run(args: &RenderArgs, mode: Mode) -> CommandResult {
 /// Writes the master's results: statistics totals, the EXR and preview, the table.
 #[allow(clippy::too_many_arguments)]
 fn finish_master(
-    args: &RenderArgs,
+    job_in: &ParallelJob<'_>,
     job: &Job,
     size: i32,
-    mode: Mode,
     threads: usize,
-    frame: crate::image::framebuffer::FrameBuffer,
+    frame: FrameBuffer,
     ranks: Vec<RankReport>,
     render_s: f64,
-    outputs: Option<Outputs>,
     wall: Instant,
     tiles_restored: usize,
     prepass: Option<&crate::prepass::PrepassOutcome>,
@@ -424,7 +439,7 @@ fn finish_master(
     }
     let mut stats = RenderStats {
         threads,
-        ..job_stats(args, job, mode.name(), size as usize, render_s)
+        ..job_in.host.job_stats(job, job_in.mode.name(), size as usize, render_s)
     };
     stats.tiles_restored = tiles_restored as u64;
     stats.add_ranks(ranks);
@@ -434,9 +449,8 @@ fn finish_master(
         crate::render::add_prepass_records(&mut frame, prepass);
     }
     stats.wall_s = wall.elapsed().as_secs_f64();
-    let outputs = outputs.expect("rank 0 checked its outputs");
-    outputs.write(args, job, &frame, &stats)?;
-    if !args.quiet {
+    job_in.host.write(job, &frame, &stats).map_err(CommandError)?;
+    if !job_in.quiet {
         print_table(&stats);
     }
     Ok(())
@@ -445,12 +459,11 @@ fn finish_master(
 /// The component mode on every rank: the master, the PAs and the PRs.
 #[allow(clippy::too_many_arguments)]
 fn run_component(
-    args: &RenderArgs,
+    job_in: &ParallelJob<'_>,
     comm: &Comm<'_>,
     mut job: Job,
     all_tiles: &[Tile],
     hosts: &[String],
-    outputs: Option<Outputs>,
     wall: Instant,
     universe: MpiSession,
     resume: Option<(&Checkpoint, &Restored)>,
@@ -459,7 +472,7 @@ fn run_component(
     let rank = comm.rank();
     let needed = job.cache.is_some() || (job.shading.ambient_bounces > 0 && job.scene.needs().diffuse);
     // Every rank reaches the same verdict from the same scene and options.
-    let roles = match component::Roles::choose(comm.size(), args.pa, needed) {
+    let roles = match component::Roles::choose(comm.size(), job_in.pa, needed) {
         Ok(roles) => roles,
         Err(e) => return stop_together(comm, (rank == 0).then_some(e.as_str())),
     };
@@ -475,26 +488,26 @@ fn run_component(
         if roles.pas.contains(&rank) {
             component::pa::run(
                 &setup,
-                SyncThreshold::of(args.sync, SyncThreshold::COMPONENT),
-                args.seed,
-                args.checkpoint.is_some(),
-                args.pa_queue.max(1) as usize,
+                SyncThreshold::of(job_in.sync, SyncThreshold::COMPONENT),
+                job_in.seed,
+                job_in.journal,
+                job_in.pa_queue.max(1) as usize,
                 grid,
             );
         } else {
             component::pr::run(
                 &setup,
                 &roles,
-                args.send.max(1) as usize,
-                SyncThreshold::of(args.sync, SyncThreshold::COMPONENT),
-                args.seed,
-                args.checkpoint.is_some(),
+                job_in.send.max(1) as usize,
+                SyncThreshold::of(job_in.sync, SyncThreshold::COMPONENT),
+                job_in.seed,
+                job_in.journal,
             );
         }
         drop(universe);
         return Ok(());
     }
-    if !args.quiet {
+    if !job_in.quiet {
         eprintln!("icrender: {}", roles.describe());
         if !needed {
             eprintln!(
@@ -502,15 +515,14 @@ fn run_component(
             );
         }
     }
-    let timeout = Duration::from_secs_f64(args.timeout.max(1.0));
     let result = component::master::run(
         comm,
         &roles,
         all_tiles,
-        args.width,
-        args.height,
+        job_in.width,
+        job_in.height,
         job.cache.as_ref(),
-        timeout,
+        job_in.silence_limit,
         hosts,
         resume,
         prepass.is_some(),
@@ -520,15 +532,13 @@ fn run_component(
         Err(e) => end_job(comm, job.cache.as_ref(), &e),
     };
     finish_master(
-        args,
+        job_in,
         &job,
         comm.size(),
-        Mode::Component,
         1,
         result.frame,
         result.ranks,
         result.render_s,
-        outputs,
         wall,
         resume.map_or(0, |(_, r)| r.count()),
         prepass.as_ref(),

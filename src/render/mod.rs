@@ -12,9 +12,8 @@ use crate::prepass::{self, PrepassOutcome};
 use crate::progress::Progress;
 use crate::scene::view::Camera;
 use crate::shading::Integrator;
-use crate::tiles::{store_tile, tiles};
+use crate::tiles::{TileQueue, store_tile, tiles};
 use std::sync::Mutex;
-use std::sync::atomic::{AtomicUsize, Ordering};
 
 /// What a one-process render made: the image, each thread's work (the prepass's included)
 /// and the prepass's own account, when there was one.
@@ -60,16 +59,16 @@ pub fn render_resumable(
         ),
     };
     progress.advance(all.len() - todo.len());
-    let next = AtomicUsize::new(0);
+    let queue = TileQueue::new(todo);
     let frame = Mutex::new(start);
-    let threads = settings.threads.max(1).min(todo.len().max(1));
+    let threads = settings.threads.max(1).min(queue.len().max(1));
     let stats: Vec<ThreadStats> = std::thread::scope(|scope| {
         let workers: Vec<_> = (0..threads)
             .map(|_| {
                 scope.spawn(|| {
                     let mut stats = ThreadStats::default();
                     let clock = ThreadClock::start();
-                    while let Some(&index) = todo.get(next.fetch_add(1, Ordering::Relaxed)) {
+                    while let Some(index) = queue.next() {
                         let tile = &all[index];
                         let values = render_tile(integrator, camera, settings, tile, &mut stats.rays, |_| {});
                         if let Some(journal) = journal {

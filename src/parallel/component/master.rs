@@ -16,7 +16,7 @@ use crate::parallel::master_sends::MasterSends;
 use crate::parallel::protocol::{FinishedTile, Message, Records};
 use crate::parallel::relay::RecordRelay;
 use crate::stats::RankReport;
-use crate::tiles::Tile;
+use crate::tiles::{Tile, TileQueue};
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
 
@@ -56,12 +56,11 @@ pub fn run(
     };
     let size = comm.size() as usize;
     // Tiles an earlier run finished (--checkpoint) are not handed out again.
-    let todo: Vec<usize> = match resume {
+    let queue = TileQueue::new(match resume {
         Some((_, restored)) => restored.unfinished(),
         None => (0..tiles.len()).collect(),
-    };
+    });
     let journal = resume.map(|(journal, _)| journal);
-    let mut next_tile = 0usize;
     // The cache file's records (none to send when the prepass already gave every rank all):
     // PAs get them now, PRs with their first tile.
     let initial = match cache {
@@ -109,8 +108,7 @@ pub fn run(
                         journal.tile(tile, requests, &pixels);
                     }
                 }
-                let tile = todo.get(next_tile).map(|&i| i as u32);
-                next_tile += usize::from(tile.is_some());
+                let tile = queue.next().map(|i| i as u32);
                 let work = Message::Work {
                     thread: 0,
                     tile,
@@ -138,7 +136,11 @@ pub fn run(
                 };
                 sends.send(source, &reply);
             }
-            Message::PaStatus { queue, done, records } => {
+            Message::PaStatus {
+                queue: queue_length,
+                done,
+                records,
+            } => {
                 relay.share(source as usize, records);
                 let reply = Message::RecordsDown {
                     thread: 0,
@@ -149,8 +151,8 @@ pub fn run(
                 let now = start.elapsed().as_secs_f64();
                 let log = pa_logs.get_mut(&source).expect("a PA, or pa_done refused it");
                 log.done = done;
-                log.samples.push((now, queue as u32));
-                balancer.report(source, queue, next_tile >= todo.len());
+                log.samples.push((now, queue_length as u32));
+                balancer.report(source, queue_length, queue.all_out());
                 for share in balancer.rebalance() {
                     order(share, &mut ledger);
                 }
@@ -160,8 +162,12 @@ pub fn run(
             }
         }
     }
-    if next_tile != todo.len() {
-        return Err(format!("only {next_tile} of {} tiles were rendered", todo.len()));
+    if !queue.all_out() {
+        return Err(format!(
+            "only {} of {} tiles were rendered",
+            queue.handed_out(),
+            queue.len()
+        ));
     }
     let render_s = start.elapsed().as_secs_f64();
 
