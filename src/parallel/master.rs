@@ -1,8 +1,11 @@
-//! The master controller (rank 0): hands out tiles on demand, collects their pixels, keeps the
-//! records every worker has shared (centralised mode) and what each worker has already seen,
-//! owns the -af cache file, and gathers the ranks' statistics. It renders nothing itself.
+//! The one master controller (rank 0), whatever the mode: hands out tiles on demand (the one
+//! `TileQueue`), takes finished tiles (into the image, or only into the --checkpoint journal),
+//! relays shared records (`RecordRelay`, which also keeps the -af file), gathers the ranks'
+//! statistics, and ends the job naming a rank that falls silent. It renders nothing itself.
+//! How records are shared, and when the render is complete, is the mode's `Sharing` policy:
+//! `sharing.rs` holds the traditional modes' (paper, section 4), `component::master` component
+//! mode's (section 5).
 
-use super::Mode;
 use super::comm::Comm;
 use super::liveness::Silence;
 use super::master_sends::MasterSends;
@@ -11,7 +14,6 @@ use super::relay::RecordRelay;
 use crate::checkpoint::{Checkpoint, Restored};
 use crate::image::framebuffer::FrameBuffer;
 use crate::irradiance::IrradianceCache;
-use crate::irradiance::record::Record;
 use crate::stats::RankReport;
 use crate::tiles::{Tile, TileQueue, store_tile};
 use std::time::{Duration, Instant};
@@ -22,20 +24,14 @@ pub struct MasterResult {
     pub render_s: f64,
 }
 
-/// Why the master stopped before the end.
-#[derive(Debug)]
-pub struct MasterError(pub String);
-
 /// What the master controls.
 pub struct Plan<'a> {
-    pub mode: Mode,
     pub tiles: &'a [Tile],
     pub width: u32,
     pub height: u32,
-    pub threads_per_worker: u32,
     /// The cache holding the -af file's records (the master renders nothing with it).
     pub cache: Option<&'a IrradianceCache>,
-    /// How long to wait for any message before giving up on the job.
+    /// How long a rank may be silent before it counts as lost.
     pub timeout: Duration,
     /// Each rank's host, for messages that name a rank.
     pub hosts: &'a [String],
@@ -45,135 +41,189 @@ pub struct Plan<'a> {
     pub workers_have_cache: bool,
 }
 
-pub fn run(comm: &Comm<'_>, plan: &Plan<'_>) -> Result<MasterResult, MasterError> {
-    let Plan {
-        mode,
-        tiles,
-        width,
-        height,
-        threads_per_worker,
-        cache,
-        timeout,
-        hosts,
-        resume,
-        workers_have_cache,
-    } = *plan;
-    let start = Instant::now();
-    let sends = MasterSends {
-        comm,
-        limit: timeout,
-        hosts,
-        cache,
-    };
-    let size = comm.size() as usize;
-    let workers = size - 1;
-    let (mut frame, mut tiles_done, todo) = match resume {
-        Some((_, restored)) => (restored.frame.clone(), restored.done.clone(), restored.unfinished()),
-        None => (
-            FrameBuffer::new(width, height),
-            vec![false; tiles.len()],
-            (0..tiles.len()).collect(),
-        ),
-    };
-
-    // Every worker starts from the records of the cache file (possibly none).
-    let initial: Vec<Record> = match cache {
-        Some(c) if !workers_have_cache => c.records(),
-        _ => Vec::new(),
-    };
-    let initial = Message::InitialRecords(Records::from(initial));
-    for w in 1..size {
-        sends.send(w as i32, &initial);
+impl Plan<'_> {
+    pub fn host(&self, rank: i32) -> String {
+        self.hosts.get(rank as usize).map_or("?", String::as_str).to_string()
     }
 
-    let queue = TileQueue::new(todo);
-    let mut finished_requesters = 0usize;
-    let requesters = workers * threads_per_worker as usize;
-    // Centralised sharing goes through the relay (the initial records every worker has).
-    let mut relay = RecordRelay::new(size, cache);
-    let mut end_markers = 0usize;
-    let mut reports: Vec<Option<RankReport>> = vec![None; size];
-    let done = |finished: usize, reports: &[Option<RankReport>], ends: usize| {
-        finished == requesters
-            && reports[1..].iter().all(Option::is_some)
-            && (mode != Mode::Broadcast || ends == workers)
-    };
-    while !done(finished_requesters, &reports, end_markers) {
-        let msg = comm
-            .receive_live(&[(None, None)], timeout, |r| reports[r as usize].is_none())
-            .map_err(|silence| MasterError(lost_rank(&silence, hosts)))?;
-        let source = msg.source as usize;
-        let message = msg
-            .message
-            .map_err(|e| MasterError(format!("rank {source} sent a malformed message: {e}")))?;
-        match message {
-            Message::WorkRequest { thread, finished } => {
-                if let Some(FinishedTile {
-                    tile: index, pixels, ..
-                }) = finished
-                {
-                    let tile = tiles
-                        .get(index as usize)
-                        .filter(|_| !tiles_done[index as usize])
-                        .ok_or_else(|| {
-                            MasterError(format!("rank {source} returned tile {index}, which it was not given"))
-                        })?;
-                    if pixels.len() != ((tile.x1 - tile.x0) * (tile.y1 - tile.y0)) as usize {
-                        return Err(MasterError(format!(
-                            "rank {source} returned tile {index} with the wrong size"
-                        )));
-                    }
-                    if let Some((journal, _)) = resume {
-                        journal.tile(index, 0, &pixels);
-                    }
-                    store_tile(&mut frame, tile, &pixels);
-                    tiles_done[index as usize] = true;
-                }
-                let assignment = queue.next().map(|i| i as u32);
-                finished_requesters += usize::from(assignment.is_none());
-                let work = Message::Work {
-                    thread,
-                    tile: assignment,
-                    records: Records::default(),
-                };
-                sends.send(msg.source, &work);
-            }
-            Message::RecordsUp { thread, records } => {
-                relay.share(source, records);
-                let reply = Message::RecordsDown {
-                    thread,
-                    records: relay.catch_up(source),
-                };
-                sends.send(msg.source, &reply);
-            }
-            Message::RecordsBroadcast { records, last } => {
-                relay.keep(records);
-                end_markers += usize::from(last);
-            }
-            Message::FinalRecords(records) => {
-                relay.keep(records);
-            }
-            Message::Stats(report) => reports[source] = Some(report),
-            other => {
-                return Err(MasterError(format!(
-                    "rank {source} sent an unexpected message ({:?})",
-                    other.kind()
-                )));
-            }
+    /// The records of the cache file the workers do not hold yet.
+    pub fn initial_records(&self) -> Records {
+        match self.cache {
+            Some(c) if !self.workers_have_cache => Records::from(c.records()),
+            _ => Records::default(),
         }
     }
-    if let Some(missing) = tiles_done.iter().position(|d| !d) {
-        return Err(MasterError(format!("tile {missing} was never rendered")));
+}
+
+/// A mode's way of sharing records, as the master sees it.
+pub trait Sharing {
+    /// Before any tile: what the workers start from.
+    fn start(&mut self, core: &mut MasterCore<'_, '_>);
+    /// Whether a finished tile's pixels are the image's (they are not when the worker keeps
+    /// part of its light to send with its whole image at the end).
+    fn keeps_tiles(&self) -> bool;
+    /// The records that go with a tile (or with "no tile left") to `rank`.
+    fn records_with_work(&mut self, core: &mut MasterCore<'_, '_>, rank: i32) -> Records;
+    /// A message of the mode's own.
+    fn on_message(&mut self, core: &mut MasterCore<'_, '_>, source: i32, message: Message) -> Result<(), String>;
+    /// Whether the render is complete.
+    fn finished(&self, core: &MasterCore<'_, '_>) -> bool;
+    /// The line that ends the job when `silence` holds.
+    fn lost(&self, core: &MasterCore<'_, '_>, silence: &Silence) -> String {
+        lost_rank(silence, core.plan.hosts)
+    }
+    /// After the render is complete: the rest of the job (component mode gathers the images).
+    fn gather(&mut self, _core: &mut MasterCore<'_, '_>) -> Result<(), String> {
+        Ok(())
+    }
+}
+
+/// What every mode's master has and does.
+pub struct MasterCore<'a, 'c> {
+    pub comm: &'a Comm<'c>,
+    pub sends: MasterSends<'a, 'c>,
+    pub plan: &'a Plan<'a>,
+    pub queue: TileQueue,
+    pub frame: FrameBuffer,
+    tiles_done: Vec<bool>,
+    pub relay: RecordRelay<'a>,
+    pub reports: Vec<Option<RankReport>>,
+    /// Work requests answered with "no tile left".
+    pub turned_away: usize,
+}
+
+impl<'a, 'c> MasterCore<'a, 'c> {
+    fn new(comm: &'a Comm<'c>, plan: &'a Plan<'a>) -> Self {
+        let size = comm.size() as usize;
+        let (frame, tiles_done, todo) = match plan.resume {
+            Some((_, restored)) => (restored.frame.clone(), restored.done.clone(), restored.unfinished()),
+            None => (
+                FrameBuffer::new(plan.width, plan.height),
+                vec![false; plan.tiles.len()],
+                (0..plan.tiles.len()).collect(),
+            ),
+        };
+        MasterCore {
+            comm,
+            sends: MasterSends {
+                comm,
+                limit: plan.timeout,
+                hosts: plan.hosts,
+                cache: plan.cache,
+            },
+            plan,
+            queue: TileQueue::new(todo),
+            frame,
+            tiles_done,
+            relay: RecordRelay::new(size, plan.cache),
+            reports: vec![None; size],
+            turned_away: 0,
+        }
+    }
+
+    pub fn workers(&self) -> usize {
+        self.reports.len() - 1
+    }
+
+    pub fn every_report_in(&self) -> bool {
+        self.reports[1..].iter().all(Option::is_some)
+    }
+
+    /// The next message from any rank; Err once a rank the master still waits for is lost.
+    pub fn receive(&self, awaited: impl Fn(i32) -> bool) -> Result<(i32, Result<Message, String>), Silence> {
+        let envelope = self.comm.receive_live(&[(None, None)], self.plan.timeout, awaited)?;
+        let source = envelope.source;
+        Ok((
+            source,
+            envelope
+                .message
+                .map_err(|e| format!("rank {source} sent a malformed message: {e}")),
+        ))
+    }
+
+    /// A finished tile from `source`: into the journal, and into the image if `keep`.
+    fn take_tile(&mut self, source: i32, finished: FinishedTile, keep: bool) -> Result<(), String> {
+        let FinishedTile {
+            tile: index,
+            requests,
+            pixels,
+        } = finished;
+        let tile = self
+            .plan
+            .tiles
+            .get(index as usize)
+            .filter(|_| !self.tiles_done[index as usize])
+            .ok_or_else(|| format!("rank {source} returned tile {index}, which it was not given"))?;
+        if pixels.len() != ((tile.x1 - tile.x0) * (tile.y1 - tile.y0)) as usize {
+            return Err(format!("rank {source} returned tile {index} with the wrong size"));
+        }
+        if let Some((journal, _)) = self.plan.resume {
+            journal.tile(index, requests, &pixels);
+        }
+        if keep {
+            store_tile(&mut self.frame, tile, &pixels);
+        }
+        self.tiles_done[index as usize] = true;
+        Ok(())
+    }
+
+    /// What the core handles in every mode; the rest goes back to the policy.
+    fn handle(&mut self, sharing: &mut dyn Sharing, source: i32, message: Message) -> Result<(), String> {
+        match message {
+            Message::WorkRequest { thread, finished } => {
+                if let Some(finished) = finished {
+                    self.take_tile(source, finished, sharing.keeps_tiles())?;
+                }
+                let tile = self.queue.next().map(|i| i as u32);
+                self.turned_away += usize::from(tile.is_none());
+                let records = sharing.records_with_work(self, source);
+                self.sends.send(source, &Message::Work { thread, tile, records });
+            }
+            Message::Stats(report) => self.reports[source as usize] = Some(report),
+            Message::Results(results) => {
+                if let Some((journal, _)) = self.plan.resume {
+                    journal.results(&results);
+                }
+            }
+            other => sharing.on_message(self, source, other)?,
+        }
+        Ok(())
+    }
+}
+
+pub fn run(comm: &Comm<'_>, plan: &Plan<'_>, sharing: &mut dyn Sharing) -> Result<MasterResult, String> {
+    let start = Instant::now();
+    let mut core = MasterCore::new(comm, plan);
+    sharing.start(&mut core);
+    while !sharing.finished(&core) {
+        let reports = &core.reports;
+        let (source, message) = match core.receive(|r| reports[r as usize].is_none()) {
+            Ok(received) => received,
+            Err(silence) => return Err(sharing.lost(&core, &silence)),
+        };
+        core.handle(sharing, source, message?)?;
+    }
+    if !core.queue.all_out() {
+        return Err(format!(
+            "only {} of {} tiles were rendered",
+            core.queue.handed_out(),
+            core.queue.len()
+        ));
     }
     let render_s = start.elapsed().as_secs_f64();
+    sharing.gather(&mut core)?;
     let mut ranks = vec![RankReport {
-        records_received: relay.received,
-        records_rejected: relay.rejected,
-        wall_s: render_s,
+        records_received: core.relay.received,
+        records_rejected: core.relay.rejected,
+        wall_s: start.elapsed().as_secs_f64(),
         ..super::traffic_report(0, "mc", &[comm.counters], comm.counters.idle_s())
     }];
-    ranks.extend(reports.into_iter().skip(1).flatten());
-    Ok(MasterResult { frame, ranks, render_s })
+    ranks.extend(core.reports.into_iter().skip(1).flatten());
+    Ok(MasterResult {
+        frame: core.frame,
+        ranks,
+        render_s,
+    })
 }
 
 /// The line that ends a job when a rank has fallen silent.

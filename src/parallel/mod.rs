@@ -14,6 +14,7 @@ pub mod prepass;
 pub mod protocol;
 pub mod pulse;
 pub mod relay;
+pub mod sharing;
 pub mod worker;
 
 use crate::checkpoint::{Checkpoint, Restored};
@@ -386,21 +387,23 @@ pub fn run(job_in: &ParallelJob<'_>) -> CommandResult {
     }
 
     let plan = master::Plan {
-        mode,
         tiles: &all_tiles,
         width: job_in.width,
         height: job_in.height,
-        threads_per_worker: threads as u32,
         cache: job.cache.as_ref(),
         timeout: silence_limit,
         hosts: &hosts,
         resume,
         workers_have_cache: prepass.is_some(),
     };
-    let result = master::run(&comm, &plan);
-    let result = match result {
+    let mut sharing: Box<dyn master::Sharing> = match mode {
+        Mode::Centralised => Box::new(sharing::Centralised::new(threads)),
+        Mode::Broadcast => Box::new(sharing::Broadcast::new(threads)),
+        _ => Box::new(sharing::NoShare::new(threads)),
+    };
+    let result = match master::run(&comm, &plan, sharing.as_mut()) {
         Ok(r) => r,
-        Err(e) => end_job(&comm, job.cache.as_ref(), &e.0),
+        Err(e) => end_job(&comm, job.cache.as_ref(), &e),
     };
     finish_master(
         job_in,
@@ -515,19 +518,18 @@ fn run_component(
             );
         }
     }
-    let result = component::master::run(
-        comm,
-        &roles,
-        all_tiles,
-        job_in.width,
-        job_in.height,
-        job.cache.as_ref(),
-        job_in.silence_limit,
+    let plan = master::Plan {
+        tiles: all_tiles,
+        width: job_in.width,
+        height: job_in.height,
+        cache: job.cache.as_ref(),
+        timeout: job_in.silence_limit,
         hosts,
         resume,
-        prepass.is_some(),
-    );
-    let result = match result {
+        workers_have_cache: prepass.is_some(),
+    };
+    let mut sharing = component::master::ComponentSharing::new(roles);
+    let result = match master::run(comm, &plan, &mut sharing) {
         Ok(r) => r,
         Err(e) => end_job(comm, job.cache.as_ref(), &e),
     };
