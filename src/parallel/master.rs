@@ -57,13 +57,23 @@ impl Plan<'_> {
 
 /// A mode's way of sharing records, as the master sees it.
 pub trait Sharing {
-    /// Before any tile: what the workers start from.
-    fn start(&mut self, core: &mut MasterCore<'_, '_>);
+    /// Before any tile: what the workers start from (by default, every worker the records of
+    /// the cache file it lacks).
+    fn start(&mut self, core: &mut MasterCore<'_, '_>) {
+        let initial = Message::InitialRecords(core.plan.initial_records());
+        for worker in 1..core.comm.size() {
+            core.sends.send(worker, &initial);
+        }
+    }
     /// Whether a finished tile's pixels are the image's (they are not when the worker keeps
     /// part of its light to send with its whole image at the end).
-    fn keeps_tiles(&self) -> bool;
+    fn keeps_tiles(&self) -> bool {
+        true
+    }
     /// The records that go with a tile (or with "no tile left") to `rank`.
-    fn records_with_work(&mut self, core: &mut MasterCore<'_, '_>, rank: i32) -> Records;
+    fn records_with_work(&mut self, _core: &mut MasterCore<'_, '_>, _rank: i32) -> Records {
+        Records::default()
+    }
     /// A message of the mode's own.
     fn on_message(&mut self, core: &mut MasterCore<'_, '_>, source: i32, message: Message) -> Result<(), String>;
     /// Whether the render is complete.

@@ -4,7 +4,7 @@
 //! once every rendering thread has been told "no tile left" and every rank has reported.
 
 use super::master::{MasterCore, Sharing};
-use super::protocol::{Message, Records};
+use super::protocol::Message;
 
 /// What the three have in common: the threads that ask for tiles.
 struct Requesters {
@@ -12,13 +12,6 @@ struct Requesters {
 }
 
 impl Requesters {
-    fn start(&self, core: &mut MasterCore<'_, '_>) {
-        let initial = Message::InitialRecords(core.plan.initial_records());
-        for worker in 1..core.comm.size() {
-            core.sends.send(worker, &initial);
-        }
-    }
-
     fn done(&self, core: &MasterCore<'_, '_>) -> bool {
         core.turned_away == core.workers() * self.threads_per_worker && core.every_report_in()
     }
@@ -63,18 +56,6 @@ impl Broadcast {
 }
 
 impl Sharing for NoShare {
-    fn start(&mut self, core: &mut MasterCore<'_, '_>) {
-        self.0.start(core);
-    }
-
-    fn keeps_tiles(&self) -> bool {
-        true
-    }
-
-    fn records_with_work(&mut self, _core: &mut MasterCore<'_, '_>, _rank: i32) -> Records {
-        Records::default()
-    }
-
     fn on_message(&mut self, core: &mut MasterCore<'_, '_>, source: i32, message: Message) -> Result<(), String> {
         match message {
             Message::FinalRecords(records) => {
@@ -91,18 +72,6 @@ impl Sharing for NoShare {
 }
 
 impl Sharing for Centralised {
-    fn start(&mut self, core: &mut MasterCore<'_, '_>) {
-        self.0.start(core);
-    }
-
-    fn keeps_tiles(&self) -> bool {
-        true
-    }
-
-    fn records_with_work(&mut self, _core: &mut MasterCore<'_, '_>, _rank: i32) -> Records {
-        Records::default()
-    }
-
     fn on_message(&mut self, core: &mut MasterCore<'_, '_>, source: i32, message: Message) -> Result<(), String> {
         match message {
             Message::RecordsUp { thread, records } => {
@@ -121,18 +90,6 @@ impl Sharing for Centralised {
 }
 
 impl Sharing for Broadcast {
-    fn start(&mut self, core: &mut MasterCore<'_, '_>) {
-        self.requesters.start(core);
-    }
-
-    fn keeps_tiles(&self) -> bool {
-        true
-    }
-
-    fn records_with_work(&mut self, _core: &mut MasterCore<'_, '_>, _rank: i32) -> Records {
-        Records::default()
-    }
-
     fn on_message(&mut self, core: &mut MasterCore<'_, '_>, source: i32, message: Message) -> Result<(), String> {
         match message {
             Message::RecordsBroadcast { records, last } => {
