@@ -6,13 +6,26 @@ use crate::render::pixel::ThreadStats;
 use crate::shading::RayCounts;
 use serde::Serialize;
 
-#[derive(Clone, Debug, Default, Serialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, serde::Deserialize)]
 pub struct RayStats {
     pub primary: u64,
     pub shadow: u64,
     pub specular: u64,
     pub ambient: u64,
     pub total: u64,
+}
+
+impl RayStats {
+    /// The sum of several.
+    pub fn sum<'a>(all: impl IntoIterator<Item = &'a RayStats>) -> RayStats {
+        all.into_iter().fold(RayStats::default(), |a, b| RayStats {
+            primary: a.primary + b.primary,
+            shadow: a.shadow + b.shadow,
+            specular: a.specular + b.specular,
+            ambient: a.ambient + b.ambient,
+            total: a.total + b.total,
+        })
+    }
 }
 
 impl From<&RayCounts> for RayStats {
@@ -120,6 +133,9 @@ pub struct RankReport {
     pub queue_lengths: Vec<(f64, u32)>,
     /// PA: the longest its request queue ever was.
     pub queue_max: u64,
+    /// Rays this rank traced (its prepass share included).
+    #[serde(default)]
+    pub rays: RayStats,
     /// Heartbeats this rank sent (one byte and MPI's envelope each, every 2 s; see
     /// `parallel::liveness`). Not in `messages`: a rank's last heartbeats may still be on their
     /// way when the reports are added up.
@@ -242,6 +258,7 @@ impl RenderStats {
             t_amb_s: self.t_amb_s,
             t_notamb_s: self.t_notamb_s,
             wall_s: self.wall_s,
+            rays: self.rays.clone(),
             ..Default::default()
         }];
     }
@@ -262,6 +279,8 @@ impl RenderStats {
         self.requests_computed = ranks.iter().map(|r| r.requests_computed).sum();
         self.requests_forwarded = ranks.iter().map(|r| r.requests_forwarded).sum();
         self.request_handling_s = ranks.iter().map(|r| r.request_handling_s).sum();
+        self.rays = RayStats::sum(ranks.iter().map(|r| &r.rays));
+        self.mrays_per_s = self.rays.total as f64 / self.render_s.max(1e-9) / 1e6;
         self.per_rank = ranks;
     }
 }

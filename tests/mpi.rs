@@ -150,6 +150,11 @@ fn every_mode_matches_serial_and_statistics_add_up() {
                 let total = |key: &str| ranks.iter().map(|r| u(r, key)).sum::<u64>();
                 assert_eq!(total("messages"), total("messages_received"), "{name}: messages");
                 assert_eq!(total("bytes"), total("bytes_received"), "{name}: bytes");
+                // Rays are counted on every rank and in total, as a serial render counts them.
+                let rays: u64 = ranks.iter().map(|r| u(&r["rays"], "total")).sum();
+                assert!(rays > 0, "{name}: no rays reported");
+                assert_eq!(u(&s["rays"], "total"), rays, "{name}: rays");
+                assert!(s["mrays_per_s"].as_f64().unwrap() > 0.0, "{name}: mrays_per_s");
                 for key in [
                     "mode",
                     "ranks",
@@ -614,7 +619,7 @@ fn component_layouts() {
     let ok = mpirun(4, &base);
     assert!(ok.status.success(), "{}", stderr(&ok));
     assert!(
-        stderr(&ok).contains("1 PA(s) on ranks 1, 2 PR(s) on ranks 2,3"),
+        stderr(&ok).contains("rank 0: master; PA: rank 1; PR: ranks 2, 3"),
         "{}",
         stderr(&ok)
     );
@@ -624,7 +629,10 @@ fn component_layouts() {
     let ok = mpirun(4, &args);
     assert!(ok.status.success(), "{}", stderr(&ok));
     let err = stderr(&ok);
-    assert!(err.contains("no PA is needed") && err.contains("3 PR(s)"), "{err}");
+    assert!(
+        err.contains("no PA is needed") && err.contains("no PA; PR: ranks 1, 2, 3"),
+        "{err}"
+    );
 }
 
 /// Closed boxes whose every point knows its answer in closed form, under mpirun in every mode.

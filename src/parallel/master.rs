@@ -189,7 +189,7 @@ impl<'a, 'c> MasterCore<'a, 'c> {
                 let records = sharing.records_with_work(self, source);
                 self.sends.send(source, &Message::Work { thread, tile, records });
             }
-            Message::Stats(report) => self.reports[source as usize] = Some(report),
+            Message::Stats(report) => self.reports[source as usize] = Some(*report),
             Message::Results(results) => {
                 if let Some((journal, _)) = self.plan.resume {
                     journal.results(&results);

@@ -137,6 +137,7 @@ pub fn rank_report(rank: i32, role: &str, threads: &[ThreadStats], counters: &[&
         hits: reports.iter().map(|t| t.hits).sum(),
         t_amb_s: reports.iter().map(|t| t.t_amb_s).sum(),
         t_notamb_s: reports.iter().map(|t| t.t_notamb_s).sum(),
+        rays: crate::stats::RayStats::sum(reports.iter().map(|t| &t.rays)),
         ..traffic_report(rank, role, counters, idle_s)
     }
 }
@@ -164,13 +165,13 @@ pub fn send_report(comm: &Comm<'_>, mut report: RankReport) {
     report.messages += 1;
     let before = report.bytes;
     for _ in 0..4 {
-        let total = before + Message::Stats(report.clone()).encode().len() as u64;
+        let total = before + Message::Stats(Box::new(report.clone())).encode().len() as u64;
         if report.bytes == total {
             break;
         }
         report.bytes = total;
     }
-    comm.send(0, &Message::Stats(report));
+    comm.send(0, &Message::Stats(Box::new(report)));
 }
 
 /// Whether this process was started by mpirun (Open MPI, MPICH or a PMIx launcher).

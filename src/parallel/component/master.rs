@@ -180,7 +180,7 @@ impl Sharing for ComponentSharing {
                     {
                         report.queue_lengths = log.samples.clone();
                     }
-                    core.reports[source as usize] = Some(report);
+                    core.reports[source as usize] = Some(*report);
                 }
                 Message::Results(results) => {
                     if let Some((journal, _)) = core.plan.resume {

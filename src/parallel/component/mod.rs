@@ -88,29 +88,46 @@ impl Roles {
         })
     }
 
+    /// The roles, each named before its ranks: "rank 0: master; PA: rank 1; PR: ranks 2, 3".
     pub fn describe(&self) -> String {
-        let list = |r: &[i32]| r.iter().map(|x| x.to_string()).collect::<Vec<_>>().join(",");
-        if self.pas.is_empty() {
-            format!(
-                "component mode: master on rank 0, {} PR(s) on ranks {}, no PA",
-                self.prs.len(),
-                list(&self.prs)
-            )
-        } else {
-            format!(
-                "component mode: master on rank 0, {} PA(s) on ranks {}, {} PR(s) on ranks {}",
-                self.pas.len(),
-                list(&self.pas),
-                self.prs.len(),
-                list(&self.prs)
-            )
-        }
+        let ranks = |what: &str, r: &[i32]| match r {
+            [] => format!("no {what}"),
+            [one] => format!("{what}: rank {one}"),
+            many => format!(
+                "{what}: ranks {}",
+                many.iter().map(|x| x.to_string()).collect::<Vec<_>>().join(", ")
+            ),
+        };
+        format!(
+            "component mode: rank 0: master; {}; {}",
+            ranks("PA", &self.pas),
+            ranks("PR", &self.prs)
+        )
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_banner_names_each_role_before_its_ranks() {
+        let roles = Roles::choose(4, None, true).unwrap();
+        assert_eq!(
+            roles.describe(),
+            "component mode: rank 0: master; PA: rank 1; PR: ranks 2, 3"
+        );
+        let roles = Roles::choose(5, None, true).unwrap();
+        assert_eq!(
+            roles.describe(),
+            "component mode: rank 0: master; PA: ranks 1, 2; PR: ranks 3, 4"
+        );
+        let roles = Roles::choose(3, None, false).unwrap();
+        assert_eq!(
+            roles.describe(),
+            "component mode: rank 0: master; no PA; PR: ranks 1, 2"
+        );
+    }
 
     #[test]
     fn roles_default_to_half_and_refuse_impossible_layouts() {

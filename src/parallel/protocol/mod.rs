@@ -162,7 +162,7 @@ pub enum Message {
     /// Worker -> MC at the end (no sharing, with -af): the rank's records, for the file.
     FinalRecords(Records),
     /// Worker -> MC at the end: the rank's statistics.
-    Stats(RankReport),
+    Stats(Box<RankReport>),
     /// PR -> PA: a request buffer.
     Requests(Requests),
     /// PA -> helper (an idle PR, or a PA that ran dry): a share of the PA's queue.
@@ -262,7 +262,7 @@ impl Message {
                 out.put_u8(*last as u8);
                 put_records(&mut out, &records.records);
             }
-            Message::Stats(report) => out.extend(serde_json::to_vec(report).unwrap_or_default()),
+            Message::Stats(report) => out.extend(serde_json::to_vec(report.as_ref()).unwrap_or_default()),
             Message::Requests(r) | Message::Forwarded(r) => requests::put(&mut out, &r.requests),
             Message::Idle {
                 sent: a,
@@ -356,7 +356,7 @@ impl Message {
             },
             Kind::Stats => {
                 let report = serde_json::from_slice(r.rest()).map_err(|e| ProtocolError(format!("statistics: {e}")))?;
-                Message::Stats(report)
+                Message::Stats(Box::new(report))
             }
             Kind::Requests => Message::Requests(requests::take(&mut r)?),
             Kind::Forwarded => Message::Forwarded(requests::take(&mut r)?),

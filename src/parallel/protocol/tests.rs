@@ -69,7 +69,7 @@ fn every_message() -> Vec<Message> {
             last: true,
         },
         Message::FinalRecords(records()),
-        Message::Stats(report),
+        Message::Stats(Box::new(report)),
         Message::Requests(Requests::from(vec![sample_request(5), sample_request(99)])),
         Message::Forwarded(Requests::default()),
         Message::Idle {
