@@ -46,10 +46,10 @@ import math
 from collections import defaultdict, deque
 
 RECORD_BYTES = 128  # src/irradiance/codec.rs
-REQUEST_BYTES = 100  # src/parallel/component/requests.rs
-PIXEL_BYTES = 52  # src/parallel/protocol.rs encode_pixels: four RGB layers and a record count
-MIN_SHARE = 2  # src/parallel/component/master.rs: the smallest share worth forwarding
-SHARE_DIVISOR = 8  # src/parallel/component/master.rs: an idle PR takes 1/8 of the longest queue
+REQUEST_BYTES = 100  # src/parallel/protocol/requests.rs
+PIXEL_BYTES = 52  # src/parallel/protocol/mod.rs encode_pixels: four RGB layers and a record count
+MIN_SHARE = 2  # src/parallel/component/balancer.rs: the smallest share worth forwarding
+SHARE_DIVISOR = 8  # src/parallel/component/balancer.rs: an idle PR takes 1/8 of the longest queue
 
 NETWORKS = {
     # name: (latency s, bandwidth bytes/s)
@@ -500,7 +500,7 @@ class Sim:
 
         def take_share(to):
             """An eighth of the longest PA queue other than `to`'s, if worth forwarding (src/
-            parallel/component/master.rs order_share): (that PA, its share as (pixel, entry)
+            parallel/component/balancer.rs LoadBalancer::share_for): (that PA, its share as (pixel, entry)
             pairs), or None."""
             best = max((o for o in pas if o != to), key=lambda o: len(queue[o]), default=None)
             if best is None or len(queue[best]) // SHARE_DIVISOR < MIN_SHARE:
@@ -510,7 +510,7 @@ class Sim:
             return best, taken
 
         def feed_pa(a, now):
-            """A PA that ran dry gets a share of the longest other queue (master.rs feed_pa): its
+            """A PA that ran dry gets a share of the longest other queue (balancer.rs LoadBalancer::rebalance): its
             status to the master, the master's order, the share."""
             shared = take_share(a)
             if shared is None:
