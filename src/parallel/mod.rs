@@ -375,14 +375,26 @@ pub fn run(job_in: &ParallelJob<'_>) -> CommandResult {
     }
     let sync = SyncThreshold::of(job_in.sync, SyncThreshold::TRADITIONAL);
     let persist_local = job_in.cache_file;
+    // The mode's two sides: how workers share, and the master's policy.
+    let (worker_sharing, mut sharing): (worker::WorkerSharing, Box<dyn master::Sharing>) = match mode {
+        Mode::Centralised => (
+            worker::WorkerSharing::ThroughMaster,
+            Box::new(sharing::Centralised::new(threads)),
+        ),
+        Mode::Broadcast => (
+            worker::WorkerSharing::ToEveryone,
+            Box::new(sharing::Broadcast::new(threads)),
+        ),
+        _ => (worker::WorkerSharing::Kept, Box::new(sharing::NoShare::new(threads))),
+    };
     if rank != 0 {
         if let Some(cache) = job.cache.as_mut()
-            && (mode != Mode::Noshare || persist_local)
+            && (worker_sharing != worker::WorkerSharing::Kept || persist_local)
         {
             cache.keep_outbox();
         }
         let setup = WorkerSetup::new(&job, &all_tiles, &counters);
-        worker::run(&setup, mode, sync, persist_local);
+        worker::run(&setup, worker_sharing, sync, persist_local);
         drop(universe);
         return Ok(());
     }
@@ -396,11 +408,6 @@ pub fn run(job_in: &ParallelJob<'_>) -> CommandResult {
         hosts: &hosts,
         resume,
         workers_have_cache: prepass.is_some(),
-    };
-    let mut sharing: Box<dyn master::Sharing> = match mode {
-        Mode::Centralised => Box::new(sharing::Centralised::new(threads)),
-        Mode::Broadcast => Box::new(sharing::Broadcast::new(threads)),
-        _ => Box::new(sharing::NoShare::new(threads)),
     };
     let result = match master::run(&comm, &plan, sharing.as_mut()) {
         Ok(r) => r,

@@ -3,7 +3,6 @@
 //! through the master (centralised), or with every other rank (broadcast, with a receiving
 //! thread that merges incoming records while the rendering threads go on).
 
-use super::Mode;
 use super::comm::{Comm, Counters, kind};
 use super::protocol::{FinishedTile, Kind, Message, Records};
 use super::{SyncThreshold, WorkerSetup};
@@ -15,11 +14,22 @@ use std::sync::Mutex;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Instant;
 
+/// A traditional mode, as its workers share records (paper, section 4).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum WorkerSharing {
+    /// noshare: each worker keeps its records.
+    Kept,
+    /// centralised: through the master, which answers with the records the worker lacks.
+    ThroughMaster,
+    /// broadcast: to every other rank, and a receiving thread merges theirs.
+    ToEveryone,
+}
+
 /// Sends what the cache has gathered since the last share, the mode's way. `thread` is the
 /// calling rendering thread (replies come back on its own tag).
 fn share(
     comm: &Comm<'_>,
-    mode: Mode,
+    mode: WorkerSharing,
     cache: &IrradianceCache,
     thread: u32,
     received: &AtomicU64,
@@ -33,7 +43,7 @@ fn share(
         records.records.into_iter().for_each(|r| cache.insert_shared(r));
     };
     match mode {
-        Mode::Centralised => {
+        WorkerSharing::ThroughMaster => {
             if records.is_empty() {
                 return;
             }
@@ -47,7 +57,7 @@ fn share(
                 take(records);
             }
         }
-        Mode::Broadcast => {
+        WorkerSharing::ToEveryone => {
             if records.is_empty() && !end {
                 return;
             }
@@ -60,7 +70,7 @@ fn share(
                 comm.send(rank, &batch);
             }
         }
-        Mode::Noshare | Mode::Component | Mode::Serial => {}
+        WorkerSharing::Kept => {}
     }
 }
 
@@ -97,7 +107,7 @@ fn receive_broadcasts(
     }
 }
 
-pub fn run(setup: &WorkerSetup<'_>, mode: Mode, sync: SyncThreshold, persist_local: bool) {
+pub fn run(setup: &WorkerSetup<'_>, mode: WorkerSharing, sync: SyncThreshold, persist_local: bool) {
     let counters = Counters::default();
     let listener_counters = Counters::default();
     let comm = Comm::new(&counters);
@@ -114,7 +124,7 @@ pub fn run(setup: &WorkerSetup<'_>, mode: Mode, sync: SyncThreshold, persist_loc
     let threads = setup.settings.threads.max(1) as u32;
     let peers = comm.size() as usize - 2;
     let thread_stats: Vec<ThreadStats> = std::thread::scope(|scope| {
-        let listener = (mode == Mode::Broadcast && cache.is_some()).then(|| {
+        let listener = (mode == WorkerSharing::ToEveryone && cache.is_some()).then(|| {
             scope.spawn(|| receive_broadcasts(&listener_counters, cache.expect("checked"), peers, &received, &rejected))
         });
         let renderers: Vec<_> = (0..threads)
@@ -142,7 +152,7 @@ pub fn run(setup: &WorkerSetup<'_>, mode: Mode, sync: SyncThreshold, persist_loc
                         let tile = &setup.tiles[index as usize];
                         let mut after_pixel = |_: &mut RayCounts| {
                             if let Some(cache) = cache
-                                && mode != Mode::Noshare
+                                && mode != WorkerSharing::Kept
                                 && sync.reached(cache.outbox_len())
                                 && let Ok(_guard) = share_lock.try_lock()
                             {
@@ -175,14 +185,15 @@ pub fn run(setup: &WorkerSetup<'_>, mode: Mode, sync: SyncThreshold, persist_loc
         // receiver knows when it has everything.
         if let Some(cache) = cache {
             match mode {
-                Mode::Centralised => share(&comm, mode, cache, 0, &received, &rejected, true),
-                Mode::Broadcast => share(&comm, mode, cache, 0, &received, &rejected, true),
+                WorkerSharing::ThroughMaster | WorkerSharing::ToEveryone => {
+                    share(&comm, mode, cache, 0, &received, &rejected, true)
+                }
                 _ if persist_local => {
                     comm.send(0, &Message::FinalRecords(Records::from(cache.take_outbox())));
                 }
                 _ => {}
             }
-        } else if mode == Mode::Broadcast {
+        } else if mode == WorkerSharing::ToEveryone {
             // Without a cache there is nothing to share, but peers still wait for the marker.
             let last = Message::RecordsBroadcast {
                 records: Records::default(),
