@@ -40,6 +40,59 @@ fn white_furnace_converges_to_e_over_one_minus_rho() {
     );
 }
 
+/// A grey box under -av A at -ab 2, with both ways of reaching the second bounce: every record
+/// of the first level holds rho^2 A, of the second rho A, and the eye sees rho^3 A at every
+/// pixel, to float precision. With `--ic-deep records` a lookup at the second level once also
+/// took first-level records (rho^2 A, a bounce too many) and pixels read up to 22 % low.
+#[test]
+fn both_deep_bounce_methods_give_the_grey_furnace_exactly() {
+    let dir = tempfile::tempdir().unwrap();
+    let (rho, a) = (0.5f64, 0.8f64);
+    let mut b = GltfBuilder::new();
+    let m = b.material(lambertian("wall", [rho as f32; 3]));
+    inward_box(&mut b, [0.0; 3], [1.0; 3], m);
+    let scene = b.write(dir.path(), "grey");
+    let expected = rho.powi(3) * a;
+    for deep in ["paths", "records"] {
+        let options = [
+            "-x",
+            "32",
+            "-y",
+            "32",
+            "-ab",
+            "2",
+            "-av",
+            "0.8",
+            "0.8",
+            "0.8",
+            "--ic-deep",
+            deep,
+            "-vp",
+            "0.5",
+            "0.5",
+            "0.5",
+            "-vd",
+            "0.3",
+            "-0.2",
+            "-1",
+            "-vh",
+            "80",
+            "-vv",
+            "80",
+        ];
+        let (image, stats) = render_to(dir.path(), &scene, deep, &options);
+        assert!(stats["records_computed"].as_u64().unwrap() > 0, "{deep}: no records");
+        for plane in rgb(&image, "indirect") {
+            let worst = plane.iter().map(|&v| (v as f64 - expected).abs()).fold(0.0, f64::max);
+            assert!(
+                worst <= 1e-5 * expected,
+                "--ic-deep {deep}: a pixel is {worst} from {expected} (mean {})",
+                mean(&plane)
+            );
+        }
+    }
+}
+
 /// A Lambertian plane under one point light: L = rho / pi * I cos(theta) / d^2 at every point,
 /// seen through a parallel view so each pixel centre's world position is known exactly.
 #[test]

@@ -641,8 +641,8 @@ fn component_layouts() {
 /// - grey walls under -av A (radiance assumed past the last bounce) at -ab 2: every record holds
 ///   irradiance pi rho^2 A and the eye sees rho^3 A in the indirect layer; these records are
 ///   what the modes make and share (records are made as tiles render, the modes' own sharing;
-///   `--ic-deep records` is left out: in this box it is not exact even in one process, with
-///   pixels 25-32 % low, a fault of its own);
+///   deeper bounces by paths, the default: `--ic-deep records` has this test in one process,
+///   `tests/analytic.rs`);
 /// - walls that also emit E, at -ab 0 -av A: emission E, direct light rho E (the analytic
 ///   direct integral: every emitter is wholly visible), indirect rho A.
 #[test]
