@@ -21,7 +21,7 @@ use crate::irradiance::record::Record;
 use crate::render::pixel::{RenderSettings, ThreadClock, ThreadStats, pixel_offset};
 use crate::sampling::Rng;
 use crate::scene::view::Camera;
-use crate::shading::{Integrator, RayCounts};
+use crate::shading::{Integrator, RayCounts, Work};
 use crate::tracer::SurfaceHit;
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -194,7 +194,7 @@ fn pixels_needing_samples(pass: Pass<'_, '_>, snapshot: &FrozenIndex, stats: &mu
         let (origin, dir) = camera.ray(x, y);
         // Glossy directions from a fixed stream: the same rays on every process.
         let mut rng = Rng::new(0, ((y as u64) << 32) | x.to_bits() as u64);
-        integrator.record_sites(origin, dir, &mut rng, counts)
+        integrator.record_sites(origin, dir, &mut rng, &mut Work::new(counts))
     };
     let covered = |hits: &[SurfaceHit]| hits.iter().all(|h| cache.covered_in(snapshot, h.position, h.normal, 0));
     let rows = AtomicUsize::new(0);
@@ -335,14 +335,15 @@ fn site_records(
     };
     let mut rng = Rng::for_sample(settings.seed, pixel, stream);
     let (origin, dir) = site_ray(camera, settings, site);
-    counts.pixel = pixel as u32;
-    for hit in integrator.record_sites(origin, dir, &mut rng, counts) {
-        counts.lookups += 1;
+    let mut work = Work::new(counts);
+    work.sample.pixel = pixel as u32;
+    for hit in integrator.record_sites(origin, dir, &mut rng, &mut work) {
+        work.lookups += 1;
         if cache.covered_in(snapshot, hit.position, hit.normal, 0) {
-            counts.hits += 1;
+            work.hits += 1;
             continue;
         }
-        records.push((index, integrator.eye_record(cache, &hit, &mut rng, counts)));
+        records.push((index, integrator.eye_record(cache, &hit, &mut rng, &mut work)));
     }
 }
 

@@ -7,7 +7,7 @@ use crate::image::framebuffer::PixelValue;
 use crate::sampling::Rng;
 use crate::scene::footprint::EmitterFootprint;
 use crate::scene::view::Camera;
-use crate::shading::{Integrator, RayCounts};
+use crate::shading::{Integrator, RayCounts, SampleContext, Work};
 use crate::tiles::Tile;
 use std::sync::Arc;
 use std::time::Instant;
@@ -123,20 +123,24 @@ pub fn render_pixel(
     let mut sum = Components::default();
     // Offsets that place this pixel's shadow rays among the strata (a stream no sample uses).
     let mut pixel_rng = Rng::for_sample(settings.seed, pixel_index, u32::MAX as u64 + 1);
-    counts.pixel_samples = samples;
-    counts.light_offset = pixel_rng.next_u32();
-    counts.light_cell_offset = pixel_rng.next_u32();
+    let mut work = Work::new(counts);
+    work.sample = SampleContext {
+        pixel: pixel_index as u32,
+        index: 0,
+        weight: 1.0 / samples as f32,
+        pixel_samples: samples,
+        light_offset: pixel_rng.next_u32(),
+        light_cell_offset: pixel_rng.next_u32(),
+    };
     for s in 0..samples {
         let mut rng = Rng::for_sample(settings.seed, pixel_index, s as u64);
         let (jx, jy) = pixel_offset(s, samples, settings.jitter, &mut rng);
         let (origin, dir) = camera.ray(x as f32 + jx, y as f32 + jy);
-        counts.pixel = pixel_index as u32;
-        counts.sample = s;
-        counts.sample_weight = 1.0 / samples as f32;
+        work.sample.index = s;
         sum += if split_emission {
-            integrator.primary_without_first_emission(origin, dir, &mut rng, counts)
+            integrator.primary_without_first_emission(origin, dir, &mut rng, &mut work)
         } else {
-            integrator.primary(origin, dir, &mut rng, counts)
+            integrator.primary(origin, dir, &mut rng, &mut work)
         };
     }
     let mut pixel = sum * (1.0 / samples as f32);
@@ -149,11 +153,10 @@ pub fn render_pixel(
             let mut rng = Rng::for_sample(settings.seed, pixel_index, (samples + s) as u64);
             let (jx, jy) = pixel_offset(s, extra, true, &mut rng);
             let (origin, dir) = camera.ray(x as f32 + jx, y as f32 + jy);
-            emission += integrator.first_emission(origin, dir, counts);
+            emission += integrator.first_emission(origin, dir, &mut work);
         }
         pixel.emission += emission / extra as f32;
     }
-    counts.pixel_samples = 0;
     pixel
 }
 
@@ -178,8 +181,9 @@ pub fn render_tile(
                 // A stream of its own, after every stream the pixel's samples use.
                 let mut rng = Rng::for_sample(settings.seed, pixel_index, u32::MAX as u64 + 2);
                 let (origin, dir) = camera.ray(x as f32 + 0.5, y as f32 + 0.5);
-                counts.pixel = pixel_index as u32;
-                integrator.prepare_records(origin, dir, &mut rng, counts);
+                let mut work = Work::new(counts);
+                work.sample.pixel = pixel_index as u32;
+                integrator.prepare_records(origin, dir, &mut rng, &mut work);
                 let index = (y - tile.y0) as usize * width + (x - tile.x0) as usize;
                 values[index].records += (counts.records_level0 - before) as f32;
             }

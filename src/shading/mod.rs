@@ -89,18 +89,51 @@ pub struct RayCounts {
     pub t_amb: f64,
     /// Indirect diffuse values left to a PA as requests (component mode's PRs).
     pub deferred: u64,
-    /// The pixel and sample being rendered, and the sample's share of the pixel (what a
-    /// deferred request needs to find its way back).
+    /// Nesting of ambient computations, so T_amb counts only the outermost.
+    ambient_depth: u32,
+}
+
+/// What the sample being rendered is (kept apart from the statistics): its pixel and index,
+/// its share of the pixel (what a deferred request needs to find its way back), and the pixel's
+/// sample count and random offsets for stratifying the shadow rays of all its samples together
+/// (see `direct::LightStrata`; 0 samples: each point on its own).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct SampleContext {
     pub pixel: u32,
-    pub sample: u32,
-    pub sample_weight: f32,
-    /// The pixel's sample count and its random offsets for stratifying the shadow rays of all
-    /// its samples together (see `direct::LightStrata`); 0 samples: each point on its own.
+    pub index: u32,
+    pub weight: f32,
     pub pixel_samples: u32,
     pub light_offset: u32,
     pub light_cell_offset: u32,
-    /// Nesting of ambient computations, so T_amb counts only the outermost.
-    ambient_depth: u32,
+}
+
+/// A thread's work on one sample: the statistics it adds to, and the sample's context. It
+/// reads as the statistics (`Deref`), which every shading function adds to.
+pub struct Work<'a> {
+    pub counts: &'a mut RayCounts,
+    pub sample: SampleContext,
+}
+
+impl<'a> Work<'a> {
+    pub fn new(counts: &'a mut RayCounts) -> Self {
+        Work {
+            counts,
+            sample: SampleContext::default(),
+        }
+    }
+}
+
+impl std::ops::Deref for Work<'_> {
+    type Target = RayCounts;
+    fn deref(&self) -> &RayCounts {
+        self.counts
+    }
+}
+
+impl std::ops::DerefMut for Work<'_> {
+    fn deref_mut(&mut self) -> &mut RayCounts {
+        self.counts
+    }
 }
 
 impl RayCounts {
@@ -203,7 +236,7 @@ impl<'a> Integrator<'a> {
     }
 
     /// The components of light arriving at the eye along a primary ray.
-    pub fn primary(&self, origin: Vec3, dir: Vec3, rng: &mut Rng, counts: &mut RayCounts) -> Components {
+    pub fn primary(&self, origin: Vec3, dir: Vec3, rng: &mut Rng, counts: &mut Work<'_>) -> Components {
         self.primary_ray(origin, dir, false, rng, counts)
     }
 
@@ -214,7 +247,7 @@ impl<'a> Integrator<'a> {
         origin: Vec3,
         dir: Vec3,
         rng: &mut Rng,
-        counts: &mut RayCounts,
+        counts: &mut Work<'_>,
     ) -> Components {
         self.primary_ray(origin, dir, true, rng, counts)
     }
@@ -225,7 +258,7 @@ impl<'a> Integrator<'a> {
         dir: Vec3,
         first_emission_elsewhere: bool,
         rng: &mut Rng,
-        counts: &mut RayCounts,
+        counts: &mut Work<'_>,
     ) -> Components {
         counts.primary += 1;
         self.trace(
@@ -244,7 +277,7 @@ impl<'a> Integrator<'a> {
     /// it lets every pixel interpolate between records on all its sides instead of
     /// extrapolating from those its predecessors happened to make. Nothing to do without a
     /// local cache (brute force, or a component-mode PR whose misses go to the PAs).
-    pub fn prepare_records(&self, origin: Vec3, dir: Vec3, rng: &mut Rng, counts: &mut RayCounts) {
+    pub fn prepare_records(&self, origin: Vec3, dir: Vec3, rng: &mut Rng, counts: &mut Work<'_>) {
         if self.cache.is_none() || self.defer.is_some() || self.options.ambient_bounces == 0 {
             return;
         }
@@ -260,7 +293,7 @@ impl<'a> Integrator<'a> {
     /// surface it reaches straight or along specular reflections and transmissions (one ray
     /// each, glossy directions drawn from `rng`, within -lr and -lw as `trace` keeps them).
     /// Empty without a cache to fill.
-    pub fn record_sites(&self, origin: Vec3, dir: Vec3, rng: &mut Rng, counts: &mut RayCounts) -> Vec<SurfaceHit> {
+    pub fn record_sites(&self, origin: Vec3, dir: Vec3, rng: &mut Rng, counts: &mut Work<'_>) -> Vec<SurfaceHit> {
         let mut sites = Vec::new();
         if self.cache.is_none() || self.options.ambient_bounces == 0 {
             return sites;
@@ -310,7 +343,7 @@ impl<'a> Integrator<'a> {
         cache: &IrradianceCache,
         hit: &SurfaceHit,
         rng: &mut Rng,
-        counts: &mut RayCounts,
+        counts: &mut Work<'_>,
     ) -> Record {
         let record = timed_ambient(counts, |counts| {
             self.compute_record(cache, hit, PathState::eye(false), rng, counts)
@@ -342,7 +375,7 @@ impl<'a> Integrator<'a> {
 
     /// The emission of the first surface a primary ray stops at (times its opacity, as
     /// `trace` weighs it): one ray, no shading. What `primary_without_first_emission` leaves out.
-    pub fn first_emission(&self, origin: Vec3, dir: Vec3, counts: &mut RayCounts) -> Vec3 {
+    pub fn first_emission(&self, origin: Vec3, dir: Vec3, counts: &mut Work<'_>) -> Vec3 {
         counts.primary += 1;
         let mut origin = origin;
         for _ in 0..MAX_MASKED_PASSES {
@@ -378,7 +411,7 @@ impl<'a> Integrator<'a> {
         state: PathState,
         coherence: Coherence,
         rng: &mut Rng,
-        counts: &mut RayCounts,
+        counts: &mut Work<'_>,
     ) -> (Components, f32) {
         let Some((hit, surface)) = self.first_surface(origin, dir, coherence) else {
             return (Components::default(), f32::INFINITY);
@@ -398,7 +431,7 @@ impl<'a> Integrator<'a> {
         jt: f32,
         state: PathState,
         rng: &mut Rng,
-        counts: &mut RayCounts,
+        counts: &mut Work<'_>,
     ) -> Vec3 {
         if state.specular_depth >= self.options.max_specular_depth || state.weight * jt < self.options.min_weight {
             return Vec3::ZERO;
@@ -426,7 +459,7 @@ impl<'a> Integrator<'a> {
         surface: &crate::scene::material::SurfacePoint,
         state: PathState,
         rng: &mut Rng,
-        counts: &mut RayCounts,
+        counts: &mut Work<'_>,
     ) -> Components {
         let material = &self.scene.materials[hit.material as usize];
         let wo = -dir;
@@ -443,14 +476,14 @@ impl<'a> Integrator<'a> {
                 LightStrata::alone(1, rng)
             } else {
                 let count = self.options.light_samples.max(1);
-                if counts.sample < counts.pixel_samples {
+                if counts.sample.index < counts.sample.pixel_samples {
                     // Stratified with the shadow rays of the pixel's other samples.
                     LightStrata {
-                        first: counts.sample * count,
+                        first: counts.sample.index * count,
                         count,
-                        total: counts.pixel_samples * count,
-                        offset: counts.light_offset,
-                        cell_offset: counts.light_cell_offset,
+                        total: counts.sample.pixel_samples * count,
+                        offset: counts.sample.light_offset,
+                        cell_offset: counts.sample.light_cell_offset,
                         eye_path: true,
                     }
                 } else {
@@ -486,7 +519,7 @@ impl<'a> Integrator<'a> {
         surface: &crate::scene::material::SurfacePoint,
         state: PathState,
         rng: &mut Rng,
-        counts: &mut RayCounts,
+        counts: &mut Work<'_>,
     ) -> Vec3 {
         if state.specular_depth >= self.options.max_specular_depth {
             return Vec3::ZERO;
@@ -532,7 +565,7 @@ impl<'a> Integrator<'a> {
         dir: Vec3,
         surface: &crate::scene::material::SurfacePoint,
         state: PathState,
-        counts: &mut RayCounts,
+        counts: &mut Work<'_>,
     ) -> Vec3 {
         counts.lookups += 1;
         if let Some(value) = self.cache.and_then(|c| c.lookup(hit.position, hit.normal, state.level)) {
@@ -545,18 +578,20 @@ impl<'a> Integrator<'a> {
             Layer::Specular
         };
         let request = AmbientRequest {
-            pixel: counts.pixel,
+            pixel: counts.sample.pixel,
             layer,
             specular_depth: state.specular_depth,
             position: hit.position,
             geometric_normal: hit.geometric_normal,
             normal: hit.normal,
             facing_normal: hit.facing_normal,
-            coefficient: state.throughput * surface.opacity * surface.diffuse * counts.sample_weight,
+            coefficient: state.throughput * surface.opacity * surface.diffuse * counts.sample.weight,
             weight: state.weight,
             direction: dir,
             material: hit.material,
-            stream: (counts.pixel as u64) << 32 | (counts.sample as u64) << 16 | (counts.deferred & 0xffff),
+            stream: (counts.sample.pixel as u64) << 32
+                | (counts.sample.index as u64) << 16
+                | (counts.deferred & 0xffff),
         };
         counts.deferred += 1;
         sink.push(request);
@@ -565,7 +600,7 @@ impl<'a> Integrator<'a> {
 
     /// Computes a PA's request: the indirect diffuse value (irradiance over pi) at the point,
     /// through this process's cache, before the request's coefficient.
-    pub fn ambient_for_request(&self, request: &AmbientRequest, rng: &mut Rng, counts: &mut RayCounts) -> Vec3 {
+    pub fn ambient_for_request(&self, request: &AmbientRequest, rng: &mut Rng, counts: &mut Work<'_>) -> Vec3 {
         let hit = SurfaceHit {
             position: request.position,
             distance: 0.0,
@@ -590,7 +625,7 @@ impl<'a> Integrator<'a> {
 
     /// Irradiance / pi arriving at a diffuse point from other surfaces (the part of L_a before
     /// the albedo); -av past the last bounce. Timed as T_amb at the outermost call.
-    fn ambient_radiance(&self, hit: &SurfaceHit, state: PathState, rng: &mut Rng, counts: &mut RayCounts) -> Vec3 {
+    fn ambient_radiance(&self, hit: &SurfaceHit, state: PathState, rng: &mut Rng, counts: &mut Work<'_>) -> Vec3 {
         if state.level >= self.options.ambient_bounces {
             return self.options.ambient_value;
         }
@@ -604,7 +639,7 @@ impl<'a> Integrator<'a> {
 
     /// Brute force (-aa 0): -ad stratified cosine-weighted samples at the first bounce, one per
     /// further bounce (an unbiased path continuation).
-    fn brute_force_ambient(&self, hit: &SurfaceHit, state: PathState, rng: &mut Rng, counts: &mut RayCounts) -> Vec3 {
+    fn brute_force_ambient(&self, hit: &SurfaceHit, state: PathState, rng: &mut Rng, counts: &mut Work<'_>) -> Vec3 {
         let next = PathState {
             level: state.level + 1,
             count_emission: false,
@@ -642,7 +677,7 @@ impl<'a> Integrator<'a> {
         hit: &SurfaceHit,
         state: PathState,
         rng: &mut Rng,
-        counts: &mut RayCounts,
+        counts: &mut Work<'_>,
     ) -> Vec3 {
         counts.lookups += 1;
         if let Some(value) = cache.lookup(hit.position, hit.normal, state.level) {
@@ -650,14 +685,15 @@ impl<'a> Integrator<'a> {
             if cache.tracing() {
                 // The record a miss here would make (for the trace only: its own random stream
                 // and counters, so the render and its statistics stay as without the trace).
-                let mut rng = Rng::new(!u64::from(counts.pixel), counts.lookups);
-                let shadow = self.compute_record(cache, hit, state, &mut rng, &mut RayCounts::default());
-                cache.trace(counts.pixel, state.level, true, &shadow);
+                let mut rng = Rng::new(!u64::from(counts.sample.pixel), counts.lookups);
+                let shadow =
+                    self.compute_record(cache, hit, state, &mut rng, &mut Work::new(&mut RayCounts::default()));
+                cache.trace(counts.sample.pixel, state.level, true, &shadow);
             }
             return value;
         }
         let record = self.compute_record(cache, hit, state, rng, counts);
-        cache.trace(counts.pixel, state.level, false, &record);
+        cache.trace(counts.sample.pixel, state.level, false, &record);
         counts.records_computed += 1;
         if state.level == 0 {
             counts.records_level0 += 1;
@@ -683,7 +719,7 @@ impl<'a> Integrator<'a> {
         hit: &SurfaceHit,
         state: PathState,
         rng: &mut Rng,
-        counts: &mut RayCounts,
+        counts: &mut Work<'_>,
     ) -> Record {
         let n = cache.settings.grid_side(state.level);
         let normal = hit.normal;
@@ -693,7 +729,7 @@ impl<'a> Integrator<'a> {
             count_emission: false,
             ..state
         };
-        let sample = |i: usize, j: usize, rng: &mut Rng, counts: &mut RayCounts| {
+        let sample = |i: usize, j: usize, rng: &mut Rng, counts: &mut Work<'_>| {
             let frame = Frame {
                 normal,
                 tangent,
@@ -744,7 +780,7 @@ impl<'a> Integrator<'a> {
 
 /// Runs indirect diffuse work, timing it as T_amb when it is the outermost (work nested in it,
 /// deeper bounces, is inside that time already).
-fn timed_ambient<T>(counts: &mut RayCounts, work: impl FnOnce(&mut RayCounts) -> T) -> T {
+fn timed_ambient<'w, T>(counts: &mut Work<'w>, work: impl FnOnce(&mut Work<'w>) -> T) -> T {
     let start = (counts.ambient_depth == 0).then(Instant::now);
     counts.ambient_depth += 1;
     let out = work(counts);

@@ -16,7 +16,7 @@ use crate::parallel::comm::Comm;
 use crate::parallel::protocol::Message;
 use crate::sampling::Rng;
 use crate::shading::request::{AmbientRequest, RequestResult};
-use crate::shading::{Integrator, RayCounts};
+use crate::shading::{Integrator, RayCounts, Work};
 
 /// Computes one request's indirect light (from the rank's cache or as a new record), adds it
 /// times the request's coefficient to the rank's image at the request's pixel, and keeps it in
@@ -30,7 +30,9 @@ pub fn compute_request(
     results: Option<&mut Vec<RequestResult>>,
 ) {
     let mut rng = Rng::new(seed, request.stream);
-    let light = integrator.ambient_for_request(request, &mut rng, counts) * request.coefficient;
+    let mut work = Work::new(counts);
+    work.sample.pixel = request.pixel;
+    let light = integrator.ambient_for_request(request, &mut rng, &mut work) * request.coefficient;
     frame.add(request.pixel as usize, request.layer, light);
     if let Some(results) = results {
         results.push(RequestResult {
