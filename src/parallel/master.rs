@@ -151,6 +151,14 @@ impl<'a, 'c> MasterCore<'a, 'c> {
         ))
     }
 
+    /// A sync of `source`'s rendering thread `thread`: its new records join the relay, and it
+    /// gets those of the others it lacks.
+    pub fn sync(&mut self, source: i32, thread: u32, records: Records) {
+        self.relay.share(source as usize, records);
+        let records = self.relay.catch_up(source as usize);
+        self.sends.send(source, &Message::RecordsDown { thread, records });
+    }
+
     /// A finished tile from `source`: into the journal, and into the image if `keep`.
     fn take_tile(&mut self, source: i32, finished: FinishedTile, keep: bool) -> Result<(), String> {
         let FinishedTile {

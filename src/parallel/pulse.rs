@@ -42,16 +42,10 @@ impl Pulse {
             thread: Some(thread),
         }
     }
-
-    /// Stops the heartbeats (before the rank leaves MPI: no thread may use it then).
-    pub fn stop(mut self) {
-        self.stop.store(true, Ordering::Relaxed);
-        if let Some(thread) = self.thread.take() {
-            let _ = thread.join();
-        }
-    }
 }
 
+/// Dropping the pulse stops the heartbeats (before the rank leaves MPI: no thread may use it
+/// then; see `MpiSession`).
 impl Drop for Pulse {
     fn drop(&mut self) {
         self.stop.store(true, Ordering::Relaxed);

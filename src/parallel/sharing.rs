@@ -75,9 +75,7 @@ impl Sharing for Centralised {
     fn on_message(&mut self, core: &mut MasterCore<'_, '_>, source: i32, message: Message) -> Result<(), String> {
         match message {
             Message::RecordsUp { thread, records } => {
-                core.relay.share(source as usize, records);
-                let records = core.relay.catch_up(source as usize);
-                core.sends.send(source, &Message::RecordsDown { thread, records });
+                core.sync(source, thread, records);
                 Ok(())
             }
             other => Err(unexpected(source, &other)),

@@ -82,15 +82,9 @@ impl Sharing for ComponentSharing {
                     self.order(core, share);
                 }
             }
-            Message::RecordsUp { thread, records } => {
-                core.relay.share(source as usize, records);
-                let records = core.relay.catch_up(source as usize);
-                core.sends.send(source, &Message::RecordsDown { thread, records });
-            }
+            Message::RecordsUp { thread, records } => core.sync(source, thread, records),
             Message::PaStatus { queue, done, records } => {
-                core.relay.share(source as usize, records);
-                let records = core.relay.catch_up(source as usize);
-                core.sends.send(source, &Message::RecordsDown { thread: 0, records });
+                core.sync(source, 0, records);
                 self.ledger.pa_done(source, done)?;
                 let log = self.pa_logs.get_mut(&source).expect("a PA, or pa_done refused it");
                 log.done = done;
