@@ -1,7 +1,7 @@
 //! Light sources: punctual lights (KHR_lights_punctual) and emissive triangles, with the
 //! sampling the direct component needs.
 
-use super::light_tree::{Item, LightTree};
+use super::light_tree::{Item, LightTree, Receiver};
 use crate::sys::scene_io::{GltfLight, LightType};
 use glam::Vec3;
 
@@ -166,6 +166,8 @@ impl EmitterSet {
                     lo: a.min(b).min(d),
                     hi: a.max(b).max(d),
                     power,
+                    anchor: t.p0,
+                    front: t.normal,
                 })
             })
             .collect();
@@ -207,13 +209,14 @@ impl EmitterSet {
         (self.cdf[index] - lo) / self.total_power
     }
 
-    /// Chooses a triangle for a shading point at `point` through the light tree with `u1`, and
-    /// a uniform point on it with `u2`, `u3`.
-    pub fn sample(&self, point: Vec3, u1: f32, u2: f32, u3: f32) -> Option<EmitterPoint> {
+    /// Chooses a triangle for a shading point at `point` with unit shading normal `normal`
+    /// through the light tree with `u1`, and a uniform point on it with `u2`, `u3`. None where
+    /// no emitter can light the point (all behind its tangent plane or facing away).
+    pub fn sample(&self, point: Vec3, normal: Vec3, u1: f32, u2: f32, u3: f32) -> Option<EmitterPoint> {
         if self.triangles.is_empty() || self.total_power.is_nan() || self.total_power <= 0.0 {
             return None;
         }
-        let (index, probability) = self.tree.pick(point, u1 as f64)?;
+        let (index, probability) = self.tree.pick(Receiver { point, normal }, u1 as f64)?;
         let t = &self.triangles[index];
         // Uniform point on a triangle by the square-root warp.
         let su = u2.sqrt();
@@ -257,10 +260,14 @@ mod tests {
         assert!((total - 1.0).abs() < 1e-9);
         // Seen from far away the tree's estimate is the power alone.
         let far = Vec3::new(0.0, 0.0, 1e4);
+        let facing_down = Receiver {
+            point: far,
+            normal: -Vec3::Z,
+        };
         for i in 0..3 {
-            assert!((set.tree.probability(far, i) - set.pick_probability(i)).abs() < 1e-5);
+            assert!((set.tree.probability(facing_down, i) - set.pick_probability(i)).abs() < 1e-5);
         }
-        let p = set.sample(far, 0.05, 0.3, 0.7).unwrap();
+        let p = set.sample(far, -Vec3::Z, 0.05, 0.3, 0.7).unwrap();
         let picked =
             (0..3).find(|&i| (p.pdf_area as f64 * set.triangles[i].area as f64 - set.pick_probability(i)).abs() < 1e-5);
         assert!(picked.is_some(), "pdf_area {} matches no triangle", p.pdf_area);
@@ -329,7 +336,7 @@ mod tests {
         let samples = 400_000;
         let mut sum = 0.0f64;
         for _ in 0..samples {
-            let Some(p) = set.sample(point, rng.next_f32(), rng.next_f32(), rng.next_f32()) else {
+            let Some(p) = set.sample(point, n, rng.next_f32(), rng.next_f32(), rng.next_f32()) else {
                 continue;
             };
             let offset = p.position - point;
@@ -340,5 +347,65 @@ mod tests {
         }
         let mean = sum / samples as f64;
         assert!((mean - exact).abs() < 0.01 * exact, "estimate {mean}, exact {exact}");
+    }
+    #[test]
+    fn estimate_stays_unbiased_where_most_emitters_cannot_light_the_point() {
+        // Three kinds of emitters around a floor point facing up: on the ceiling facing down
+        // (they light it), on the ceiling facing up (the point is behind them) and under the
+        // floor (behind the point's tangent plane). The tree gives the dark ones no picks (a pick
+        // may end in none at all, where a part of the tree holds only dark ones); the estimate
+        // must still be the lit ones' exact irradiance.
+        let mut rng = crate::sampling::Rng::new(5, 0);
+        let (point, n) = (Vec3::new(0.3, 0.1, 0.0), Vec3::Z);
+        let mut triangles = Vec::new();
+        let mut exact = 0.0f64;
+        for k in 0..150u32 {
+            let x = rng.next_f32() * 8.0 - 4.0;
+            let y = rng.next_f32() * 8.0 - 4.0;
+            let size = 0.1 + 0.3 * rng.next_f32();
+            let (z, facing_down) = match k % 3 {
+                0 => (3.0, true),
+                1 => (3.0, false),
+                _ => (-2.0, false),
+            };
+            let (e1, e2) = if facing_down {
+                (Vec3::Y * size, Vec3::X * size)
+            } else {
+                (Vec3::X * size, Vec3::Y * size)
+            };
+            let t = EmitterTriangle {
+                p0: Vec3::new(x, y, z),
+                e1,
+                e2,
+                normal: e1.cross(e2).normalize(),
+                area: 0.5 * size * size,
+                radiance: Vec3::splat(1.0 + 4.0 * rng.next_f32()),
+                geom_id: 0,
+                prim_id: k,
+            };
+            if k % 3 == 0 {
+                exact += triangle_irradiance(&t, point, n);
+            }
+            triangles.push(t);
+        }
+        let set = EmitterSet::new(triangles);
+        let samples = 300_000;
+        let (mut sum, mut none) = (0.0f64, 0);
+        for _ in 0..samples {
+            let Some(p) = set.sample(point, n, rng.next_f32(), rng.next_f32(), rng.next_f32()) else {
+                none += 1;
+                continue;
+            };
+            let offset = p.position - point;
+            let d2 = offset.length_squared();
+            let wi = offset / d2.sqrt();
+            let geometry = n.dot(wi) * -p.normal.dot(wi) / d2;
+            assert!(geometry > 0.0, "picked an emitter that cannot light the point");
+            sum += (p.radiance.x * geometry / p.pdf_area) as f64;
+        }
+        let mean = sum / samples as f64;
+        assert!((mean - exact).abs() < 0.01 * exact, "estimate {mean}, exact {exact}");
+        // By power alone two picks in three would go to dark emitters.
+        assert!(none < samples / 2, "{none} of {samples} picks found no emitter");
     }
 }

@@ -109,7 +109,7 @@ pub fn direct_light(
         let side = crate::sampling::grid_side(strata.total.max(1));
         for k in 0..emitter_samples {
             let (u1, u2, u3) = strata.uniforms(k, side, rng);
-            let Some(light) = scene.emitters.sample(hit.position, u1, u2, u3) else {
+            let Some(light) = scene.emitters.sample(hit.position, hit.normal, u1, u2, u3) else {
                 continue;
             };
             let offset = light.position - hit.position;
