@@ -299,15 +299,15 @@ mod tests {
         // Emitters along x from 0 to 9.8, shining up; the receiver stands at x = 5.
         let items: Vec<Item> = (0..50).map(|i| item(i as f32 * 0.2, 1.0)).collect();
         let tree = LightTree::new(&items);
-        // A wall facing +x at x = 5: only the emitters wholly beyond it can light it.
+        // A wall facing +x at x = 5: only the emitters reaching beyond it can light it.
         let wall = Receiver {
             point: Vec3::new(5.0, 0.05, 0.5),
             normal: Vec3::X,
         };
         let lit = |i: usize| items[i].hi.x > 5.0;
-        for i in 0..items.len() {
+        for (i, it) in items.iter().enumerate() {
             let p = tree.probability(wall, i);
-            assert_eq!(p > 0.0, lit(i), "emitter {i} at x {}: probability {p}", items[i].lo.x);
+            assert_eq!(p > 0.0, lit(i), "emitter {i} at x {}: probability {p}", it.lo.x);
         }
         let total: f64 = (0..items.len()).map(|i| tree.probability(wall, i)).sum();
         assert!((total - 1.0).abs() < 1e-9, "the lit emitters share every pick: {total}");
