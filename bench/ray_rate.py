@@ -1,0 +1,82 @@
+#!/usr/bin/env python3
+"""The renderer's ray rate against Embree's own on the same scene (issue 18's target: at -ab 2
+at least 60 % of `icrender bench rays`).
+
+    python3 bench/ray_rate.py                      # conference room and Sibenik, -ab 2
+    python3 bench/ray_rate.py --scenes conference --repeats 5
+
+For each scene, one thread throughout, alternating the two measurements --repeats times and
+keeping each one's best (interference from other work only ever slows a run down):
+  - Embree alone: `icrender bench rays --threads 1`, its incoherent rays (random origins in the
+    scene's bounds, random directions: rays that cross the scene, as hemisphere rays do);
+  - the renderer: a render at the bench's quality (peers.py's highest conference setting) with
+    --stats, its rays of every kind (primary, shadow, hemisphere) over the rendering thread's
+    busy time (wall clock, as the Embree bench measures) and over its CPU time.
+The ratio is what the renderer keeps of Embree's rate; the rest is shading, light sampling,
+the cache and hit reconstruction. Prints figures only; asserts nothing.
+"""
+
+import argparse
+import json
+import os
+import re
+import subprocess
+import sys
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import common  # noqa: E402
+
+SCENES = {
+    "conference": os.path.join(common.SHARED_SCENES, "conference_room", "conference.gltf"),
+    "sibenik": os.path.join(common.SHARED_SCENES, "sibenik_cathedral", "sibenik.gltf"),
+    "cornell": os.path.join(common.SHARED_SCENES, "cornell_box", "CornellBox-Original.gltf"),
+}
+RENDER = "-x 320 -y 240 -ab 2 --lambertian -aa 0.1 -ad 512 -as 128 -ar 64 --spp 16 --threads 1".split()
+
+
+def embree_rate(scene, seconds):
+    out = subprocess.run([common.BINARY, "bench", "rays", scene, "--threads", "1", "--seconds", str(seconds)],
+                         capture_output=True, text=True, check=True).stdout
+    match = re.search(r"1 thread\(s\).*incoherent ([0-9.]+) Mrays/s", out)
+    if not match:
+        raise RuntimeError(f"bench rays printed no one-thread incoherent rate:\n{out}")
+    return float(match.group(1))
+
+
+def renderer_rate(scene, work):
+    out = os.path.join(work, "ray-rate.exr")
+    stats, _ = common.render(scene, out, RENDER)
+    [thread] = stats["per_thread"]
+    rays = stats["rays"]["total"]
+    return rays / thread["busy_s"] / 1e6, rays / thread["cpu_s"] / 1e6, stats["rays"]
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--scenes", default="conference,sibenik")
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--seconds", type=float, default=3.0, help="Embree bench seconds per measurement")
+    args = parser.parse_args()
+    common.build()
+    work = os.path.join(common.ROOT, "bench", "out", "ray_rate")
+    os.makedirs(work, exist_ok=True)
+    load = os.getloadavg()
+    print(f"ray_rate: load average at start {load[0]:.2f} {load[1]:.2f} {load[2]:.2f} on {os.cpu_count()} cores")
+    for name in args.scenes.split(","):
+        scene = SCENES[name]
+        embree, wall, cpu, kinds = [], [], [], None
+        for _ in range(args.repeats):
+            embree.append(embree_rate(scene, args.seconds))
+            w, c, kinds = renderer_rate(scene, work)
+            wall.append(w)
+            cpu.append(c)
+        best_embree, best_wall, best_cpu = max(embree), max(wall), max(cpu)
+        print(f"ray_rate: {name}: Embree alone {best_embree:.2f} Mrays/s (runs {' '.join(f'{e:.2f}' for e in embree)}); "
+              f"renderer {best_wall:.2f} Mrays/s by busy time (runs {' '.join(f'{w:.2f}' for w in wall)}), "
+              f"{best_cpu:.2f} by CPU time; rays {json.dumps(kinds)}")
+        print(f"ray_rate: {name}: the renderer's rate is {best_wall / best_embree * 100:.0f} % of Embree's "
+              f"({best_cpu / best_embree * 100:.0f} % by CPU time; target 60 %)")
+
+
+if __name__ == "__main__":
+    main()
