@@ -6,7 +6,6 @@
 pub mod comm;
 pub mod component;
 pub mod counters;
-pub mod link_bench;
 pub mod liveness;
 pub mod master;
 pub mod master_sends;
