@@ -60,6 +60,16 @@ pub fn kind(source: Option<i32>, kind: Kind) -> Filter {
     (source, Some(kind.tag()))
 }
 
+/// Every rank's host name, by rank, for the messages that name a rank.
+pub struct Hosts(Vec<String>);
+
+impl Hosts {
+    /// The host of `rank` ("?" if there is no such rank).
+    pub fn of(&self, rank: i32) -> &str {
+        self.0.get(rank as usize).map_or("?", String::as_str)
+    }
+}
+
 /// The world communicator, seen from one thread. Cheap to make; every thread makes its own
 /// (the handle is not shared across threads).
 pub struct Comm<'c> {
@@ -237,7 +247,7 @@ impl<'c> Comm<'c> {
     }
 
     /// Every rank's host (MPI processor) name, by rank. A collective: every rank calls it.
-    pub fn host_names(&self) -> Vec<String> {
+    pub fn host_names(&self) -> Hosts {
         use mpi::collective::CommunicatorCollectives;
         const LEN: usize = 64;
         let name = mpi::environment::processor_name().unwrap_or_else(|_| "?".into());
@@ -246,9 +256,11 @@ impl<'c> Comm<'c> {
         mine[..bytes.len().min(LEN)].copy_from_slice(&bytes[..bytes.len().min(LEN)]);
         let mut all = vec![0u8; LEN * self.size() as usize];
         self.world.all_gather_into(&mine[..], &mut all[..]);
-        all.chunks_exact(LEN)
-            .map(|c| String::from_utf8_lossy(&c[..c.iter().position(|&b| b == 0).unwrap_or(LEN)]).into_owned())
-            .collect()
+        Hosts(
+            all.chunks_exact(LEN)
+                .map(|c| String::from_utf8_lossy(&c[..c.iter().position(|&b| b == 0).unwrap_or(LEN)]).into_owned())
+                .collect(),
+        )
     }
 
     /// Waits until every rank has come here. A collective: every rank calls it.

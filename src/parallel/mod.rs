@@ -8,7 +8,6 @@ pub mod component;
 pub mod counters;
 pub mod liveness;
 pub mod master;
-pub mod master_sends;
 pub mod prepass;
 pub mod protocol;
 pub mod pulse;
@@ -319,11 +318,10 @@ pub fn run(job_in: &ParallelJob<'_>) -> CommandResult {
     // ends MPI.
     liveness::begin(size as usize);
     let silence_limit = job_in.silence_limit;
-    let host_of = |r: i32| hosts.get(r as usize).map_or("?", String::as_str).to_string();
     let lost_master = format!(
         "rank {rank} on {}: no word from the master (rank 0 on {}) for {:.0} s: it is gone or hangs; this rank ends",
-        host_of(rank),
-        host_of(0),
+        hosts.of(rank),
+        hosts.of(0),
         silence_limit.as_secs_f64()
     );
     let pulse = (granted == Threading::Multiple).then(|| pulse::Pulse::start(silence_limit, lost_master));
@@ -473,7 +471,7 @@ fn run_component(
     comm: &Comm<'_>,
     mut job: Job,
     all_tiles: &[Tile],
-    hosts: &[String],
+    hosts: &comm::Hosts,
     wall: Instant,
     universe: MpiSession,
     resume: Option<(&Checkpoint, &Restored)>,

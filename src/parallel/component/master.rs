@@ -47,7 +47,7 @@ impl ComponentSharing {
             count: share.count as u32,
             to_pa: share.to_pa,
         };
-        core.sends.send(share.from, &message);
+        core.send(share.from, &message);
         if !share.to_pa {
             self.ledger.forward_ordered(share.to);
         }
@@ -61,7 +61,7 @@ impl Sharing for ComponentSharing {
         core.relay.preload(initial.records);
         for &pa in &self.roles.pas {
             let records = core.relay.catch_up(pa as usize);
-            core.sends.send(pa, &Message::InitialRecords(records));
+            core.send(pa, &Message::InitialRecords(records));
         }
     }
 
@@ -113,7 +113,7 @@ impl Sharing for ComponentSharing {
             .map(|(r, log)| {
                 format!(
                     "PA {r} (rank {r}, host {}, last queue {}, computed {})",
-                    core.plan.host(*r),
+                    core.plan.hosts.of(*r),
                     self.balancer.queue(*r),
                     log.done
                 )
@@ -123,7 +123,7 @@ impl Sharing for ComponentSharing {
             .ledger
             .unflushed()
             .iter()
-            .map(|r| format!("PR {r} (host {})", core.plan.host(*r)))
+            .map(|r| format!("PR {r} (host {})", core.plan.hosts.of(*r)))
             .collect();
         let list = |what: &str, items: &[String]| {
             if items.is_empty() {
@@ -136,7 +136,7 @@ impl Sharing for ComponentSharing {
             "rank {} (host {}) has been silent for {:.0} s; {}{}missing: the indirect light of every pixel whose \
              requests those ranks held, and the pixels of unfinished PRs (requests reported sent {}, computed {})",
             lost.rank,
-            core.plan.host(lost.rank),
+            core.plan.hosts.of(lost.rank),
             lost.seconds,
             list("silent", &quiet),
             list("unfinished", &unfinished),
@@ -151,7 +151,7 @@ impl Sharing for ComponentSharing {
     fn gather(&mut self, core: &mut MasterCore<'_, '_>) -> Result<(), String> {
         let size = core.comm.size();
         for rank in 1..size {
-            core.sends.send(rank, &Message::Finish);
+            core.send(rank, &Message::Finish);
         }
         let mut has_image = vec![false; size as usize];
         has_image[0] = true;
@@ -187,7 +187,7 @@ impl Sharing for ComponentSharing {
                         thread: 0,
                         records: Records::default(),
                     };
-                    core.sends.send(source, &reply);
+                    core.send(source, &reply);
                 }
                 other => {
                     return Err(format!(
