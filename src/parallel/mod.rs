@@ -31,6 +31,7 @@ use crate::tracer::Tracer;
 use comm::{Comm, Counters};
 use mpi::Threading;
 use protocol::Message;
+use sharing::{TraditionalSharing, WorkerSharing};
 use std::time::{Duration, Instant};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -373,20 +374,14 @@ pub fn run(job_in: &ParallelJob<'_>) -> CommandResult {
     let sync = SyncThreshold::of(job_in.sync, SyncThreshold::TRADITIONAL);
     let persist_local = job_in.cache_file;
     // The mode's two sides: how workers share, and the master's policy.
-    let (worker_sharing, mut sharing): (worker::WorkerSharing, Box<dyn master::Sharing>) = match mode {
-        Mode::Centralised => (
-            worker::WorkerSharing::ThroughMaster,
-            Box::new(sharing::Centralised::new(threads)),
-        ),
-        Mode::Broadcast => (
-            worker::WorkerSharing::ToEveryone,
-            Box::new(sharing::Broadcast::new(threads)),
-        ),
-        _ => (worker::WorkerSharing::Kept, Box::new(sharing::NoShare::new(threads))),
+    let worker_sharing = match mode {
+        Mode::Centralised => WorkerSharing::ThroughMaster,
+        Mode::Broadcast => WorkerSharing::ToEveryone,
+        _ => WorkerSharing::Kept,
     };
     if rank != 0 {
         if let Some(cache) = job.cache.as_mut()
-            && (worker_sharing != worker::WorkerSharing::Kept || persist_local)
+            && (worker_sharing != WorkerSharing::Kept || persist_local)
         {
             cache.keep_outbox();
         }
@@ -406,7 +401,8 @@ pub fn run(job_in: &ParallelJob<'_>) -> CommandResult {
         resume,
         workers_have_cache: prepass.is_some(),
     };
-    let result = match master::run(&comm, &plan, sharing.as_mut()) {
+    let mut sharing = TraditionalSharing::new(worker_sharing, threads);
+    let result = match master::run(&comm, &plan, &mut sharing) {
         Ok(r) => r,
         Err(e) => end_job(&comm, job.cache.as_ref(), &e),
     };

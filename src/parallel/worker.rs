@@ -5,6 +5,7 @@
 
 use super::comm::{Comm, Counters, kind};
 use super::protocol::{FinishedTile, Kind, Message, Records};
+use super::sharing::WorkerSharing;
 use super::{SyncThreshold, WorkerSetup};
 use super::{rank_report, send_report};
 use crate::irradiance::IrradianceCache;
@@ -13,17 +14,6 @@ use crate::shading::{Integrator, RayCounts};
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Instant;
-
-/// A traditional mode, as its workers share records (paper, section 4).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum WorkerSharing {
-    /// noshare: each worker keeps its records.
-    Kept,
-    /// centralised: through the master, which answers with the records the worker lacks.
-    ThroughMaster,
-    /// broadcast: to every other rank, and a receiving thread merges theirs.
-    ToEveryone,
-}
 
 /// Sends what the cache has gathered since the last share, the mode's way. `thread` is the
 /// calling rendering thread (replies come back on its own tag).
