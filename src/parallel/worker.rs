@@ -6,11 +6,10 @@
 use super::comm::{Comm, Counters, kind};
 use super::protocol::{FinishedTile, Kind, Message, Records};
 use super::sharing::WorkerSharing;
-use super::{SyncThreshold, WorkerSetup};
-use super::{rank_report, send_report};
+use super::{SyncThreshold, WorkerSetup, send_report};
 use crate::irradiance::IrradianceCache;
 use crate::render::{ThreadClock, ThreadStats, render_tile};
-use crate::shading::{Integrator, RayCounts};
+use crate::shading::RayCounts;
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Instant;
@@ -102,7 +101,7 @@ pub fn run(setup: &WorkerSetup<'_>, mode: WorkerSharing, sync: SyncThreshold, pe
     let listener_counters = Counters::default();
     let comm = Comm::new(&counters);
     let start = Instant::now();
-    let cache = setup.cache;
+    let cache = setup.cache();
     let received = AtomicU64::new(0);
     let rejected = AtomicU64::new(0);
 
@@ -111,7 +110,7 @@ pub fn run(setup: &WorkerSetup<'_>, mode: WorkerSharing, sync: SyncThreshold, pe
         records.records.into_iter().for_each(|r| cache.insert_shared(r));
     }
     let share_lock = Mutex::new(());
-    let threads = setup.settings.threads.max(1) as u32;
+    let threads = setup.job.settings.threads.max(1) as u32;
     let peers = comm.size() as usize - 2;
     let thread_stats: Vec<ThreadStats> = std::thread::scope(|scope| {
         let listener = (mode == WorkerSharing::ToEveryone && cache.is_some()).then(|| {
@@ -122,8 +121,7 @@ pub fn run(setup: &WorkerSetup<'_>, mode: WorkerSharing, sync: SyncThreshold, pe
                 let (counters, received, rejected, share_lock) = (&counters, &received, &rejected, &share_lock);
                 scope.spawn(move || {
                     let comm = Comm::new(counters);
-                    let integrator = Integrator::new(setup.scene, setup.tracer, setup.shading, cache)
-                        .cache_frozen(setup.settings.prepass);
+                    let integrator = setup.integrator();
                     let mut stats = ThreadStats::default();
                     let clock = ThreadClock::start();
                     let mut finished: Option<FinishedTile> = None;
@@ -151,8 +149,8 @@ pub fn run(setup: &WorkerSetup<'_>, mode: WorkerSharing, sync: SyncThreshold, pe
                         };
                         let pixels = render_tile(
                             &integrator,
-                            setup.camera,
-                            setup.settings,
+                            &setup.job.camera,
+                            &setup.job.settings,
                             tile,
                             &mut stats.rays,
                             &mut after_pixel,
@@ -169,8 +167,7 @@ pub fn run(setup: &WorkerSetup<'_>, mode: WorkerSharing, sync: SyncThreshold, pe
                 })
             })
             .collect();
-        let mut stats: Vec<ThreadStats> = renderers.into_iter().map(|r| r.join().unwrap_or_default()).collect();
-        crate::render::add_prepass_work(&mut stats, setup.prepass);
+        let stats: Vec<ThreadStats> = renderers.into_iter().map(|r| r.join().unwrap_or_default()).collect();
         // What is left to share goes out now; broadcast ends with the end marker so every
         // receiver knows when it has everything.
         if let Some(cache) = cache {
@@ -199,13 +196,7 @@ pub fn run(setup: &WorkerSetup<'_>, mode: WorkerSharing, sync: SyncThreshold, pe
         stats
     });
 
-    let mut report = rank_report(
-        comm.rank(),
-        "worker",
-        &thread_stats,
-        &[&counters, &listener_counters, setup.traffic_before],
-        counters.idle_s(),
-    );
+    let mut report = setup.report(&comm, "worker", thread_stats, &listener_counters);
     report.records_received = received.load(Ordering::Relaxed);
     report.records_rejected = rejected.load(Ordering::Relaxed);
     report.wall_s = start.elapsed().as_secs_f64();

@@ -11,9 +11,8 @@ use crate::image::framebuffer::FrameBuffer;
 use crate::irradiance::IrradianceCache;
 use crate::parallel::comm::{Comm, Counters, kind};
 use crate::parallel::protocol::{Kind, Message, Records, Requests};
-use crate::parallel::{SyncThreshold, WorkerSetup, rank_report, send_report};
+use crate::parallel::{SyncThreshold, WorkerSetup, send_report};
 use crate::render::{ThreadClock, ThreadStats};
-use crate::shading::Integrator;
 use crate::shading::request::AmbientRequest;
 use crate::shading::request::RequestResult;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -162,8 +161,8 @@ pub fn run(setup: &WorkerSetup<'_>, sync: SyncThreshold, seed: u64, journal: boo
     let comm_counters = Counters::default();
     let comm = Comm::new(&counters);
     let start = Instant::now();
-    let (width, height) = (setup.camera.width, setup.camera.height);
-    let cache = setup.cache;
+    let (width, height) = (setup.job.camera.width, setup.job.camera.height);
+    let cache = setup.cache();
     let queue = Mutex::new(Queue {
         requests: RequestQueue::new(width, grid),
         finish: false,
@@ -200,8 +199,7 @@ pub fn run(setup: &WorkerSetup<'_>, sync: SyncThreshold, seed: u64, journal: boo
                 bound,
             )
         });
-        let integrator =
-            Integrator::new(setup.scene, setup.tracer, setup.shading, cache).cache_frozen(setup.settings.prepass);
+        let integrator = setup.integrator();
         let clock = ThreadClock::start();
         let mut reported = u64::MAX;
         // Syncs with the master: new records up, and the queue length and the count of
@@ -280,15 +278,7 @@ pub fn run(setup: &WorkerSetup<'_>, sync: SyncThreshold, seed: u64, journal: boo
     }
 
     comm.send(0, &Message::Image(frame.to_floats()));
-    let mut threads = vec![stats];
-    crate::render::add_prepass_work(&mut threads, setup.prepass);
-    let mut report = rank_report(
-        comm.rank(),
-        "pa",
-        &threads,
-        &[&counters, &comm_counters, setup.traffic_before],
-        counters.idle_s(),
-    );
+    let mut report = setup.report(&comm, "pa", vec![stats], &comm_counters);
     report.records_received = replies.records.load(Ordering::Relaxed);
     report.records_rejected = tallies.rejected.load(Ordering::Relaxed);
     report.requests_computed = done;

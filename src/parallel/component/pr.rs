@@ -10,9 +10,8 @@ use crate::image::framebuffer::FrameBuffer;
 use crate::parallel::comm::kind;
 use crate::parallel::comm::{Comm, Counters, Envelope, Marker};
 use crate::parallel::protocol::{FinishedTile, Kind, Message, Records, Requests};
-use crate::parallel::{SyncThreshold, WorkerSetup, rank_report, send_report};
+use crate::parallel::{SyncThreshold, WorkerSetup, send_report};
 use crate::render::{ThreadClock, ThreadStats, render_tile};
-use crate::shading::Integrator;
 use crate::shading::request::RequestBuffer;
 use crate::tiles::store_tile;
 use std::collections::HashMap;
@@ -170,11 +169,10 @@ fn render_and_help(
     let counters = Counters::default();
     let comm = Comm::new(&counters);
     let start = Instant::now();
-    let (width, height) = (setup.camera.width, setup.camera.height);
+    let (width, height) = (setup.job.camera.width, setup.job.camera.height);
     let mut frame = FrameBuffer::new(width, height);
     let sink = RequestBuffer::default();
-    let mut integrator =
-        Integrator::new(setup.scene, setup.tracer, setup.shading, setup.cache).cache_frozen(setup.settings.prepass);
+    let mut integrator = setup.integrator();
     if !roles.pas.is_empty() {
         integrator = integrator.deferring(&sink);
     }
@@ -201,7 +199,7 @@ fn render_and_help(
         let Ok(Message::Work { tile, records, .. }) = reply.message else {
             return None;
         };
-        if let Some(cache) = setup.cache {
+        if let Some(cache) = setup.cache() {
             *received += records.records.len() as u64;
             *rejected += records.rejected as u64;
             records.records.into_iter().for_each(|r| cache.insert_shared(r));
@@ -228,11 +226,18 @@ fn render_and_help(
         // The outgoing buffer is empty here (flushed at every tile's end), so what this tile
         // sent is the change in the count sent.
         let sent_before = sender.sent;
-        let pixels = render_tile(&integrator, setup.camera, setup.settings, tile, &mut stats.rays, |_| {
-            if sink.len() >= send_at {
-                sender.send(&sink);
-            }
-        });
+        let pixels = render_tile(
+            &integrator,
+            &setup.job.camera,
+            &setup.job.settings,
+            tile,
+            &mut stats.rays,
+            |_| {
+                if sink.len() >= send_at {
+                    sender.send(&sink);
+                }
+            },
+        );
         // The tile's last requests go to its PA now, not with the next tile's.
         sender.send(&sink);
         if journal {
@@ -261,7 +266,7 @@ fn render_and_help(
     // Helping: compute what the master has a PA forward, until it says everything is done.
     let mut helped = 0u64;
     loop {
-        let records = setup.cache.map_or_else(Vec::new, |c| c.take_outbox());
+        let records = setup.cache().map_or_else(Vec::new, |c| c.take_outbox());
         send_results(&comm, &mut results);
         let idle = Message::Idle {
             sent: sender.sent,
@@ -284,7 +289,7 @@ fn render_and_help(
                         journal.then_some(&mut results),
                     );
                     // A helper shares its records as often as a PA does.
-                    if let Some(cache) = setup.cache
+                    if let Some(cache) = setup.cache()
                         && sync.reached(cache.outbox_len())
                     {
                         send_results(&comm, &mut results);
@@ -304,15 +309,7 @@ fn render_and_help(
     clock.stop(&mut stats);
 
     comm.send(0, &Message::Image(frame.to_floats()));
-    let mut threads = vec![stats.clone()];
-    crate::render::add_prepass_work(&mut threads, setup.prepass);
-    let mut report = rank_report(
-        comm.rank(),
-        "pr",
-        &threads,
-        &[&counters, courier_counters, setup.traffic_before],
-        counters.idle_s(),
-    );
+    let mut report = setup.report(&comm, "pr", vec![stats], courier_counters);
     report.records_received = received;
     report.records_rejected = rejected;
     report.requests_sent = sender.sent;
