@@ -98,13 +98,14 @@ impl<'c> Comm<'c> {
     }
 
     pub fn send(&self, dest: i32, message: &Message) {
-        self.send_bytes(dest, message.tag(), &message.encode());
+        let data = message.encode();
+        self.world.process_at_rank(dest).send_with_tag(&data[..], message.tag());
+        self.count_sent(data.len());
     }
 
-    fn send_bytes(&self, dest: i32, tag: Tag, data: &[u8]) {
-        self.world.process_at_rank(dest).send_with_tag(data, tag);
+    fn count_sent(&self, bytes: usize) {
         self.counters.messages_sent.fetch_add(1, Ordering::Relaxed);
-        self.counters.bytes_sent.fetch_add(data.len() as u64, Ordering::Relaxed);
+        self.counters.bytes_sent.fetch_add(bytes as u64, Ordering::Relaxed);
     }
 
     /// Sends like `send`, but waits at most `limit` for the message to leave: one too large to
@@ -125,8 +126,7 @@ impl<'c> Comm<'c> {
                 match stalled() {}
             }
         });
-        self.counters.messages_sent.fetch_add(1, Ordering::Relaxed);
-        self.counters.bytes_sent.fetch_add(data.len() as u64, Ordering::Relaxed);
+        self.count_sent(data.len());
     }
 
     /// Sends an empty request buffer as a marker, with a synchronous send: it completes only
@@ -138,10 +138,7 @@ impl<'c> Comm<'c> {
             .world
             .process_at_rank(dest)
             .immediate_synchronous_send_with_tag(StaticScope, marker, tag);
-        self.counters.messages_sent.fetch_add(1, Ordering::Relaxed);
-        self.counters
-            .bytes_sent
-            .fetch_add(marker.len() as u64, Ordering::Relaxed);
+        self.count_sent(marker.len());
         Marker(request)
     }
 
@@ -201,15 +198,10 @@ impl<'c> Comm<'c> {
         })
     }
 
-    /// Waits for a matching message, pausing between polls; the wait counts as idle time.
-    /// Gives up after `timeout` (None: never) and returns None.
-    pub fn receive(&self, source: Option<i32>, tag: Option<Tag>, timeout: Option<Duration>) -> Option<Envelope> {
-        self.receive_one_of(&[(source, tag)], timeout)
-    }
-
-    /// Like `receive`, for the first message matching any of several filters, tried in order
-    /// at every poll. A heartbeat a filter for any tag takes is noted, not returned.
-    pub fn receive_one_of(&self, filters: &[Filter], timeout: Option<Duration>) -> Option<Envelope> {
+    /// Waits for the first message matching any of the filters, tried in order at every poll,
+    /// pausing between polls; the wait counts as idle time. Gives up after `timeout` (None:
+    /// never) and returns None. A heartbeat a filter for any tag takes is noted, not returned.
+    pub fn receive(&self, filters: &[Filter], timeout: Option<Duration>) -> Option<Envelope> {
         let poll = || {
             filters
                 .iter()
@@ -227,7 +219,7 @@ impl<'c> Comm<'c> {
         result
     }
 
-    /// Like `receive_one_of`, for a master that must notice a lost rank: every second without
+    /// Like `receive`, for a master that must notice a lost rank: every second without
     /// a message it checks whether a rank `awaited` holds true for has been silent for `limit`
     /// (see `liveness`), and gives up with that rank if so.
     pub fn receive_live(
@@ -237,7 +229,7 @@ impl<'c> Comm<'c> {
         awaited: impl Fn(i32) -> bool,
     ) -> Result<Envelope, Silence> {
         loop {
-            if let Some(envelope) = self.receive_one_of(filters, Some(limit.min(Duration::from_secs(1)))) {
+            if let Some(envelope) = self.receive(filters, Some(limit.min(Duration::from_secs(1)))) {
                 return Ok(envelope);
             }
             if let Some(silence) = super::liveness::lost(self.size(), limit, &awaited) {

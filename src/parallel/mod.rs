@@ -26,8 +26,10 @@ use crate::stats::{RankReport, RenderStats, ThreadReport};
 use crate::tiles::{Tile, tiles};
 use comm::{Comm, Counters, Hosts};
 use mpi::Threading;
-use protocol::Message;
+use protocol::{Message, Records};
 use sharing::{TraditionalSharing, WorkerSharing};
+use std::sync::atomic::AtomicU64;
+use std::sync::atomic::Ordering::Relaxed;
 use std::time::{Duration, Instant};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -119,7 +121,6 @@ impl SyncThreshold {
 
 /// A rank's report of its messages and waiting alone: the master's.
 pub fn traffic_report(rank: i32, role: &str, counters: &[&Counters], idle_s: f64) -> RankReport {
-    use std::sync::atomic::Ordering::Relaxed;
     let sum = |f: &dyn Fn(&Counters) -> u64| counters.iter().map(|c| f(c)).sum::<u64>();
     RankReport {
         rank: rank as u32,
@@ -168,6 +169,31 @@ fn launcher_pid() -> Option<u32> {
 fn pid_in_session_dir(dir: &str) -> Option<u32> {
     dir.split('/')
         .find_map(|part| part.strip_prefix("pid.").and_then(|p| p.parse().ok()))
+}
+
+/// The records a worker took in from other ranks, and those it refused, for its report.
+#[derive(Default)]
+pub struct Intake {
+    received: AtomicU64,
+    rejected: AtomicU64,
+}
+
+impl Intake {
+    /// Counts `records` (and those refused on arrival) and adds them to the rank's cache.
+    pub fn take(&self, cache: &IrradianceCache, records: Records) {
+        self.received.fetch_add(records.records.len() as u64, Relaxed);
+        self.reject(records.rejected);
+        records.records.into_iter().for_each(|r| cache.insert_shared(r));
+    }
+
+    pub fn reject(&self, count: usize) {
+        self.rejected.fetch_add(count as u64, Relaxed);
+    }
+
+    /// Records received and refused so far.
+    pub fn totals(&self) -> (u64, u64) {
+        (self.received.load(Relaxed), self.rejected.load(Relaxed))
+    }
 }
 
 /// What a worker renders with: this rank's job and the image's tiles.

@@ -69,7 +69,7 @@ pub fn run(comm: &Comm<'_>, job: &Job, timeout: Duration, hosts: &Hosts) -> Resu
         return failure.map_or(Ok(outcome), Err);
     }
     match comm
-        .receive_one_of(&[kind(Some(0), Kind::PrepassStart)], Some(timeout))
+        .receive(&[kind(Some(0), Kind::PrepassStart)], Some(timeout))
         .map(|m| m.message)
     {
         Some(Ok(Message::PrepassStart(start))) => start.records.into_iter().for_each(|r| cache.insert_shared(r)),
@@ -81,7 +81,7 @@ pub fn run(comm: &Comm<'_>, job: &Job, timeout: Duration, hosts: &Hosts) -> Resu
         }
         comm.send(0, &Message::PrepassRound(mine));
         match comm
-            .receive_one_of(&[kind(Some(0), Kind::PrepassRound)], Some(timeout))
+            .receive(&[kind(Some(0), Kind::PrepassRound)], Some(timeout))
             .map(|m| m.message)
         {
             Some(Ok(Message::PrepassRound(round))) => round,

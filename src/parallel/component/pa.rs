@@ -98,7 +98,7 @@ fn communicate(
             } else {
                 (&filters[..], None)
             };
-            let Some(msg) = comm.receive_one_of(accepted, wait) else {
+            let Some(msg) = comm.receive(accepted, wait) else {
                 continue;
             };
             match msg.message {
@@ -176,7 +176,7 @@ pub fn run(setup: &WorkerSetup<'_>, sync: SyncThreshold, seed: u64, journal: boo
         records: AtomicU64::new(0),
     };
 
-    if let Some(initial) = comm.receive_one_of(&[kind(Some(0), Kind::InitialRecords)], None)
+    if let Some(initial) = comm.receive(&[kind(Some(0), Kind::InitialRecords)], None)
         && let (Some(cache), Ok(Message::InitialRecords(batch))) = (cache, initial.message)
     {
         batch.records.into_iter().for_each(|r| cache.insert_shared(r));
@@ -269,7 +269,7 @@ pub fn run(setup: &WorkerSetup<'_>, sync: SyncThreshold, seed: u64, journal: boo
     // every status, also after FINISH.
     while replies.pending.load(Ordering::Acquire) > 0 {
         match comm
-            .receive_one_of(&[kind(Some(0), Kind::RecordsDown)], None)
+            .receive(&[kind(Some(0), Kind::RecordsDown)], None)
             .map(|r| r.message)
         {
             Some(Ok(Message::RecordsDown { records, .. })) => replies.take(records),
