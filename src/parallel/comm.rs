@@ -60,6 +60,16 @@ pub fn kind(source: Option<i32>, kind: Kind) -> Filter {
     (source, Some(kind.tag()))
 }
 
+/// Every rank's host name, by rank, for the messages that name a rank.
+pub struct Hosts(Vec<String>);
+
+impl Hosts {
+    /// The host of `rank` ("?" if there is no such rank).
+    pub fn of(&self, rank: i32) -> &str {
+        self.0.get(rank as usize).map_or("?", String::as_str)
+    }
+}
+
 /// The world communicator, seen from one thread. Cheap to make; every thread makes its own
 /// (the handle is not shared across threads).
 pub struct Comm<'c> {
@@ -88,13 +98,14 @@ impl<'c> Comm<'c> {
     }
 
     pub fn send(&self, dest: i32, message: &Message) {
-        self.send_bytes(dest, message.tag(), &message.encode());
+        let data = message.encode();
+        self.world.process_at_rank(dest).send_with_tag(&data[..], message.tag());
+        self.count_sent(data.len());
     }
 
-    fn send_bytes(&self, dest: i32, tag: Tag, data: &[u8]) {
-        self.world.process_at_rank(dest).send_with_tag(data, tag);
+    fn count_sent(&self, bytes: usize) {
         self.counters.messages_sent.fetch_add(1, Ordering::Relaxed);
-        self.counters.bytes_sent.fetch_add(data.len() as u64, Ordering::Relaxed);
+        self.counters.bytes_sent.fetch_add(bytes as u64, Ordering::Relaxed);
     }
 
     /// Sends like `send`, but waits at most `limit` for the message to leave: one too large to
@@ -115,8 +126,7 @@ impl<'c> Comm<'c> {
                 match stalled() {}
             }
         });
-        self.counters.messages_sent.fetch_add(1, Ordering::Relaxed);
-        self.counters.bytes_sent.fetch_add(data.len() as u64, Ordering::Relaxed);
+        self.count_sent(data.len());
     }
 
     /// Sends an empty request buffer as a marker, with a synchronous send: it completes only
@@ -128,10 +138,7 @@ impl<'c> Comm<'c> {
             .world
             .process_at_rank(dest)
             .immediate_synchronous_send_with_tag(StaticScope, marker, tag);
-        self.counters.messages_sent.fetch_add(1, Ordering::Relaxed);
-        self.counters
-            .bytes_sent
-            .fetch_add(marker.len() as u64, Ordering::Relaxed);
+        self.count_sent(marker.len());
         Marker(request)
     }
 
@@ -191,15 +198,10 @@ impl<'c> Comm<'c> {
         })
     }
 
-    /// Waits for a matching message, pausing between polls; the wait counts as idle time.
-    /// Gives up after `timeout` (None: never) and returns None.
-    pub fn receive(&self, source: Option<i32>, tag: Option<Tag>, timeout: Option<Duration>) -> Option<Envelope> {
-        self.receive_one_of(&[(source, tag)], timeout)
-    }
-
-    /// Like `receive`, for the first message matching any of several filters, tried in order
-    /// at every poll. A heartbeat a filter for any tag takes is noted, not returned.
-    pub fn receive_one_of(&self, filters: &[Filter], timeout: Option<Duration>) -> Option<Envelope> {
+    /// Waits for the first message matching any of the filters, tried in order at every poll,
+    /// pausing between polls; the wait counts as idle time. Gives up after `timeout` (None:
+    /// never) and returns None. A heartbeat a filter for any tag takes is noted, not returned.
+    pub fn receive(&self, filters: &[Filter], timeout: Option<Duration>) -> Option<Envelope> {
         let poll = || {
             filters
                 .iter()
@@ -217,7 +219,7 @@ impl<'c> Comm<'c> {
         result
     }
 
-    /// Like `receive_one_of`, for a master that must notice a lost rank: every second without
+    /// Like `receive`, for a master that must notice a lost rank: every second without
     /// a message it checks whether a rank `awaited` holds true for has been silent for `limit`
     /// (see `liveness`), and gives up with that rank if so.
     pub fn receive_live(
@@ -227,7 +229,7 @@ impl<'c> Comm<'c> {
         awaited: impl Fn(i32) -> bool,
     ) -> Result<Envelope, Silence> {
         loop {
-            if let Some(envelope) = self.receive_one_of(filters, Some(limit.min(Duration::from_secs(1)))) {
+            if let Some(envelope) = self.receive(filters, Some(limit.min(Duration::from_secs(1)))) {
                 return Ok(envelope);
             }
             if let Some(silence) = super::liveness::lost(self.size(), limit, &awaited) {
@@ -237,7 +239,7 @@ impl<'c> Comm<'c> {
     }
 
     /// Every rank's host (MPI processor) name, by rank. A collective: every rank calls it.
-    pub fn host_names(&self) -> Vec<String> {
+    pub fn host_names(&self) -> Hosts {
         use mpi::collective::CommunicatorCollectives;
         const LEN: usize = 64;
         let name = mpi::environment::processor_name().unwrap_or_else(|_| "?".into());
@@ -246,9 +248,11 @@ impl<'c> Comm<'c> {
         mine[..bytes.len().min(LEN)].copy_from_slice(&bytes[..bytes.len().min(LEN)]);
         let mut all = vec![0u8; LEN * self.size() as usize];
         self.world.all_gather_into(&mine[..], &mut all[..]);
-        all.chunks_exact(LEN)
-            .map(|c| String::from_utf8_lossy(&c[..c.iter().position(|&b| b == 0).unwrap_or(LEN)]).into_owned())
-            .collect()
+        Hosts(
+            all.chunks_exact(LEN)
+                .map(|c| String::from_utf8_lossy(&c[..c.iter().position(|&b| b == 0).unwrap_or(LEN)]).into_owned())
+                .collect(),
+        )
     }
 
     /// Waits until every rank has come here. A collective: every rank calls it.

@@ -6,9 +6,8 @@
 //! `sharing.rs` holds the traditional modes' (paper, section 4), `component::master` component
 //! mode's (section 5).
 
-use super::comm::Comm;
+use super::comm::{Comm, Hosts};
 use super::liveness::Silence;
-use super::master_sends::MasterSends;
 use super::protocol::{FinishedTile, Message, Records};
 use super::relay::RecordRelay;
 use crate::checkpoint::{Checkpoint, Restored};
@@ -16,6 +15,7 @@ use crate::image::framebuffer::FrameBuffer;
 use crate::irradiance::IrradianceCache;
 use crate::stats::RankReport;
 use crate::tiles::{Tile, TileQueue, store_tile};
+use std::convert::Infallible;
 use std::time::{Duration, Instant};
 
 pub struct MasterResult {
@@ -34,7 +34,7 @@ pub struct Plan<'a> {
     /// How long a rank may be silent before it counts as lost.
     pub timeout: Duration,
     /// Each rank's host, for messages that name a rank.
-    pub hosts: &'a [String],
+    pub hosts: &'a Hosts,
     /// The --checkpoint journal and what an earlier run finished (those tiles are not handed out).
     pub resume: Option<(&'a Checkpoint, &'a Restored)>,
     /// Every worker already holds the cache's records (the prepass shared them).
@@ -42,10 +42,6 @@ pub struct Plan<'a> {
 }
 
 impl Plan<'_> {
-    pub fn host(&self, rank: i32) -> String {
-        self.hosts.get(rank as usize).map_or("?", String::as_str).to_string()
-    }
-
     /// The records of the cache file the workers do not hold yet.
     pub fn initial_records(&self) -> Records {
         match self.cache {
@@ -62,7 +58,7 @@ pub trait Sharing {
     fn start(&mut self, core: &mut MasterCore<'_, '_>) {
         let initial = Message::InitialRecords(core.plan.initial_records());
         for worker in 1..core.comm.size() {
-            core.sends.send(worker, &initial);
+            core.send(worker, &initial);
         }
     }
     /// Whether a finished tile's pixels are the image's (they are not when the worker keeps
@@ -91,7 +87,6 @@ pub trait Sharing {
 /// What every mode's master has and does.
 pub struct MasterCore<'a, 'c> {
     pub comm: &'a Comm<'c>,
-    pub sends: MasterSends<'a, 'c>,
     pub plan: &'a Plan<'a>,
     pub queue: TileQueue,
     pub frame: FrameBuffer,
@@ -115,12 +110,6 @@ impl<'a, 'c> MasterCore<'a, 'c> {
         };
         MasterCore {
             comm,
-            sends: MasterSends {
-                comm,
-                limit: plan.timeout,
-                hosts: plan.hosts,
-                cache: plan.cache,
-            },
             plan,
             queue: TileQueue::new(todo),
             frame,
@@ -129,6 +118,25 @@ impl<'a, 'c> MasterCore<'a, 'c> {
             reports: vec![None; size],
             turned_away: 0,
         }
+    }
+
+    /// Sends to `dest`, waiting at most the timeout for the message to leave. The master's
+    /// --timeout must hold whatever a worker's host does, but a standard MPI send of a message
+    /// too large to go eagerly waits until the receiver takes it, and a receiver whose host or
+    /// link is gone never does: the master would hang there, past its timeout, and so would the
+    /// job. Past the timeout the job ends as on any other failure (the cache file keeps what it
+    /// has), naming the rank and host that stopped taking messages.
+    pub fn send(&self, dest: i32, message: &Message) {
+        let limit = self.plan.timeout;
+        self.comm.send_within(dest, message, limit, || -> Infallible {
+            let line = format!(
+                "rank {dest} (host {}) took no message from the master for {:.0} s: its host or link is gone, or \
+                 it hangs",
+                self.plan.hosts.of(dest),
+                limit.as_secs_f64()
+            );
+            super::end_job(self.comm, self.plan.cache, &line)
+        });
     }
 
     pub fn workers(&self) -> usize {
@@ -156,7 +164,7 @@ impl<'a, 'c> MasterCore<'a, 'c> {
     pub fn sync(&mut self, source: i32, thread: u32, records: Records) {
         self.relay.share(source as usize, records);
         let records = self.relay.catch_up(source as usize);
-        self.sends.send(source, &Message::RecordsDown { thread, records });
+        self.send(source, &Message::RecordsDown { thread, records });
     }
 
     /// A finished tile from `source`: into the journal, and into the image if `keep`.
@@ -195,7 +203,7 @@ impl<'a, 'c> MasterCore<'a, 'c> {
                 let tile = self.queue.next().map(|i| i as u32);
                 self.turned_away += usize::from(tile.is_none());
                 let records = sharing.records_with_work(self, source);
-                self.sends.send(source, &Message::Work { thread, tile, records });
+                self.send(source, &Message::Work { thread, tile, records });
             }
             Message::Stats(report) => self.reports[source as usize] = Some(*report),
             Message::Results(results) => {
@@ -245,12 +253,12 @@ pub fn run(comm: &Comm<'_>, plan: &Plan<'_>, sharing: &mut dyn Sharing) -> Resul
 }
 
 /// The line that ends a job when a rank has fallen silent.
-pub fn lost_rank(silence: &Silence, hosts: &[String]) -> String {
+pub fn lost_rank(silence: &Silence, hosts: &Hosts) -> String {
     format!(
         "rank {} (host {}) has been silent for {:.0} s: its host or link is gone, or it hangs; the cache \
          file keeps every record synced before",
         silence.rank,
-        hosts.get(silence.rank as usize).map_or("?", String::as_str),
+        hosts.of(silence.rank),
         silence.seconds
     )
 }

@@ -6,10 +6,8 @@
 pub mod comm;
 pub mod component;
 pub mod counters;
-pub mod link_bench;
 pub mod liveness;
 pub mod master;
-pub mod master_sends;
 pub mod prepass;
 pub mod protocol;
 pub mod pulse;
@@ -22,17 +20,16 @@ use crate::commands::{CommandError, CommandResult, warn};
 use crate::image::framebuffer::FrameBuffer;
 use crate::irradiance::IrradianceCache;
 use crate::job::Job;
-use crate::render::RenderSettings;
 use crate::render::ThreadStats;
-use crate::scene::Scene;
-use crate::scene::view::Camera;
-use crate::shading::ShadingOptions;
+use crate::shading::Integrator;
 use crate::stats::{RankReport, RenderStats, ThreadReport};
 use crate::tiles::{Tile, tiles};
-use crate::tracer::Tracer;
-use comm::{Comm, Counters};
+use comm::{Comm, Counters, Hosts};
 use mpi::Threading;
-use protocol::Message;
+use protocol::{Message, Records};
+use sharing::{TraditionalSharing, WorkerSharing};
+use std::sync::atomic::AtomicU64;
+use std::sync::atomic::Ordering::Relaxed;
 use std::time::{Duration, Instant};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -122,29 +119,8 @@ impl SyncThreshold {
     }
 }
 
-/// A rank's report from its rendering threads and its message counters. `idle_s` is the
-/// waiting of the rendering threads (not of helper threads that wait by design).
-pub fn rank_report(rank: i32, role: &str, threads: &[ThreadStats], counters: &[&Counters], idle_s: f64) -> RankReport {
-    // Waiting is counted per rank; each rendering thread waited for its own replies.
-    let idle_per_thread = idle_s / threads.len().max(1) as f64;
-    let reports: Vec<ThreadReport> = threads.iter().map(|t| ThreadReport::new(t, idle_per_thread)).collect();
-    RankReport {
-        threads: threads.len(),
-        tiles: reports.iter().map(|t| t.tiles).sum(),
-        records_computed: reports.iter().map(|t| t.records_computed).sum(),
-        gap_records: reports.iter().map(|t| t.gap_records).sum(),
-        lookups: reports.iter().map(|t| t.lookups).sum(),
-        hits: reports.iter().map(|t| t.hits).sum(),
-        t_amb_s: reports.iter().map(|t| t.t_amb_s).sum(),
-        t_notamb_s: reports.iter().map(|t| t.t_notamb_s).sum(),
-        rays: crate::stats::RayStats::sum(reports.iter().map(|t| &t.rays)),
-        ..traffic_report(rank, role, counters, idle_s)
-    }
-}
-
 /// A rank's report of its messages and waiting alone: the master's.
 pub fn traffic_report(rank: i32, role: &str, counters: &[&Counters], idle_s: f64) -> RankReport {
-    use std::sync::atomic::Ordering::Relaxed;
     let sum = |f: &dyn Fn(&Counters) -> u64| counters.iter().map(|c| f(c)).sum::<u64>();
     RankReport {
         rank: rank as u32,
@@ -195,34 +171,80 @@ fn pid_in_session_dir(dir: &str) -> Option<u32> {
         .find_map(|part| part.strip_prefix("pid.").and_then(|p| p.parse().ok()))
 }
 
-/// What a worker renders with.
+/// The records a worker took in from other ranks, and those it refused, for its report.
+#[derive(Default)]
+pub struct Intake {
+    received: AtomicU64,
+    rejected: AtomicU64,
+}
+
+impl Intake {
+    /// Counts `records` (and those refused on arrival) and adds them to the rank's cache.
+    pub fn take(&self, cache: &IrradianceCache, records: Records) {
+        self.received.fetch_add(records.records.len() as u64, Relaxed);
+        self.reject(records.rejected);
+        records.records.into_iter().for_each(|r| cache.insert_shared(r));
+    }
+
+    pub fn reject(&self, count: usize) {
+        self.rejected.fetch_add(count as u64, Relaxed);
+    }
+
+    /// Records received and refused so far.
+    pub fn totals(&self) -> (u64, u64) {
+        (self.received.load(Relaxed), self.rejected.load(Relaxed))
+    }
+}
+
+/// What a worker renders with: this rank's job and the image's tiles.
 pub struct WorkerSetup<'a> {
-    /// What this rank did in the prepass, thread by thread (empty without one).
-    pub prepass: &'a [ThreadStats],
+    pub job: &'a Job,
+    pub tiles: &'a [Tile],
     /// The messages this rank sent and received before its role began (the prepass's), for
     /// its report.
     pub traffic_before: &'a Counters,
-    pub scene: &'a Scene,
-    pub tracer: &'a Tracer,
-    pub shading: &'a ShadingOptions,
-    pub camera: &'a Camera,
-    pub settings: &'a RenderSettings,
-    pub tiles: &'a [Tile],
-    pub cache: Option<&'a IrradianceCache>,
 }
 
 impl<'a> WorkerSetup<'a> {
     pub fn new(job: &'a Job, tiles: &'a [Tile], traffic_before: &'a Counters) -> Self {
         WorkerSetup {
-            prepass: &job.prepass_threads,
-            traffic_before,
-            scene: &job.scene,
-            tracer: &job.tracer,
-            shading: &job.shading,
-            camera: &job.camera,
-            settings: &job.settings,
+            job,
             tiles,
-            cache: job.cache.as_ref(),
+            traffic_before,
+        }
+    }
+
+    pub fn cache(&self) -> Option<&'a IrradianceCache> {
+        self.job.cache.as_ref()
+    }
+
+    /// The integrator of every worker: the rank's cache, read only after a prepass.
+    pub fn integrator(&self) -> Integrator<'a> {
+        let job = self.job;
+        Integrator::new(&job.scene, &job.tracer, &job.shading, job.cache.as_ref()).cache_frozen(job.settings.prepass)
+    }
+
+    /// This rank's report: what its rendering `threads` did (with its share of the prepass),
+    /// the messages of `comm`, of its helper thread (`helper`) and of the prepass, and as idle
+    /// time the waiting of the rendering threads on `comm` (not of the helper, which waits by
+    /// design).
+    pub fn report(&self, comm: &Comm<'_>, role: &str, mut threads: Vec<ThreadStats>, helper: &Counters) -> RankReport {
+        crate::render::add_prepass_work(&mut threads, &self.job.prepass_threads);
+        let idle_s = comm.counters.idle_s();
+        // Waiting is counted per rank; each rendering thread waited for its own replies.
+        let idle_per_thread = idle_s / threads.len().max(1) as f64;
+        let reports: Vec<ThreadReport> = threads.iter().map(|t| ThreadReport::new(t, idle_per_thread)).collect();
+        RankReport {
+            threads: threads.len(),
+            tiles: reports.iter().map(|t| t.tiles).sum(),
+            records_computed: reports.iter().map(|t| t.records_computed).sum(),
+            gap_records: reports.iter().map(|t| t.gap_records).sum(),
+            lookups: reports.iter().map(|t| t.lookups).sum(),
+            hits: reports.iter().map(|t| t.hits).sum(),
+            t_amb_s: reports.iter().map(|t| t.t_amb_s).sum(),
+            t_notamb_s: reports.iter().map(|t| t.t_notamb_s).sum(),
+            rays: crate::stats::RayStats::sum(reports.iter().map(|t| &t.rays)),
+            ..traffic_report(comm.rank(), role, &[comm.counters, helper, self.traffic_before], idle_s)
         }
     }
 }
@@ -234,6 +256,24 @@ fn threading_name(t: Threading) -> &'static str {
         Threading::Serialized => "MPI_THREAD_SERIALIZED",
         Threading::Multiple => "MPI_THREAD_MULTIPLE",
     }
+}
+
+/// Checks that MPI gives the threads the mode needs.
+fn check_threads(mode: Mode, threads: usize, granted: Threading) -> Result<(), String> {
+    if mode == Mode::Component && threads != 1 {
+        return Err(
+            "--mode component runs one rendering thread per rank (as in the paper): leave out --threads".into(),
+        );
+    }
+    let needs_multiple = mode == Mode::Broadcast || mode == Mode::Component || threads > 1;
+    if needs_multiple && granted != Threading::Multiple {
+        return Err(format!(
+            "--mode {} with {threads} thread(s) per rank needs MPI_THREAD_MULTIPLE, but the MPI library grants only {}",
+            mode.name(),
+            threading_name(granted)
+        ));
+    }
+    Ok(())
 }
 
 /// Checks that the layout can work; the same answer on every rank, so every rank can stop on
@@ -267,6 +307,31 @@ struct MpiSession {
     _universe: mpi::environment::Universe,
 }
 
+impl MpiSession {
+    /// Heartbeats from here on (see `liveness`): every rank hears from its master and the
+    /// master from every rank while the job runs (the pulse needs MPI_THREAD_MULTIPLE).
+    fn start(
+        universe: mpi::environment::Universe,
+        granted: Threading,
+        comm: &Comm<'_>,
+        hosts: &Hosts,
+        limit: Duration,
+    ) -> Self {
+        liveness::begin(comm.size() as usize);
+        let rank = comm.rank();
+        let lost_master = format!(
+            "rank {rank} on {}: no word from the master (rank 0 on {}) for {:.0} s: it is gone or hangs; this rank ends",
+            hosts.of(rank),
+            hosts.of(0),
+            limit.as_secs_f64()
+        );
+        MpiSession {
+            _pulse: (granted == Threading::Multiple).then(|| pulse::Pulse::start(limit, lost_master)),
+            _universe: universe,
+        }
+    }
+}
+
 /// Ends a job that every rank stops together: each rank says its `line` if it has one (for a
 /// verdict all ranks share, rank 0 alone has one), then all meet at a barrier before any exits.
 /// A rank that exits with an error first makes mpirun kill the job, rank 0 included, before its
@@ -279,9 +344,41 @@ fn stop_together(comm: &Comm<'_>, line: Option<&str>) -> CommandResult {
     Err(CommandError(String::new()))
 }
 
+/// What the worker ranks are, chosen alike on every rank.
+enum Layout {
+    /// A traditional mode's workers, sharing records its way.
+    Traditional(WorkerSharing),
+    /// Component mode's PAs and PRs.
+    Component(component::Roles),
+}
+
+impl Layout {
+    /// Every rank reaches the same verdict from the same scene and options.
+    fn choose(job_in: &ParallelJob<'_>, job: &Job, size: i32) -> Result<Layout, String> {
+        Ok(match job_in.mode {
+            Mode::Component => {
+                let needed = job.cache.is_some() || (job.shading.ambient_bounces > 0 && job.scene.needs().diffuse);
+                Layout::Component(component::Roles::choose(size, job_in.pa, needed)?)
+            }
+            Mode::Centralised => Layout::Traditional(WorkerSharing::ThroughMaster),
+            Mode::Broadcast => Layout::Traditional(WorkerSharing::ToEveryone),
+            _ => Layout::Traditional(WorkerSharing::Kept),
+        })
+    }
+}
+
+/// A rank once every rank has its job and the prepass (if any) is done.
+struct Ready<'a, 'c> {
+    job_in: &'a ParallelJob<'a>,
+    comm: &'a Comm<'c>,
+    job: Job,
+    tiles: Vec<Tile>,
+    hosts: Hosts,
+    prepass: Option<crate::prepass::PrepassOutcome>,
+}
+
 pub fn run(job_in: &ParallelJob<'_>) -> CommandResult {
     let wall = Instant::now();
-    let mode = job_in.mode;
     let host = job_in.host;
     // A rank never outlives its launcher (see sys::process).
     crate::sys::process::die_with_parent(launcher_pid()).map_err(CommandError)?;
@@ -293,20 +390,7 @@ pub fn run(job_in: &ParallelJob<'_>) -> CommandResult {
     let (rank, size) = (comm.rank(), comm.size());
     let fail = |message: String| stop_together(&comm, (rank == 0).then_some(message.as_str()));
     let threads = job_in.threads.unwrap_or(1);
-    if mode == Mode::Component && threads != 1 {
-        return fail(
-            "--mode component runs one rendering thread per rank (as in the paper): leave out --threads".into(),
-        );
-    }
-    let needs_multiple = mode == Mode::Broadcast || mode == Mode::Component || threads > 1;
-    if needs_multiple && granted != Threading::Multiple {
-        return fail(format!(
-            "--mode {} with {threads} thread(s) per rank needs MPI_THREAD_MULTIPLE, but the MPI library grants only {}",
-            mode.name(),
-            threading_name(granted)
-        ));
-    }
-    if let Err(e) = host.validate() {
+    if let Err(e) = check_threads(job_in.mode, threads, granted).and_then(|()| host.validate()) {
         return fail(e);
     }
     let (tile_width, tile_height) = job_in.tile;
@@ -315,34 +399,15 @@ pub fn run(job_in: &ParallelJob<'_>) -> CommandResult {
         return fail(e);
     }
     let hosts = comm.host_names();
-    // Heartbeats from here on (see `liveness`): every rank hears from its master and the
-    // master from every rank while the job runs. The pulse stops (dropped) before the universe
-    // ends MPI.
-    liveness::begin(size as usize);
-    let silence_limit = job_in.silence_limit;
-    let host_of = |r: i32| hosts.get(r as usize).map_or("?", String::as_str).to_string();
-    let lost_master = format!(
-        "rank {rank} on {}: no word from the master (rank 0 on {}) for {:.0} s: it is gone or hangs; this rank ends",
-        host_of(rank),
-        host_of(0),
-        silence_limit.as_secs_f64()
-    );
-    let pulse = (granted == Threading::Multiple).then(|| pulse::Pulse::start(silence_limit, lost_master));
-    let universe = MpiSession {
-        _pulse: pulse,
-        _universe: universe,
-    };
+    let session = MpiSession::start(universe, granted, &comm, &hosts, job_in.silence_limit);
     // From here on a failure may hit one rank only (its files, its file system): that rank says
     // why and ends the whole job, or the others would wait for it for ever.
-    if rank == 0 {
-        // Rank 0 alone writes images; the other ranks never open the image library.
-        crate::sys::image_io::open_in_background();
-        host.check_outputs().unwrap_or_else(|e| fatal(&comm, &e));
-    }
-
     // Every rank loads the scene; only the master opens the cache file.
     // With --checkpoint the master also journals finished work and keeps the cache beside it.
     let checkpoint = if rank == 0 {
+        // Rank 0 alone writes images; the other ranks never open the image library.
+        crate::sys::image_io::open_in_background();
+        host.check_outputs().unwrap_or_else(|e| fatal(&comm, &e));
         host.open_checkpoint(&all_tiles).unwrap_or_else(|e| fatal(&comm, &e))
     } else {
         None
@@ -363,198 +428,125 @@ pub fn run(job_in: &ParallelJob<'_>) -> CommandResult {
             return stop_together(&comm, line.as_deref());
         }
     };
-    let resume = checkpoint.as_ref().map(|(journal, restored)| (journal, restored));
     // The prepass: every rank ends it with the same complete cache; the modes then only read
     // it (a gap's record stays with the pixel that needed it).
     let prepass = job.settings.prepass.then(|| {
-        prepass::run(&comm, &job, silence_limit, &hosts).unwrap_or_else(|e| end_job(&comm, job.cache.as_ref(), &e))
+        prepass::run(&comm, &job, job_in.silence_limit, &hosts)
+            .unwrap_or_else(|e| end_job(&comm, job.cache.as_ref(), &e))
     });
     job.prepass_threads = prepass.as_ref().map(|p| p.threads.clone()).unwrap_or_default();
-    if mode == Mode::Component {
-        return run_component(job_in, &comm, job, &all_tiles, &hosts, wall, universe, resume, prepass);
-    }
-    let sync = SyncThreshold::of(job_in.sync, SyncThreshold::TRADITIONAL);
-    let persist_local = job_in.cache_file;
-    // The mode's two sides: how workers share, and the master's policy.
-    let (worker_sharing, mut sharing): (worker::WorkerSharing, Box<dyn master::Sharing>) = match mode {
-        Mode::Centralised => (
-            worker::WorkerSharing::ThroughMaster,
-            Box::new(sharing::Centralised::new(threads)),
-        ),
-        Mode::Broadcast => (
-            worker::WorkerSharing::ToEveryone,
-            Box::new(sharing::Broadcast::new(threads)),
-        ),
-        _ => (worker::WorkerSharing::Kept, Box::new(sharing::NoShare::new(threads))),
+    let layout = match Layout::choose(job_in, &job, size) {
+        Ok(layout) => layout,
+        Err(e) => return fail(e),
     };
-    if rank != 0 {
-        if let Some(cache) = job.cache.as_mut()
-            && (worker_sharing != worker::WorkerSharing::Kept || persist_local)
-        {
-            cache.keep_outbox();
-        }
-        let setup = WorkerSetup::new(&job, &all_tiles, &counters);
-        worker::run(&setup, worker_sharing, sync, persist_local);
-        drop(universe);
-        return Ok(());
-    }
-
-    let plan = master::Plan {
-        tiles: &all_tiles,
-        width: job_in.width,
-        height: job_in.height,
-        cache: job.cache.as_ref(),
-        timeout: silence_limit,
-        hosts: &hosts,
-        resume,
-        workers_have_cache: prepass.is_some(),
-    };
-    let result = match master::run(&comm, &plan, sharing.as_mut()) {
-        Ok(r) => r,
-        Err(e) => end_job(&comm, job.cache.as_ref(), &e),
-    };
-    finish_master(
+    let ready = Ready {
         job_in,
-        &job,
-        size,
-        threads,
-        result.frame,
-        result.ranks,
-        result.render_s,
-        wall,
-        resume.map_or(0, |(_, r)| r.count()),
-        prepass.as_ref(),
-    )?;
-    drop(universe);
-    Ok(())
-}
-
-/// Writes the master's results: statistics totals, the EXR and preview, the table.
-#[allow(clippy::too_many_arguments)]
-fn finish_master(
-    job_in: &ParallelJob<'_>,
-    job: &Job,
-    size: i32,
-    threads: usize,
-    frame: FrameBuffer,
-    ranks: Vec<RankReport>,
-    render_s: f64,
-    wall: Instant,
-    tiles_restored: usize,
-    prepass: Option<&crate::prepass::PrepassOutcome>,
-) -> CommandResult {
-    if let Some(cache) = &job.cache
-        && let Err(e) = cache.finish()
-    {
-        warn(&format!("cache file not fully written: {e}"));
-    }
-    let mut stats = RenderStats {
-        threads,
-        ..job_in.host.job_stats(job, job_in.mode.name(), size as usize, render_s)
-    };
-    stats.tiles_restored = tiles_restored as u64;
-    stats.add_ranks(ranks);
-    let mut frame = frame;
-    if let Some(prepass) = prepass {
-        stats.add_prepass(prepass);
-        crate::render::add_prepass_records(&mut frame, prepass);
-    }
-    stats.wall_s = wall.elapsed().as_secs_f64();
-    job_in.host.write(job, &frame, &stats).map_err(CommandError)?;
-    if !job_in.quiet {
-        print_table(&stats);
-    }
-    Ok(())
-}
-
-/// The component mode on every rank: the master, the PAs and the PRs.
-#[allow(clippy::too_many_arguments)]
-fn run_component(
-    job_in: &ParallelJob<'_>,
-    comm: &Comm<'_>,
-    mut job: Job,
-    all_tiles: &[Tile],
-    hosts: &[String],
-    wall: Instant,
-    universe: MpiSession,
-    resume: Option<(&Checkpoint, &Restored)>,
-    prepass: Option<crate::prepass::PrepassOutcome>,
-) -> CommandResult {
-    let rank = comm.rank();
-    let needed = job.cache.is_some() || (job.shading.ambient_bounces > 0 && job.scene.needs().diffuse);
-    // Every rank reaches the same verdict from the same scene and options.
-    let roles = match component::Roles::choose(comm.size(), job_in.pa, needed) {
-        Ok(roles) => roles,
-        Err(e) => return stop_together(comm, (rank == 0).then_some(e.as_str())),
-    };
-    if rank != 0 {
-        if let Some(cache) = job.cache.as_mut() {
-            cache.keep_outbox();
-        }
-        // The overture's grid orders each PA's queue (component::order). A PR makes no
-        // records before its pixels: its misses go to the PAs.
-        let grid = job.settings.overture;
-        job.settings.overture = 0;
-        let setup = WorkerSetup::new(&job, all_tiles, comm.counters);
-        if roles.pas.contains(&rank) {
-            component::pa::run(
-                &setup,
-                SyncThreshold::of(job_in.sync, SyncThreshold::COMPONENT),
-                job_in.seed,
-                job_in.journal,
-                job_in.pa_queue.max(1) as usize,
-                grid,
-            );
-        } else {
-            component::pr::run(
-                &setup,
-                &roles,
-                job_in.send.max(1) as usize,
-                SyncThreshold::of(job_in.sync, SyncThreshold::COMPONENT),
-                job_in.seed,
-                job_in.journal,
-            );
-        }
-        drop(universe);
-        return Ok(());
-    }
-    if !job_in.quiet {
-        eprintln!("icrender: {}", roles.describe());
-        if !needed {
-            eprintln!(
-                "icrender: the scene has no indirect diffuse work (-ab 0 or no diffuse surface): no PA is needed"
-            );
-        }
-    }
-    let plan = master::Plan {
+        comm: &comm,
+        job,
         tiles: all_tiles,
-        width: job_in.width,
-        height: job_in.height,
-        cache: job.cache.as_ref(),
-        timeout: job_in.silence_limit,
         hosts,
-        resume,
-        workers_have_cache: prepass.is_some(),
+        prepass,
     };
-    let mut sharing = component::master::ComponentSharing::new(roles);
-    let result = match master::run(comm, &plan, &mut sharing) {
-        Ok(r) => r,
-        Err(e) => end_job(comm, job.cache.as_ref(), &e),
-    };
-    finish_master(
-        job_in,
-        &job,
-        comm.size(),
-        1,
-        result.frame,
-        result.ranks,
-        result.render_s,
-        wall,
-        resume.map_or(0, |(_, r)| r.count()),
-        prepass.as_ref(),
-    )?;
-    drop(universe);
+    if rank == 0 {
+        ready.master(layout, checkpoint, wall)?;
+    } else {
+        ready.work(&layout);
+    }
+    drop(session);
     Ok(())
+}
+
+impl Ready<'_, '_> {
+    /// A worker rank's part: a traditional mode's worker, or component mode's PA or PR.
+    fn work(mut self, layout: &Layout) {
+        let (job_in, comm) = (self.job_in, self.comm);
+        let keeps_outbox = match layout {
+            Layout::Traditional(way) => *way != WorkerSharing::Kept || job_in.cache_file,
+            Layout::Component(_) => true,
+        };
+        if keeps_outbox && let Some(cache) = self.job.cache.as_mut() {
+            cache.keep_outbox();
+        }
+        match layout {
+            Layout::Traditional(way) => {
+                let sync = SyncThreshold::of(job_in.sync, SyncThreshold::TRADITIONAL);
+                let setup = WorkerSetup::new(&self.job, &self.tiles, comm.counters);
+                worker::run(&setup, *way, sync, job_in.cache_file);
+            }
+            Layout::Component(roles) => {
+                // The overture's grid orders each PA's queue (component::order). A PR makes no
+                // records before its pixels: its misses go to the PAs.
+                let grid = std::mem::take(&mut self.job.settings.overture);
+                let setup = WorkerSetup::new(&self.job, &self.tiles, comm.counters);
+                let sync = SyncThreshold::of(job_in.sync, SyncThreshold::COMPONENT);
+                if roles.pas.contains(&comm.rank()) {
+                    let bound = job_in.pa_queue.max(1) as usize;
+                    component::pa::run(&setup, sync, job_in.seed, job_in.journal, bound, grid);
+                } else {
+                    let send_at = job_in.send.max(1) as usize;
+                    component::pr::run(&setup, roles, send_at, sync, job_in.seed, job_in.journal);
+                }
+            }
+        }
+    }
+
+    /// The master's part: the one master with the mode's policy, then the image, its statistics
+    /// and the table.
+    fn master(self, layout: Layout, checkpoint: Option<(Checkpoint, Restored)>, wall: Instant) -> CommandResult {
+        let (job_in, comm, job, prepass) = (self.job_in, self.comm, &self.job, &self.prepass);
+        let threads = job_in.threads.unwrap_or(1);
+        let mut sharing: Box<dyn master::Sharing> = match layout {
+            Layout::Traditional(way) => Box::new(TraditionalSharing::new(way, threads)),
+            Layout::Component(roles) => {
+                if !job_in.quiet {
+                    eprintln!("icrender: {}", roles.describe());
+                    if roles.pas.is_empty() {
+                        eprintln!(
+                            "icrender: the scene has no indirect diffuse work (-ab 0 or no diffuse surface): no PA is needed"
+                        );
+                    }
+                }
+                Box::new(component::master::ComponentSharing::new(roles))
+            }
+        };
+        let resume = checkpoint.as_ref().map(|(journal, restored)| (journal, restored));
+        let plan = master::Plan {
+            tiles: &self.tiles,
+            width: job_in.width,
+            height: job_in.height,
+            cache: job.cache.as_ref(),
+            timeout: job_in.silence_limit,
+            hosts: &self.hosts,
+            resume,
+            workers_have_cache: prepass.is_some(),
+        };
+        let result =
+            master::run(comm, &plan, sharing.as_mut()).unwrap_or_else(|e| end_job(comm, job.cache.as_ref(), &e));
+        if let Some(cache) = &job.cache
+            && let Err(e) = cache.finish()
+        {
+            warn(&format!("cache file not fully written: {e}"));
+        }
+        let mut stats = RenderStats {
+            threads,
+            ..job_in
+                .host
+                .job_stats(job, job_in.mode.name(), comm.size() as usize, result.render_s)
+        };
+        stats.tiles_restored = resume.map_or(0, |(_, r)| r.count()) as u64;
+        stats.add_ranks(result.ranks);
+        let mut frame = result.frame;
+        if let Some(prepass) = prepass {
+            stats.add_prepass(prepass);
+            crate::render::add_prepass_records(&mut frame, prepass);
+        }
+        stats.wall_s = wall.elapsed().as_secs_f64();
+        job_in.host.write(job, &frame, &stats).map_err(CommandError)?;
+        if !job_in.quiet {
+            print_table(&stats);
+        }
+        Ok(())
+    }
 }
 
 /// The master's end of a failed job: keeps what the cache file already has, says why, and

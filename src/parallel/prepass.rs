@@ -5,7 +5,7 @@
 //! in the same order, so all caches hold the record set one process would have made, and the
 //! image is the same for any number of ranks and any mode.
 
-use super::comm::{Comm, kind};
+use super::comm::{Comm, Hosts, kind};
 use super::protocol::{Kind, Message, Records};
 use crate::job::Job;
 use crate::prepass::{PrepassOutcome, RoundRecords, Share, run_shared};
@@ -14,8 +14,7 @@ use std::time::Duration;
 
 /// Runs this rank's part of the prepass. Err: a rank fell silent for `timeout`, or sent
 /// records that cannot be trusted (the job cannot go on: ranks would hold different caches).
-pub fn run(comm: &Comm<'_>, job: &Job, timeout: Duration, hosts: &[String]) -> Result<PrepassOutcome, String> {
-    let host = |rank: i32| hosts.get(rank as usize).map_or("?", String::as_str).to_string();
+pub fn run(comm: &Comm<'_>, job: &Job, timeout: Duration, hosts: &Hosts) -> Result<PrepassOutcome, String> {
     let (rank, size) = (comm.rank(), comm.size());
     let workers = (size - 1).max(1) as usize;
     let Some(cache) = job.cache.as_ref() else {
@@ -41,7 +40,7 @@ pub fn run(comm: &Comm<'_>, job: &Job, timeout: Duration, hosts: &[String]) -> R
                     Ok(other) => {
                         failure = Some(format!(
                             "prepass: rank {worker} on {} sent a bad round: {}",
-                            host(worker),
+                            hosts.of(worker),
                             other.err().map_or_else(|| "not a round".into(), |e| e.0)
                         ))
                     }
@@ -50,7 +49,7 @@ pub fn run(comm: &Comm<'_>, job: &Job, timeout: Duration, hosts: &[String]) -> R
                             "prepass: rank {} on {} has been silent for {:.0} s (lost, or stalled); the cache file keeps \
                              every record of the rounds before",
                             lost.rank,
-                            host(lost.rank),
+                            hosts.of(lost.rank),
                             lost.seconds
                         ))
                     }
@@ -70,7 +69,7 @@ pub fn run(comm: &Comm<'_>, job: &Job, timeout: Duration, hosts: &[String]) -> R
         return failure.map_or(Ok(outcome), Err);
     }
     match comm
-        .receive_one_of(&[kind(Some(0), Kind::PrepassStart)], Some(timeout))
+        .receive(&[kind(Some(0), Kind::PrepassStart)], Some(timeout))
         .map(|m| m.message)
     {
         Some(Ok(Message::PrepassStart(start))) => start.records.into_iter().for_each(|r| cache.insert_shared(r)),
@@ -82,7 +81,7 @@ pub fn run(comm: &Comm<'_>, job: &Job, timeout: Duration, hosts: &[String]) -> R
         }
         comm.send(0, &Message::PrepassRound(mine));
         match comm
-            .receive_one_of(&[kind(Some(0), Kind::PrepassRound)], Some(timeout))
+            .receive(&[kind(Some(0), Kind::PrepassRound)], Some(timeout))
             .map(|m| m.message)
         {
             Some(Ok(Message::PrepassRound(round))) => round,
@@ -96,8 +95,8 @@ pub fn run(comm: &Comm<'_>, job: &Job, timeout: Duration, hosts: &[String]) -> R
             None => {
                 failure = Some(format!(
                     "rank {rank} on {}: prepass: nothing from the master (rank 0 on {}) for {} s",
-                    host(rank),
-                    host(0),
+                    hosts.of(rank),
+                    hosts.of(0),
                     timeout.as_secs()
                 ));
                 Vec::new()

@@ -1,105 +1,66 @@
-//! The traditional modes' sharing policies (paper, section 4), as the master sees them: not at
-//! all (noshare), through the master (centralised), or by every worker to every other
-//! (broadcast). In each, workers start from the cache file's records and the render is complete
-//! once every rendering thread has been told "no tile left" and every rank has reported.
+//! The traditional modes' sharing (paper, section 4): not at all (noshare), through the master
+//! (centralised), or by every worker to every other (broadcast). `WorkerSharing` names the way,
+//! which the workers follow (`worker`) and the master's policy, `TraditionalSharing`, answers.
+//! In each, workers start from the cache file's records and the render is complete once every
+//! rendering thread has been told "no tile left" and every rank has reported (in broadcast
+//! mode, also once every worker's last batch has arrived).
 
 use super::master::{MasterCore, Sharing};
 use super::protocol::Message;
 
-/// What the three have in common: the threads that ask for tiles.
-struct Requesters {
+/// A traditional mode, as its workers share records.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum WorkerSharing {
+    /// noshare: each worker keeps its records; with -af they come to the master at the end.
+    Kept,
+    /// centralised: through the master, which answers with the records the worker lacks.
+    ThroughMaster,
+    /// broadcast: to every other rank, and a receiving thread merges theirs; the master keeps
+    /// them for the file.
+    ToEveryone,
+}
+
+/// The master's side of a traditional mode.
+pub struct TraditionalSharing {
+    way: WorkerSharing,
+    /// The threads that ask for tiles on each worker.
     threads_per_worker: usize,
-}
-
-impl Requesters {
-    fn done(&self, core: &MasterCore<'_, '_>) -> bool {
-        core.turned_away == core.workers() * self.threads_per_worker && core.every_report_in()
-    }
-}
-
-fn unexpected(source: i32, message: &Message) -> String {
-    format!("rank {source} sent an unexpected message ({:?})", message.kind())
-}
-
-/// No sharing: each worker keeps its records; with -af they come to the master at the end.
-pub struct NoShare(Requesters);
-
-/// Workers send their new records to the master, which answers with those they lack.
-pub struct Centralised(Requesters);
-
-/// Workers send their new records to every other rank; the master keeps them for the file.
-pub struct Broadcast {
-    requesters: Requesters,
-    /// Workers whose last batch has arrived.
+    /// Broadcast: workers whose last batch has arrived.
     ended: usize,
 }
 
-impl NoShare {
-    pub fn new(threads_per_worker: usize) -> Self {
-        NoShare(Requesters { threads_per_worker })
-    }
-}
-
-impl Centralised {
-    pub fn new(threads_per_worker: usize) -> Self {
-        Centralised(Requesters { threads_per_worker })
-    }
-}
-
-impl Broadcast {
-    pub fn new(threads_per_worker: usize) -> Self {
-        Broadcast {
-            requesters: Requesters { threads_per_worker },
+impl TraditionalSharing {
+    pub fn new(way: WorkerSharing, threads_per_worker: usize) -> Self {
+        TraditionalSharing {
+            way,
+            threads_per_worker,
             ended: 0,
         }
     }
 }
 
-impl Sharing for NoShare {
+impl Sharing for TraditionalSharing {
     fn on_message(&mut self, core: &mut MasterCore<'_, '_>, source: i32, message: Message) -> Result<(), String> {
-        match message {
-            Message::FinalRecords(records) => {
+        match (self.way, message) {
+            (WorkerSharing::Kept, Message::FinalRecords(records)) => {
                 core.relay.keep(records);
-                Ok(())
             }
-            other => Err(unexpected(source, &other)),
-        }
-    }
-
-    fn finished(&self, core: &MasterCore<'_, '_>) -> bool {
-        self.0.done(core)
-    }
-}
-
-impl Sharing for Centralised {
-    fn on_message(&mut self, core: &mut MasterCore<'_, '_>, source: i32, message: Message) -> Result<(), String> {
-        match message {
-            Message::RecordsUp { thread, records } => {
+            (WorkerSharing::ThroughMaster, Message::RecordsUp { thread, records }) => {
                 core.sync(source, thread, records);
-                Ok(())
             }
-            other => Err(unexpected(source, &other)),
-        }
-    }
-
-    fn finished(&self, core: &MasterCore<'_, '_>) -> bool {
-        self.0.done(core)
-    }
-}
-
-impl Sharing for Broadcast {
-    fn on_message(&mut self, core: &mut MasterCore<'_, '_>, source: i32, message: Message) -> Result<(), String> {
-        match message {
-            Message::RecordsBroadcast { records, last } => {
+            (WorkerSharing::ToEveryone, Message::RecordsBroadcast { records, last }) => {
                 core.relay.keep(records);
                 self.ended += usize::from(last);
-                Ok(())
             }
-            other => Err(unexpected(source, &other)),
+            (_, other) => {
+                return Err(format!("rank {source} sent an unexpected message ({:?})", other.kind()));
+            }
         }
+        Ok(())
     }
 
     fn finished(&self, core: &MasterCore<'_, '_>) -> bool {
-        self.requesters.done(core) && self.ended == core.workers()
+        let all_ended = self.way != WorkerSharing::ToEveryone || self.ended == core.workers();
+        core.turned_away == core.workers() * self.threads_per_worker && core.every_report_in() && all_ended
     }
 }

@@ -5,203 +5,168 @@
 
 use super::comm::{Comm, Counters, kind};
 use super::protocol::{FinishedTile, Kind, Message, Records};
-use super::{SyncThreshold, WorkerSetup};
-use super::{rank_report, send_report};
+use super::sharing::WorkerSharing;
+use super::{Intake, SyncThreshold, WorkerSetup, send_report};
 use crate::irradiance::IrradianceCache;
 use crate::render::{ThreadClock, ThreadStats, render_tile};
-use crate::shading::{Integrator, RayCounts};
 use std::sync::Mutex;
-use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Instant;
 
-/// A traditional mode, as its workers share records (paper, section 4).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum WorkerSharing {
-    /// noshare: each worker keeps its records.
-    Kept,
-    /// centralised: through the master, which answers with the records the worker lacks.
-    ThroughMaster,
-    /// broadcast: to every other rank, and a receiving thread merges theirs.
-    ToEveryone,
+/// How this worker's rendering threads share records: the mode's way, every `sync` new
+/// records, one thread at a time; and the records that came back.
+struct Sharer<'a> {
+    way: WorkerSharing,
+    sync: SyncThreshold,
+    cache: Option<&'a IrradianceCache>,
+    /// Held while a thread shares: the others render on instead of waiting to share too.
+    lock: Mutex<()>,
+    intake: Intake,
 }
 
-/// Sends what the cache has gathered since the last share, the mode's way. `thread` is the
-/// calling rendering thread (replies come back on its own tag).
-fn share(
-    comm: &Comm<'_>,
-    mode: WorkerSharing,
-    cache: &IrradianceCache,
-    thread: u32,
-    received: &AtomicU64,
-    rejected: &AtomicU64,
-    end: bool,
-) {
-    let records = cache.take_outbox();
-    let take = |records: Records| {
-        received.fetch_add(records.records.len() as u64, Ordering::Relaxed);
-        rejected.fetch_add(records.rejected as u64, Ordering::Relaxed);
-        records.records.into_iter().for_each(|r| cache.insert_shared(r));
-    };
-    match mode {
-        WorkerSharing::ThroughMaster => {
-            if records.is_empty() {
-                return;
-            }
-            let up = Message::RecordsUp {
-                thread,
-                records: Records::from(records),
-            };
-            comm.send(0, &up);
-            let reply = comm.receive(Some(0), Some(Kind::RecordsDown.for_thread(thread)), None);
-            if let Some(Ok(Message::RecordsDown { records, .. })) = reply.map(|r| r.message) {
-                take(records);
-            }
+impl Sharer<'_> {
+    /// After a pixel: shares if the cache has gathered enough and no other thread is sharing.
+    fn after_pixel(&self, comm: &Comm<'_>, thread: u32) {
+        if let Some(cache) = self.cache
+            && self.way != WorkerSharing::Kept
+            && self.sync.reached(cache.outbox_len())
+            && let Ok(_guard) = self.lock.try_lock()
+        {
+            self.share(comm, thread, false);
         }
-        WorkerSharing::ToEveryone => {
-            if records.is_empty() && !end {
-                return;
+    }
+
+    /// Sends what the cache has gathered since the last share, the mode's way. `thread` is the
+    /// calling rendering thread (replies come back on its own tag). The `end` of broadcasting
+    /// is marked, records or none (without a cache too): every receiver waits for the marker.
+    fn share(&self, comm: &Comm<'_>, thread: u32, end: bool) {
+        let records = self.cache.map_or_else(Vec::new, |c| c.take_outbox());
+        match self.way {
+            WorkerSharing::ThroughMaster if !records.is_empty() => {
+                let up = Message::RecordsUp {
+                    thread,
+                    records: Records::from(records),
+                };
+                comm.send(0, &up);
+                let reply = comm.receive(&[(Some(0), Some(Kind::RecordsDown.for_thread(thread)))], None);
+                if let (Some(cache), Some(Ok(Message::RecordsDown { records, .. }))) =
+                    (self.cache, reply.map(|r| r.message))
+                {
+                    self.intake.take(cache, records);
+                }
             }
-            let batch = Message::RecordsBroadcast {
-                records: Records::from(records),
-                last: end,
-            };
-            // The master is a recipient too: it keeps the cache file.
-            for rank in (0..comm.size()).filter(|&r| r != comm.rank()) {
-                comm.send(rank, &batch);
+            WorkerSharing::ToEveryone if end || !records.is_empty() => {
+                let batch = Message::RecordsBroadcast {
+                    records: Records::from(records),
+                    last: end,
+                };
+                // The master is a recipient too: it keeps the cache file.
+                for rank in (0..comm.size()).filter(|&r| r != comm.rank()) {
+                    comm.send(rank, &batch);
+                }
             }
+            _ => {}
         }
-        WorkerSharing::Kept => {}
     }
 }
 
 /// Merges the records other workers broadcast until each of them has sent its end marker.
 /// It has counters of its own: its waiting is not the rank's idle time (the rendering threads
 /// go on meanwhile).
-fn receive_broadcasts(
-    counters: &Counters,
-    cache: &IrradianceCache,
-    peers: usize,
-    received: &AtomicU64,
-    rejected: &AtomicU64,
-) {
+fn receive_broadcasts(counters: &Counters, cache: &IrradianceCache, peers: usize, intake: &Intake) {
     let comm = Comm::new(counters);
     let mut ends = 0;
     while ends < peers {
-        let Some(msg) = comm.receive_one_of(&[kind(None, Kind::RecordsBroadcast)], None) else {
+        let Some(msg) = comm.receive(&[kind(None, Kind::RecordsBroadcast)], None) else {
             continue;
         };
         match msg.message {
             Ok(Message::RecordsBroadcast { records, last }) => {
-                received.fetch_add(records.records.len() as u64, Ordering::Relaxed);
-                rejected.fetch_add(records.rejected as u64, Ordering::Relaxed);
-                records.records.into_iter().for_each(|r| cache.insert_shared(r));
-                if last {
-                    ends += 1;
-                }
+                intake.take(cache, records);
+                ends += usize::from(last);
             }
             // A broken message cannot be trusted at all; count it and go on.
-            _ => {
-                rejected.fetch_add(1, Ordering::Relaxed);
-            }
+            _ => intake.reject(1),
         }
     }
 }
 
-pub fn run(setup: &WorkerSetup<'_>, mode: WorkerSharing, sync: SyncThreshold, persist_local: bool) {
+/// One rendering thread: tiles from the master until there are none left, each finished tile
+/// going back with the request for the next.
+fn render_tiles(setup: &WorkerSetup<'_>, counters: &Counters, sharer: &Sharer<'_>, thread: u32) -> ThreadStats {
+    let comm = Comm::new(counters);
+    let integrator = setup.integrator();
+    let mut stats = ThreadStats::default();
+    let clock = ThreadClock::start();
+    let mut finished: Option<FinishedTile> = None;
+    loop {
+        comm.send(
+            0,
+            &Message::WorkRequest {
+                thread,
+                finished: finished.take(),
+            },
+        );
+        let reply = comm.receive(&[(Some(0), Some(Kind::Work.for_thread(thread)))], None);
+        let Some(Ok(Message::Work { tile: Some(index), .. })) = reply.map(|r| r.message) else {
+            break;
+        };
+        let tile = &setup.tiles[index as usize];
+        let (camera, settings) = (&setup.job.camera, &setup.job.settings);
+        let pixels = render_tile(&integrator, camera, settings, tile, &mut stats.rays, |_| {
+            sharer.after_pixel(&comm, thread)
+        });
+        finished = Some(FinishedTile {
+            tile: index,
+            requests: 0,
+            pixels,
+        });
+        stats.tiles += 1;
+    }
+    clock.stop(&mut stats);
+    stats
+}
+
+pub fn run(setup: &WorkerSetup<'_>, way: WorkerSharing, sync: SyncThreshold, persist_local: bool) {
     let counters = Counters::default();
     let listener_counters = Counters::default();
     let comm = Comm::new(&counters);
     let start = Instant::now();
-    let cache = setup.cache;
-    let received = AtomicU64::new(0);
-    let rejected = AtomicU64::new(0);
-
-    let initial = comm.receive_one_of(&[kind(Some(0), Kind::InitialRecords)], None);
+    let cache = setup.cache();
+    let initial = comm.receive(&[kind(Some(0), Kind::InitialRecords)], None);
     if let (Some(cache), Some(Ok(Message::InitialRecords(records)))) = (cache, initial.map(|m| m.message)) {
         records.records.into_iter().for_each(|r| cache.insert_shared(r));
     }
-    let share_lock = Mutex::new(());
-    let threads = setup.settings.threads.max(1) as u32;
+    let sharer = Sharer {
+        way,
+        sync,
+        cache,
+        lock: Mutex::new(()),
+        intake: Intake::default(),
+    };
+    let threads = setup.job.settings.threads.max(1) as u32;
     let peers = comm.size() as usize - 2;
     let thread_stats: Vec<ThreadStats> = std::thread::scope(|scope| {
-        let listener = (mode == WorkerSharing::ToEveryone && cache.is_some()).then(|| {
-            scope.spawn(|| receive_broadcasts(&listener_counters, cache.expect("checked"), peers, &received, &rejected))
-        });
+        let listener = match (way, cache) {
+            (WorkerSharing::ToEveryone, Some(cache)) => {
+                Some(scope.spawn(|| receive_broadcasts(&listener_counters, cache, peers, &sharer.intake)))
+            }
+            _ => None,
+        };
         let renderers: Vec<_> = (0..threads)
             .map(|thread| {
-                let (counters, received, rejected, share_lock) = (&counters, &received, &rejected, &share_lock);
-                scope.spawn(move || {
-                    let comm = Comm::new(counters);
-                    let integrator = Integrator::new(setup.scene, setup.tracer, setup.shading, cache)
-                        .cache_frozen(setup.settings.prepass);
-                    let mut stats = ThreadStats::default();
-                    let clock = ThreadClock::start();
-                    let mut finished: Option<FinishedTile> = None;
-                    loop {
-                        comm.send(
-                            0,
-                            &Message::WorkRequest {
-                                thread,
-                                finished: finished.take(),
-                            },
-                        );
-                        let reply = comm.receive(Some(0), Some(Kind::Work.for_thread(thread)), None);
-                        let Some(Ok(Message::Work { tile: Some(index), .. })) = reply.map(|r| r.message) else {
-                            break;
-                        };
-                        let tile = &setup.tiles[index as usize];
-                        let mut after_pixel = |_: &mut RayCounts| {
-                            if let Some(cache) = cache
-                                && mode != WorkerSharing::Kept
-                                && sync.reached(cache.outbox_len())
-                                && let Ok(_guard) = share_lock.try_lock()
-                            {
-                                share(&comm, mode, cache, thread, received, rejected, false);
-                            }
-                        };
-                        let pixels = render_tile(
-                            &integrator,
-                            setup.camera,
-                            setup.settings,
-                            tile,
-                            &mut stats.rays,
-                            &mut after_pixel,
-                        );
-                        finished = Some(FinishedTile {
-                            tile: index,
-                            requests: 0,
-                            pixels,
-                        });
-                        stats.tiles += 1;
-                    }
-                    clock.stop(&mut stats);
-                    stats
-                })
+                let (counters, sharer) = (&counters, &sharer);
+                scope.spawn(move || render_tiles(setup, counters, sharer, thread))
             })
             .collect();
-        let mut stats: Vec<ThreadStats> = renderers.into_iter().map(|r| r.join().unwrap_or_default()).collect();
-        crate::render::add_prepass_work(&mut stats, setup.prepass);
+        let stats = renderers.into_iter().map(|r| r.join().unwrap_or_default()).collect();
         // What is left to share goes out now; broadcast ends with the end marker so every
         // receiver knows when it has everything.
-        if let Some(cache) = cache {
-            match mode {
-                WorkerSharing::ThroughMaster | WorkerSharing::ToEveryone => {
-                    share(&comm, mode, cache, 0, &received, &rejected, true)
-                }
-                _ if persist_local => {
-                    comm.send(0, &Message::FinalRecords(Records::from(cache.take_outbox())));
-                }
-                _ => {}
+        match (way, cache) {
+            (WorkerSharing::Kept, Some(cache)) if persist_local => {
+                comm.send(0, &Message::FinalRecords(Records::from(cache.take_outbox())));
             }
-        } else if mode == WorkerSharing::ToEveryone {
-            // Without a cache there is nothing to share, but peers still wait for the marker.
-            let last = Message::RecordsBroadcast {
-                records: Records::default(),
-                last: true,
-            };
-            for rank in (0..comm.size()).filter(|&r| r != comm.rank()) {
-                comm.send(rank, &last);
-            }
+            (WorkerSharing::Kept, _) => {}
+            _ => sharer.share(&comm, 0, true),
         }
         if let Some(listener) = listener {
             let _ = listener.join();
@@ -209,15 +174,8 @@ pub fn run(setup: &WorkerSetup<'_>, mode: WorkerSharing, sync: SyncThreshold, pe
         stats
     });
 
-    let mut report = rank_report(
-        comm.rank(),
-        "worker",
-        &thread_stats,
-        &[&counters, &listener_counters, setup.traffic_before],
-        counters.idle_s(),
-    );
-    report.records_received = received.load(Ordering::Relaxed);
-    report.records_rejected = rejected.load(Ordering::Relaxed);
+    let mut report = setup.report(&comm, "worker", thread_stats, &listener_counters);
+    (report.records_received, report.records_rejected) = sharer.intake.totals();
     report.wall_s = start.elapsed().as_secs_f64();
     send_report(&comm, report);
 }

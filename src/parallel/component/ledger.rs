@@ -63,6 +63,11 @@ impl TerminationLedger {
         Ok(())
     }
 
+    /// The requests PA `pa` has reported computed.
+    pub fn computed_by(&self, pa: i32) -> u64 {
+        self.pa_done.get(&pa).copied().unwrap_or(0)
+    }
+
     pub fn sent(&self) -> u64 {
         self.prs.values().map(|p| p.sent).sum()
     }

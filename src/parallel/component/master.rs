@@ -12,22 +12,11 @@ use crate::image::framebuffer::FrameBuffer;
 use crate::parallel::liveness::{self, Silence};
 use crate::parallel::master::{MasterCore, Sharing, lost_rank};
 use crate::parallel::protocol::{Message, Records};
-use std::collections::BTreeMap;
-use std::time::Instant;
-
-/// What the master remembers of a PA for its report and for saying what a lost one held.
-#[derive(Default)]
-struct PaLog {
-    done: u64,
-    samples: Vec<(f64, u32)>,
-}
 
 pub struct ComponentSharing {
     roles: Roles,
     balancer: LoadBalancer,
     ledger: TerminationLedger,
-    pa_logs: BTreeMap<i32, PaLog>,
-    start: Instant,
 }
 
 impl ComponentSharing {
@@ -35,8 +24,6 @@ impl ComponentSharing {
         ComponentSharing {
             balancer: LoadBalancer::new(&roles.pas),
             ledger: TerminationLedger::new(&roles.pas, &roles.prs),
-            pa_logs: roles.pas.iter().map(|&r| (r, PaLog::default())).collect(),
-            start: Instant::now(),
             roles,
         }
     }
@@ -47,7 +34,7 @@ impl ComponentSharing {
             count: share.count as u32,
             to_pa: share.to_pa,
         };
-        core.sends.send(share.from, &message);
+        core.send(share.from, &message);
         if !share.to_pa {
             self.ledger.forward_ordered(share.to);
         }
@@ -61,7 +48,7 @@ impl Sharing for ComponentSharing {
         core.relay.preload(initial.records);
         for &pa in &self.roles.pas {
             let records = core.relay.catch_up(pa as usize);
-            core.sends.send(pa, &Message::InitialRecords(records));
+            core.send(pa, &Message::InitialRecords(records));
         }
     }
 
@@ -86,9 +73,6 @@ impl Sharing for ComponentSharing {
             Message::PaStatus { queue, done, records } => {
                 core.sync(source, 0, records);
                 self.ledger.pa_done(source, done)?;
-                let log = self.pa_logs.get_mut(&source).expect("a PA, or pa_done refused it");
-                log.done = done;
-                log.samples.push((self.start.elapsed().as_secs_f64(), queue as u32));
                 self.balancer.report(source, queue, core.queue.all_out());
                 for share in self.balancer.rebalance() {
                     self.order(core, share);
@@ -107,15 +91,16 @@ impl Sharing for ComponentSharing {
     /// it, a PR that never finished leaves its tiles' pixels undelivered).
     fn lost(&self, core: &MasterCore<'_, '_>, lost: &Silence) -> String {
         let quiet: Vec<String> = self
-            .pa_logs
+            .roles
+            .pas
             .iter()
-            .filter(|&(&r, _)| liveness::silent_for(r).as_secs_f64() >= lost.seconds * 0.9)
-            .map(|(r, log)| {
+            .filter(|&&r| liveness::silent_for(r).as_secs_f64() >= lost.seconds * 0.9)
+            .map(|&r| {
                 format!(
                     "PA {r} (rank {r}, host {}, last queue {}, computed {})",
-                    core.plan.host(*r),
-                    self.balancer.queue(*r),
-                    log.done
+                    core.plan.hosts.of(r),
+                    self.balancer.queue(r),
+                    self.ledger.computed_by(r)
                 )
             })
             .collect();
@@ -123,7 +108,7 @@ impl Sharing for ComponentSharing {
             .ledger
             .unflushed()
             .iter()
-            .map(|r| format!("PR {r} (host {})", core.plan.host(*r)))
+            .map(|r| format!("PR {r} (host {})", core.plan.hosts.of(*r)))
             .collect();
         let list = |what: &str, items: &[String]| {
             if items.is_empty() {
@@ -136,7 +121,7 @@ impl Sharing for ComponentSharing {
             "rank {} (host {}) has been silent for {:.0} s; {}{}missing: the indirect light of every pixel whose \
              requests those ranks held, and the pixels of unfinished PRs (requests reported sent {}, computed {})",
             lost.rank,
-            core.plan.host(lost.rank),
+            core.plan.hosts.of(lost.rank),
             lost.seconds,
             list("silent", &quiet),
             list("unfinished", &unfinished),
@@ -151,7 +136,7 @@ impl Sharing for ComponentSharing {
     fn gather(&mut self, core: &mut MasterCore<'_, '_>) -> Result<(), String> {
         let size = core.comm.size();
         for rank in 1..size {
-            core.sends.send(rank, &Message::Finish);
+            core.send(rank, &Message::Finish);
         }
         let mut has_image = vec![false; size as usize];
         has_image[0] = true;
@@ -168,14 +153,7 @@ impl Sharing for ComponentSharing {
                     core.frame.accumulate(&part);
                     has_image[source as usize] = true;
                 }
-                Message::Stats(mut report) => {
-                    if let Some(log) = self.pa_logs.get(&source)
-                        && report.queue_lengths.is_empty()
-                    {
-                        report.queue_lengths = log.samples.clone();
-                    }
-                    core.reports[source as usize] = Some(*report);
-                }
+                Message::Stats(report) => core.reports[source as usize] = Some(*report),
                 Message::Results(results) => {
                     if let Some((journal, _)) = core.plan.resume {
                         journal.results(&results);
@@ -187,7 +165,7 @@ impl Sharing for ComponentSharing {
                         thread: 0,
                         records: Records::default(),
                     };
-                    core.sends.send(source, &reply);
+                    core.send(source, &reply);
                 }
                 other => {
                     return Err(format!(

@@ -11,20 +11,48 @@ use crate::image::framebuffer::FrameBuffer;
 use crate::irradiance::IrradianceCache;
 use crate::parallel::comm::{Comm, Counters, kind};
 use crate::parallel::protocol::{Kind, Message, Records, Requests};
-use crate::parallel::{SyncThreshold, WorkerSetup, rank_report, send_report};
+use crate::parallel::{SyncThreshold, WorkerSetup, send_report};
 use crate::render::{ThreadClock, ThreadStats};
-use crate::shading::Integrator;
 use crate::shading::request::AmbientRequest;
 use crate::shading::request::RequestResult;
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::{Condvar, Mutex};
+use std::sync::{Condvar, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
-struct Queue {
+struct Queued {
     requests: RequestQueue,
     finish: bool,
     /// The longest the queue has been.
     longest: usize,
+}
+
+/// The requests the communicating thread queues and the computing thread takes, and the
+/// signal that some came (or FINISH did).
+struct Queue {
+    queued: Mutex<Queued>,
+    ready: Condvar,
+}
+
+impl Queue {
+    fn lock(&self) -> MutexGuard<'_, Queued> {
+        self.queued.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// Waits until a request or FINISH is there, counting the wait in `idle_ns`; whether the PA
+    /// is done (FINISH came and nothing is left).
+    fn wait(&self, idle_ns: &AtomicU64) -> bool {
+        let mut q = self.lock();
+        let waited = Instant::now();
+        while q.requests.is_empty() && !q.finish {
+            q = self
+                .ready
+                .wait_timeout(q, Duration::from_millis(20))
+                .unwrap_or_else(|e| e.into_inner())
+                .0;
+        }
+        idle_ns.fetch_add(waited.elapsed().as_nanos() as u64, Ordering::Relaxed);
+        q.requests.is_empty() && q.finish
+    }
 }
 
 /// What the communicating thread counts for the PA's report: requests handed to helping PRs,
@@ -55,9 +83,8 @@ impl Replies<'_> {
     fn take(&self, records: Records) {
         self.pending.fetch_sub(1, Ordering::AcqRel);
         if let Some(cache) = self.cache {
-            let batch = records;
-            self.records.fetch_add(batch.records.len() as u64, Ordering::Relaxed);
-            batch.records.into_iter().for_each(|r| cache.insert_shared(r));
+            self.records.fetch_add(records.records.len() as u64, Ordering::Relaxed);
+            records.records.into_iter().for_each(|r| cache.insert_shared(r));
         }
     }
 }
@@ -72,8 +99,7 @@ impl Replies<'_> {
 /// (seen once in the paper bench: conference room, 4 workers, the job hung).
 fn communicate(
     counters: &Counters,
-    queue: &Mutex<Queue>,
-    ready: &Condvar,
+    queue: &Queue,
     pixels: u32,
     tallies: &Tallies,
     replies: &Replies<'_>,
@@ -92,14 +118,14 @@ fn communicate(
     ];
     std::thread::scope(|senders| {
         loop {
-            let full = queue.lock().unwrap_or_else(|e| e.into_inner()).requests.len() >= bound;
+            let full = queue.lock().requests.len() >= bound;
             // Full: only the master's messages, looking again at the queue every few milliseconds.
             let (accepted, wait) = if full {
                 (&filters[..3], Some(Duration::from_millis(2)))
             } else {
                 (&filters[..], None)
             };
-            let Some(msg) = comm.receive_one_of(accepted, wait) else {
+            let Some(msg) = comm.receive(accepted, wait) else {
                 continue;
             };
             match msg.message {
@@ -112,11 +138,11 @@ fn communicate(
                     tallies
                         .rejected
                         .fetch_add((decoded.rejected + outside.len()) as u64, Ordering::Relaxed);
-                    let mut q = queue.lock().unwrap_or_else(|e| e.into_inner());
+                    let mut q = queue.lock();
                     q.requests.extend(inside);
                     q.longest = q.longest.max(q.requests.len());
                     drop(q);
-                    ready.notify_one();
+                    queue.ready.notify_one();
                     tallies
                         .handling_ns
                         .fetch_add(handling.elapsed().as_nanos() as u64, Ordering::Relaxed);
@@ -126,11 +152,7 @@ fn communicate(
                     // component::balancer), and an empty share sent to it could arrive after FINISH.
                     // The newest requests go: the PA keeps working through the oldest (see
                     // RequestQueue::take_newest).
-                    let share: Vec<AmbientRequest> = queue
-                        .lock()
-                        .unwrap_or_else(|e| e.into_inner())
-                        .requests
-                        .take_newest(count as usize);
+                    let share = queue.lock().requests.take_newest(count as usize);
                     tallies.forwarded.fetch_add(share.len() as u64, Ordering::Relaxed);
                     if !(to_pa && share.is_empty()) {
                         // Every share is received before the job ends (a PR waits for its own, and
@@ -145,8 +167,8 @@ fn communicate(
                     tallies.rejected.fetch_add(1, Ordering::Relaxed);
                 }
                 _ => {
-                    queue.lock().unwrap_or_else(|e| e.into_inner()).finish = true;
-                    ready.notify_all();
+                    queue.lock().finish = true;
+                    queue.ready.notify_all();
                     break;
                 }
             }
@@ -162,14 +184,16 @@ pub fn run(setup: &WorkerSetup<'_>, sync: SyncThreshold, seed: u64, journal: boo
     let comm_counters = Counters::default();
     let comm = Comm::new(&counters);
     let start = Instant::now();
-    let (width, height) = (setup.camera.width, setup.camera.height);
-    let cache = setup.cache;
-    let queue = Mutex::new(Queue {
-        requests: RequestQueue::new(width, grid),
-        finish: false,
-        longest: 0,
-    });
-    let ready = Condvar::new();
+    let (width, height) = (setup.job.camera.width, setup.job.camera.height);
+    let cache = setup.cache();
+    let queue = Queue {
+        queued: Mutex::new(Queued {
+            requests: RequestQueue::new(width, grid),
+            finish: false,
+            longest: 0,
+        }),
+        ready: Condvar::new(),
+    };
     let tallies = Tallies::default();
     let replies = Replies {
         cache,
@@ -177,7 +201,7 @@ pub fn run(setup: &WorkerSetup<'_>, sync: SyncThreshold, seed: u64, journal: boo
         records: AtomicU64::new(0),
     };
 
-    if let Some(initial) = comm.receive_one_of(&[kind(Some(0), Kind::InitialRecords)], None)
+    if let Some(initial) = comm.receive(&[kind(Some(0), Kind::InitialRecords)], None)
         && let (Some(cache), Ok(Message::InitialRecords(batch))) = (cache, initial.message)
     {
         batch.records.into_iter().for_each(|r| cache.insert_shared(r));
@@ -189,19 +213,9 @@ pub fn run(setup: &WorkerSetup<'_>, sync: SyncThreshold, seed: u64, journal: boo
     let mut queue_samples = Vec::new();
     let mut results: Vec<RequestResult> = Vec::new();
     std::thread::scope(|scope| {
-        let comm_thread = scope.spawn(|| {
-            communicate(
-                &comm_counters,
-                &queue,
-                &ready,
-                width * height,
-                &tallies,
-                &replies,
-                bound,
-            )
-        });
-        let integrator =
-            Integrator::new(setup.scene, setup.tracer, setup.shading, cache).cache_frozen(setup.settings.prepass);
+        let comm_thread =
+            scope.spawn(|| communicate(&comm_counters, &queue, width * height, &tallies, &replies, bound));
+        let integrator = setup.integrator();
         let clock = ThreadClock::start();
         let mut reported = u64::MAX;
         // Syncs with the master: new records up, and the queue length and the count of
@@ -224,7 +238,7 @@ pub fn run(setup: &WorkerSetup<'_>, sync: SyncThreshold, seed: u64, journal: boo
                 samples.push((start.elapsed().as_secs_f64(), left as u32));
             };
         loop {
-            let next = queue.lock().unwrap_or_else(|e| e.into_inner()).requests.pop();
+            let next = queue.lock().requests.pop();
             let Some(request) = next else {
                 // Going idle: the master must know everything done so far first (the queue
                 // may also have been emptied by a forward order while a request was computed).
@@ -233,18 +247,7 @@ pub fn run(setup: &WorkerSetup<'_>, sync: SyncThreshold, seed: u64, journal: boo
                     reported = done;
                     continue;
                 }
-                let mut q = queue.lock().unwrap_or_else(|e| e.into_inner());
-                let waited = Instant::now();
-                while q.requests.is_empty() && !q.finish {
-                    q = ready
-                        .wait_timeout(q, Duration::from_millis(20))
-                        .unwrap_or_else(|e| e.into_inner())
-                        .0;
-                }
-                counters
-                    .idle_ns
-                    .fetch_add(waited.elapsed().as_nanos() as u64, Ordering::Relaxed);
-                if q.requests.is_empty() && q.finish {
+                if queue.wait(&counters.idle_ns) {
                     break;
                 }
                 continue;
@@ -259,7 +262,7 @@ pub fn run(setup: &WorkerSetup<'_>, sync: SyncThreshold, seed: u64, journal: boo
             );
             done += 1;
             if sync.reached(cache.map_or(0, |c| c.outbox_len())) {
-                let left = queue.lock().unwrap_or_else(|e| e.into_inner()).requests.len();
+                let left = queue.lock().requests.len();
                 sync_with_master(left, done, &mut queue_samples, &mut results);
                 reported = done;
             }
@@ -271,7 +274,7 @@ pub fn run(setup: &WorkerSetup<'_>, sync: SyncThreshold, seed: u64, journal: boo
     // every status, also after FINISH.
     while replies.pending.load(Ordering::Acquire) > 0 {
         match comm
-            .receive_one_of(&[kind(Some(0), Kind::RecordsDown)], None)
+            .receive(&[kind(Some(0), Kind::RecordsDown)], None)
             .map(|r| r.message)
         {
             Some(Ok(Message::RecordsDown { records, .. })) => replies.take(records),
@@ -280,22 +283,14 @@ pub fn run(setup: &WorkerSetup<'_>, sync: SyncThreshold, seed: u64, journal: boo
     }
 
     comm.send(0, &Message::Image(frame.to_floats()));
-    let mut threads = vec![stats];
-    crate::render::add_prepass_work(&mut threads, setup.prepass);
-    let mut report = rank_report(
-        comm.rank(),
-        "pa",
-        &threads,
-        &[&counters, &comm_counters, setup.traffic_before],
-        counters.idle_s(),
-    );
+    let mut report = setup.report(&comm, "pa", vec![stats], &comm_counters);
     report.records_received = replies.records.load(Ordering::Relaxed);
     report.records_rejected = tallies.rejected.load(Ordering::Relaxed);
     report.requests_computed = done;
     report.requests_forwarded = tallies.forwarded.load(Ordering::Relaxed);
     report.request_handling_s = tallies.handling_ns.load(Ordering::Relaxed) as f64 * 1e-9;
     report.queue_lengths = queue_samples;
-    report.queue_max = queue.lock().unwrap_or_else(|e| e.into_inner()).longest as u64;
+    report.queue_max = queue.lock().longest as u64;
     report.wall_s = start.elapsed().as_secs_f64();
     send_report(&comm, report);
 }

@@ -7,10 +7,10 @@
 use super::{Roles, compute_request, send_results};
 use crate::checkpoint::RequestResult;
 use crate::image::framebuffer::FrameBuffer;
-use crate::parallel::comm::kind;
-use crate::parallel::comm::{Comm, Counters, Envelope, Marker};
+use crate::irradiance::IrradianceCache;
+use crate::parallel::comm::{Comm, Counters, Marker, kind};
 use crate::parallel::protocol::{FinishedTile, Kind, Message, Records, Requests};
-use crate::parallel::{SyncThreshold, WorkerSetup, rank_report, send_report};
+use crate::parallel::{Intake, SyncThreshold, WorkerSetup, send_report};
 use crate::render::{ThreadClock, ThreadStats, render_tile};
 use crate::shading::Integrator;
 use crate::shading::request::RequestBuffer;
@@ -108,78 +108,42 @@ fn deliver(counters: &Counters, inbox: Receiver<(i32, Message)>) {
     }
 }
 
-/// Sends the records made here and takes in those the master has from others.
-fn sync_records(
-    comm: &Comm<'_>,
-    cache: &crate::irradiance::IrradianceCache,
-    up: Vec<crate::irradiance::record::Record>,
-    received: &mut u64,
-    rejected: &mut u64,
-) {
-    comm.send(
-        0,
-        &Message::RecordsUp {
-            thread: 0,
-            records: Records::from(up),
-        },
-    );
-    if let Some(reply) = comm.receive_one_of(&[kind(Some(0), Kind::RecordsDown)], None)
-        && let Ok(Message::RecordsDown { records: batch, .. }) = reply.message
-    {
-        *received += batch.records.len() as u64;
-        *rejected += batch.rejected as u64;
-        batch.records.into_iter().for_each(|r| cache.insert_shared(r));
-    }
-}
-
-/// `journal`: --checkpoint is on, so finished tiles and computed requests are reported to the
-/// master as they finish.
-pub fn run(setup: &WorkerSetup<'_>, roles: &Roles, send_at: usize, sync: SyncThreshold, seed: u64, journal: bool) {
-    let courier_counters = Counters::default();
-    let (outbox, inbox) = sync_channel(BATCHES_IN_FLIGHT);
-    std::thread::scope(|scope| {
-        let courier = scope.spawn(|| deliver(&courier_counters, inbox));
-        render_and_help(
-            setup,
-            roles,
-            send_at,
-            sync,
-            seed,
-            journal,
-            outbox,
-            &courier_counters,
-            || {
-                let _ = courier.join();
-            },
-        );
-    });
-}
-
-#[allow(clippy::too_many_arguments)]
-fn render_and_help(
-    setup: &WorkerSetup<'_>,
-    roles: &Roles,
-    send_at: usize,
-    sync: SyncThreshold,
-    seed: u64,
+/// A PR's work and what it has to show for it, through its two phases: rendering tiles, then
+/// helping.
+struct Pr<'a, 'c> {
+    setup: &'a WorkerSetup<'a>,
+    comm: Comm<'c>,
+    integrator: Integrator<'a>,
+    frame: FrameBuffer,
+    stats: ThreadStats,
+    intake: Intake,
+    /// --checkpoint is on: finished tiles and computed requests are reported to the master as
+    /// they finish.
     journal: bool,
-    outbox: SyncSender<(i32, Message)>,
-    courier_counters: &Counters,
-    join_courier: impl FnOnce(),
-) {
+}
+
+/// `journal`: --checkpoint is on (see `Pr::journal`).
+pub fn run(setup: &WorkerSetup<'_>, roles: &Roles, send_at: usize, sync: SyncThreshold, seed: u64, journal: bool) {
     let counters = Counters::default();
-    let comm = Comm::new(&counters);
+    let courier_counters = Counters::default();
     let start = Instant::now();
-    let (width, height) = (setup.camera.width, setup.camera.height);
-    let mut frame = FrameBuffer::new(width, height);
     let sink = RequestBuffer::default();
-    let mut integrator =
-        Integrator::new(setup.scene, setup.tracer, setup.shading, setup.cache).cache_frozen(setup.settings.prepass);
+    let mut integrator = setup.integrator();
     if !roles.pas.is_empty() {
         integrator = integrator.deferring(&sink);
     }
-    let mut stats = ThreadStats::default();
+    let (width, height) = (setup.job.camera.width, setup.job.camera.height);
+    let mut pr = Pr {
+        setup,
+        comm: Comm::new(&counters),
+        integrator,
+        frame: FrameBuffer::new(width, height),
+        stats: ThreadStats::default(),
+        intake: Intake::default(),
+        journal,
+    };
     let clock = ThreadClock::start();
+    let (outbox, inbox) = sync_channel(BATCHES_IN_FLIGHT);
     let mut sender = Sender {
         outbox: Some(outbox),
         idle_ns: &counters.idle_ns,
@@ -188,141 +152,164 @@ fn render_and_help(
         sent: 0,
         handling_ns: 0,
     };
-    let (mut received, mut rejected) = (0u64, 0u64);
-
-    // Tiles until the master has none left. A PR asks for its next tile as it starts the
-    // current one, so the master's round trip overlaps the rendering instead of idling the PR
-    // between tiles (a 16x16 tile is under a millisecond of work, the round trip a few tenths).
-    // The request carries the report of the tile finished before (with --checkpoint); the
-    // records that come with the next tile are one tile older than they would have been.
-    let ask = |finished: Option<FinishedTile>| comm.send(0, &Message::WorkRequest { thread: 0, finished });
-    let take = |received: &mut u64, rejected: &mut u64| -> Option<u32> {
-        let reply = comm.receive_one_of(&[kind(Some(0), Kind::Work)], None)?;
-        let Ok(Message::Work { tile, records, .. }) = reply.message else {
-            return None;
-        };
-        if let Some(cache) = setup.cache {
-            *received += records.records.len() as u64;
-            *rejected += records.rejected as u64;
-            records.records.into_iter().for_each(|r| cache.insert_shared(r));
-        }
-        tile
-    };
-    ask(None);
-    let mut next = take(&mut received, &mut rejected);
-    let mut finished_tile: Option<FinishedTile> = None;
-    loop {
-        let Some(index) = next else {
-            if finished_tile.is_none() {
-                break;
-            }
-            // The last tile's report still has to reach the master: one more request (its
-            // answer is no tile; were it one, the loop renders it).
-            ask(finished_tile.take());
-            next = take(&mut received, &mut rejected);
-            continue;
-        };
-        ask(finished_tile.take());
-        let tile = &setup.tiles[index as usize];
-        sender.start_tile(index);
-        // The outgoing buffer is empty here (flushed at every tile's end), so what this tile
-        // sent is the change in the count sent.
-        let sent_before = sender.sent;
-        let pixels = render_tile(&integrator, setup.camera, setup.settings, tile, &mut stats.rays, |_| {
-            if sink.len() >= send_at {
-                sender.send(&sink);
-            }
-        });
-        // The tile's last requests go to its PA now, not with the next tile's.
+    std::thread::scope(|scope| {
+        let courier = scope.spawn(|| deliver(&courier_counters, inbox));
+        pr.render_tiles(&mut sender, &sink, send_at);
         sender.send(&sink);
-        if journal {
-            let requests = (sender.sent - sent_before) as u32;
-            finished_tile = Some(FinishedTile {
-                tile: index,
-                requests,
-                pixels: pixels.clone(),
-            });
-        }
-        store_tile(&mut frame, tile, &pixels);
-        stats.tiles += 1;
-        next = take(&mut received, &mut rejected);
-    }
-    sender.send(&sink);
-    sender.close();
-    // Every batch must have reached its PA before this PR counts as flushed (the master may
-    // end the job once the counts close, and a PA stops taking requests then).
-    let waited = Instant::now();
-    join_courier();
-    counters
-        .idle_ns
-        .fetch_add(waited.elapsed().as_nanos() as u64, Ordering::Relaxed);
-    let mut results: Vec<RequestResult> = Vec::new();
+        sender.close();
+        // Every batch must have reached its PA before this PR counts as flushed (the master may
+        // end the job once the counts close, and a PA stops taking requests then).
+        let waited = Instant::now();
+        let _ = courier.join();
+        counters
+            .idle_ns
+            .fetch_add(waited.elapsed().as_nanos() as u64, Ordering::Relaxed);
+    });
+    let helped = pr.help(sender.sent, seed, sync);
+    clock.stop(&mut pr.stats);
 
-    // Helping: compute what the master has a PA forward, until it says everything is done.
-    let mut helped = 0u64;
-    loop {
-        let records = setup.cache.map_or_else(Vec::new, |c| c.take_outbox());
-        send_results(&comm, &mut results);
-        let idle = Message::Idle {
-            sent: sender.sent,
-            helped,
-            records: Records::from(records),
-        };
-        comm.send(0, &idle);
-        let Some(msg) = wait_for_forward_or_finish(&comm) else {
-            break;
-        };
-        match msg.message {
-            Ok(Message::Forwarded(decoded)) => {
-                for request in decoded.requests.iter().filter(|r| r.pixel < width * height) {
-                    compute_request(
-                        &integrator,
-                        request,
-                        seed,
-                        &mut stats.rays,
-                        &mut frame,
-                        journal.then_some(&mut results),
-                    );
-                    // A helper shares its records as often as a PA does.
-                    if let Some(cache) = setup.cache
-                        && sync.reached(cache.outbox_len())
-                    {
-                        send_results(&comm, &mut results);
-                        sync_records(&comm, cache, cache.take_outbox(), &mut received, &mut rejected);
-                    }
-                }
-                // Refused requests are counted as computed (with nothing added) so the totals
-                // still close; the refusal is reported in the statistics.
-                let outside = decoded.requests.iter().filter(|r| r.pixel >= width * height).count();
-                helped += (decoded.requests.len() + decoded.rejected) as u64;
-                rejected += (decoded.rejected + outside) as u64;
-            }
-            Ok(_) => break,
-            Err(_) => rejected += 1,
-        }
-    }
-    clock.stop(&mut stats);
-
-    comm.send(0, &Message::Image(frame.to_floats()));
-    let mut threads = vec![stats.clone()];
-    crate::render::add_prepass_work(&mut threads, setup.prepass);
-    let mut report = rank_report(
-        comm.rank(),
-        "pr",
-        &threads,
-        &[&counters, courier_counters, setup.traffic_before],
-        counters.idle_s(),
-    );
-    report.records_received = received;
-    report.records_rejected = rejected;
+    pr.comm.send(0, &Message::Image(pr.frame.to_floats()));
+    let mut report = setup.report(&pr.comm, "pr", vec![pr.stats], &courier_counters);
+    (report.records_received, report.records_rejected) = pr.intake.totals();
     report.requests_sent = sender.sent;
     report.request_handling_s = sender.handling_ns as f64 * 1e-9;
     report.requests_computed = helped;
     report.wall_s = start.elapsed().as_secs_f64();
-    send_report(&comm, report);
+    send_report(&pr.comm, report);
 }
 
-/// Waits for forwarded requests from any PA or the master's FINISH.
-fn wait_for_forward_or_finish(comm: &Comm<'_>) -> Option<Envelope> {
-    comm.receive_one_of(&[kind(Some(0), Kind::Finish), kind(None, Kind::Forwarded)], None)
+impl Pr<'_, '_> {
+    /// Asks the master for a tile, with the report of the tile finished before (if any).
+    fn ask(&self, finished: Option<FinishedTile>) {
+        self.comm.send(0, &Message::WorkRequest { thread: 0, finished });
+    }
+
+    /// The master's answer to `ask`: a tile or none, and the records this PR lacks.
+    fn answer(&self) -> Option<u32> {
+        let reply = self.comm.receive(&[kind(Some(0), Kind::Work)], None)?;
+        let Ok(Message::Work { tile, records, .. }) = reply.message else {
+            return None;
+        };
+        if let Some(cache) = self.setup.cache() {
+            self.intake.take(cache, records);
+        }
+        tile
+    }
+
+    /// Tiles until the master has none left, the requests they make going out through `sender`
+    /// every `send_at`. A PR asks for its next tile as it starts the current one, so the
+    /// master's round trip overlaps the rendering instead of idling the PR between tiles (a
+    /// 16x16 tile is under a millisecond of work, the round trip a few tenths). The request
+    /// carries the report of the tile finished before (with --checkpoint); the records that
+    /// come with the next tile are one tile older than they would have been.
+    fn render_tiles(&mut self, sender: &mut Sender<'_>, sink: &RequestBuffer, send_at: usize) {
+        self.ask(None);
+        let mut next = self.answer();
+        let mut finished_tile: Option<FinishedTile> = None;
+        loop {
+            let Some(index) = next else {
+                if finished_tile.is_none() {
+                    break;
+                }
+                // The last tile's report still has to reach the master: one more request (its
+                // answer is no tile; were it one, the loop renders it).
+                self.ask(finished_tile.take());
+                next = self.answer();
+                continue;
+            };
+            self.ask(finished_tile.take());
+            let tile = &self.setup.tiles[index as usize];
+            sender.start_tile(index);
+            // The outgoing buffer is empty here (flushed at every tile's end), so what this tile
+            // sent is the change in the count sent.
+            let sent_before = sender.sent;
+            let (camera, settings) = (&self.setup.job.camera, &self.setup.job.settings);
+            let pixels = render_tile(&self.integrator, camera, settings, tile, &mut self.stats.rays, |_| {
+                if sink.len() >= send_at {
+                    sender.send(sink);
+                }
+            });
+            // The tile's last requests go to its PA now, not with the next tile's.
+            sender.send(sink);
+            if self.journal {
+                let requests = (sender.sent - sent_before) as u32;
+                finished_tile = Some(FinishedTile {
+                    tile: index,
+                    requests,
+                    pixels: pixels.clone(),
+                });
+            }
+            store_tile(&mut self.frame, tile, &pixels);
+            self.stats.tiles += 1;
+            next = self.answer();
+        }
+    }
+
+    /// Helping: computes what the master has a PA forward, until it says everything is done.
+    /// Each time it runs out it reports itself idle with the requests it `sent` and those it
+    /// helped with so far. How many it helped with.
+    fn help(&mut self, sent: u64, seed: u64, sync: SyncThreshold) -> u64 {
+        let pixels = self.frame.width * self.frame.height;
+        let mut results: Vec<RequestResult> = Vec::new();
+        let mut helped = 0u64;
+        loop {
+            let records = self.setup.cache().map_or_else(Vec::new, |c| c.take_outbox());
+            send_results(&self.comm, &mut results);
+            let idle = Message::Idle {
+                sent,
+                helped,
+                records: Records::from(records),
+            };
+            self.comm.send(0, &idle);
+            // Forwarded requests from any PA, or the master's FINISH.
+            let filters = [kind(Some(0), Kind::Finish), kind(None, Kind::Forwarded)];
+            let Some(msg) = self.comm.receive(&filters, None) else {
+                break;
+            };
+            match msg.message {
+                Ok(Message::Forwarded(decoded)) => {
+                    for request in decoded.requests.iter().filter(|r| r.pixel < pixels) {
+                        let kept = self.journal.then_some(&mut results);
+                        compute_request(
+                            &self.integrator,
+                            request,
+                            seed,
+                            &mut self.stats.rays,
+                            &mut self.frame,
+                            kept,
+                        );
+                        // A helper shares its records as often as a PA does.
+                        if let Some(cache) = self.setup.cache()
+                            && sync.reached(cache.outbox_len())
+                        {
+                            send_results(&self.comm, &mut results);
+                            self.sync_records(cache);
+                        }
+                    }
+                    // Refused requests are counted as computed (with nothing added) so the
+                    // totals still close; the refusal is reported in the statistics.
+                    let outside = decoded.requests.iter().filter(|r| r.pixel >= pixels).count();
+                    helped += (decoded.requests.len() + decoded.rejected) as u64;
+                    self.intake.reject(decoded.rejected + outside);
+                }
+                Ok(_) => break,
+                Err(_) => self.intake.reject(1),
+            }
+        }
+        helped
+    }
+
+    /// Sends the records made here and takes in those the master has from others.
+    fn sync_records(&self, cache: &IrradianceCache) {
+        let up = Message::RecordsUp {
+            thread: 0,
+            records: Records::from(cache.take_outbox()),
+        };
+        self.comm.send(0, &up);
+        if let Some(reply) = self.comm.receive(&[kind(Some(0), Kind::RecordsDown)], None)
+            && let Ok(Message::RecordsDown { records, .. }) = reply.message
+        {
+            self.intake.take(cache, records);
+        }
+    }
 }

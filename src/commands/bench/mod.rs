@@ -1,10 +1,12 @@
 //! `icrender bench rays`: how fast Embree traces this scene's rays, outside the renderer, so the
 //! renderer's own throughput has a ceiling to be compared with. `icrender bench messages`: what
-//! a message costs between two MPI ranks (src/parallel/link_bench.rs).
+//! a message costs between two MPI ranks (link.rs: it talks MPI directly, for this command
+//! alone, and shares nothing with the renderer's MPI modes).
+
+mod link;
 
 use super::{CommandError, CommandResult};
 use crate::cli::{BenchArgs, BenchCommand};
-use crate::parallel::link_bench;
 use crate::sampling::Rng;
 use crate::scene::{LoadOptions, Scene};
 use crate::sys::embree::Coherence;
@@ -66,10 +68,10 @@ fn messages(sizes: &str) -> CommandResult {
         .collect::<Result<Vec<_>, _>>()
         .map_err(|e| CommandError(format!("--sizes {sizes:?}: {e} (bytes, comma-separated)")))?;
     // 4 MiB in 32 KiB messages: past a capped link's burst allowance, under the eager limit.
-    let Some(measured) = link_bench::measure(&sizes, 32 << 10, 128).map_err(CommandError)? else {
+    let Some(measured) = link::measure(&sizes, 32 << 10, 128).map_err(CommandError)? else {
         return Ok(());
     };
-    let fitted = link_bench::fit(&measured);
+    let fitted = link::fit(&measured);
     let report = serde_json::json!({
         "stream_bytes": measured.stream_bytes,
         "stream_s": measured.stream_s,
@@ -90,7 +92,7 @@ fn rays(path: &Path, seconds: f64, threads: Option<usize>) -> CommandResult {
     let tracer = Tracer::new(&scene)?;
     let build_s = build_start.elapsed().as_secs_f64();
     let (width, height) = (1024u32, 1024u32);
-    let (view, _) = super::view::choose_view(&scene, &tracer, &Default::default(), width, height)?;
+    let (view, _) = crate::commands::view::choose_view(&scene, &tracer, &Default::default(), width, height)?;
     let camera = view.camera(width, height);
     let primary = |i: u64| {
         let p = i % (width as u64 * height as u64);
