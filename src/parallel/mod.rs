@@ -492,9 +492,9 @@ fn run_component(
             cache.keep_outbox();
         }
         // The overture's grid orders each PA's queue (component::order). A PR makes no
-        // records before its pixels: its misses go to the PAs.
+        // records before its pixels (its misses go to the PAs): it renders the grid's pixels
+        // first instead, so that their requests reach the PA first (render::render_tile).
         let grid = job.settings.overture;
-        job.settings.overture = 0;
         let setup = WorkerSetup::new(&job, all_tiles, comm.counters);
         if roles.pas.contains(&rank) {
             component::pa::run(
