@@ -634,7 +634,8 @@ def main():
         drow.update(scene=name, width=w, height=h, setting="default")
         say(f"{name:>10} serial at the default --overture {common.DEFAULT_OVERTURE}: {drow['misses']:.0f} misses, "
             f"{drow['aggregated_s']:.3f} s CPU, relMSE {drow['relmse']:.3e}")
-        runs_default.append(drow)
+        if default_repeat:
+            runs_default.append(drow)
         setups[name] = {"path": path, "size": size, "aa": aa, "base": base, "ref": ref, "trace": trace,
                         "serial": srow, "serial_default": drow, "ref_s": ref_s,
                         "serial_repeats": len(serial), "serial_default_repeats": len(default)}
@@ -645,14 +646,14 @@ def main():
             row.update(scene=name, width=w, height=h, setting=setting,
                        spread_pct=spread_pct(reps[(mode, np, setting)]))
             (runs if setting == "paper" else runs_default).append(row)
-            if mode == "component":  # the same runs, at their default order, in both settings
+            if mode == "component" and default_repeat:  # the same runs, at their default order, in both settings
                 runs_default.append(dict(row, setting="default"))
             say(f"{name:>10} {mode:<12} {np} proc ({setting}): {row['misses']:7.1f} misses, {row['aggregated_s']:.3f} "
                 f"s CPU (fastest of {row['repeats']}; median {row['aggregated_s_median']:.3f}, slowest "
                 f"{row['aggregated_s_max']:.3f}), idle {row['idle_s']:.3f} s, "
                 f"relMSE {row['relmse']:.3e}")
         # Component mode against the others, each setting, with intervals from the repeats.
-        for setting in SETTINGS:
+        for setting in SETTINGS if default_repeat else ("paper",):
             for np in ranks:
                 by_mode = {m: reps.get((m, np, "paper" if m == "component" else setting)) or [] for m in MODES}
                 c = compare_component(by_mode, seed=zlib.crc32(f"{name} {np} {setting}".encode()))

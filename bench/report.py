@@ -476,7 +476,8 @@ def gains_section(gains, scenes):
         out.append(table(["scene"] + [f"{w} workers" for w in ws], rows))
         labels = [("faster", "faster than every other mode beyond noise"),
                   ("within noise", "within noise of the second-best mode"),
-                  ("slower", "slower than the second-best mode beyond noise")]
+                  ("slower", "slower than the second-best mode beyond noise"),
+                  ("one run, no interval", "measured once (no interval, no verdict)")]
         out.append("\nComponent mode is " + _verdict_prose(mine, "verdict", labels))
         reps = sorted({(g["component_repeats"], g["other_repeats"]) for g in mine})
         out.append("Repeats behind each interval (component mode, fewest of the others): "
@@ -516,7 +517,8 @@ def misses_section(gains, scenes):
     out.append(table(["scene", "setting"] + [f"{w} workers" for w in ws], rows))
     labels = [("fewer", "fewer records than every other mode beyond noise"),
               ("within noise", "as many as the mode with the fewest, within noise"),
-              ("more", "more than the mode with the fewest, beyond noise")]
+              ("more", "more than the mode with the fewest, beyond noise"),
+              ("one run, no interval", "a count measured once (no interval, no verdict)")]
     for setting in ("paper", "default"):
         mine = [g for g in gains if g.get("setting", "paper") == setting]
         if mine:
