@@ -15,7 +15,8 @@ import tempfile
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SHARED_SCENES = os.path.normpath(os.path.join(ROOT, "..", "shared", "scenes"))
-BINARY = os.path.join(ROOT, "target", "release", "icrender")
+# Where cargo puts it: $CARGO_TARGET_DIR when set (a worktree sharing a build directory), else target/.
+BINARY = os.path.join(ROOT, os.environ.get("CARGO_TARGET_DIR") or "target", "release", "icrender")
 
 
 def build():

@@ -28,8 +28,10 @@ the renderer (src/irradiance/record.rs, Hessian metric). What a rank can see fol
 With `overture` N > 0 (the renderer's --overture, default 3): in the serial run and the
 traditional modes a rank first looks up (and makes) the records of the first surfaces at the
 tile's N-pixel grid, then renders the tile's pixels (src/render.rs render_tile); in component
-mode a PA computes the requests of pixels on that grid first, in the image's coordinates
-(src/parallel/component/order.rs), and a helping PR is handed the newest off-grid ones first.
+mode a PR renders the pixels on that grid (in the image's coordinates) first, so that their
+requests reach the PA first (src/render/pixel.rs render_tile), a PA computes the requests of
+pixels on that grid first (src/parallel/component/order.rs), and a helping PR is handed the
+newest off-grid ones first.
 
 A miss at a point the serial run answered from the cache makes a record shaped like the one
 that answered it there (its radii, axis and horizon, at the new point and normal).
@@ -392,6 +394,16 @@ class Sim:
         grid = [(p, True) for p in tile if (p % width - x0) % s == s // 2 and (p // width - y0) % s == s // 2]
         return grid + steps
 
+    def pr_order(self, tile):
+        """The order a component-mode PR renders a tile's pixels in (src/render/pixel.rs
+        render_tile): with the overture on, the pixels on the image's grid first (the grid the
+        PAs compute first), then the others, each group in scanline order."""
+        s, width = self.overture, self.t.width
+        if s <= 1:
+            return tile
+        on = [p for p in tile if p % width % s == s // 2 and p // width % s == s // 2]
+        return on + [p for p in tile if not (p % width % s == s // 2 and p // width % s == s // 2)]
+
     def run_traditional(self):
         W, c, res = self.W, self.c, self.res
         clock = [0.0] * W
@@ -695,7 +707,7 @@ class Sim:
                 clock[w] += c.message
                 self.seen_sync[w] = max(self.seen_sync[w], arrive)
                 if tile is not None:
-                    state[w] = (tile, 0)
+                    state[w] = (self.pr_order(tile), 0)
                     tile_pa[w] = index % len(pas)
                     request_tile(w)
                     heapq.heappush(heap, (clock[w], w))

@@ -70,7 +70,7 @@ def table(headers, rows):
 
 
 def render(*, command, elapsed, runs, gains, rad_rows, sim_rows, cluster_rows, cluster_note, pred_rows, setups, scenes,
-           ranks, repeat, rad_version, figures, predict, args):
+           ranks, repeat, rad_version, figures, predict, args, runs_default=(), default_repeat=0):
     m = machine()
     now = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     L = []
@@ -100,6 +100,7 @@ def render(*, command, elapsed, runs, gains, rad_rows, sim_rows, cluster_rows, c
     L.append("## Commands\n")
     L.append("```sh\n" + command + "            # this report (default, small)\n"
              "python3 bench/paper.py --full     # the paper's image sizes, 2/4/8 workers (hours)\n"
+             "python3 bench/paper.py --quick    # a check that the bench runs end to end (not a measurement)\n"
              "sudo python3 bench/cluster_bench.py  # optional first: the test bed's runs the simulation also checks\n```\n")
     L.append("What each run is (per scene, options as Radiance's):\n")
     rows = []
@@ -110,17 +111,32 @@ def render(*, command, elapsed, runs, gains, rad_rows, sim_rows, cluster_rows, c
                      f"{os.path.relpath(st['ref'], common.ROOT)} ({st['ref_s']:.0f} s this time; 0 = reused)"])
     L.append(table(["scene", "file", "size", "options", "reference (`icrender reference`, brute force, "
                     "pixel centres)"], rows))
+    serial_reps = sorted({st.get("serial_repeats", 3) for st in setups.values()})
+    default_serial_reps = sorted({st.get("serial_default_repeats", 3) for st in setups.values()})
     L.append(f"\nProcess counts {', '.join(map(str, ranks))} (the master controller is one of them, as the paper's "
-             f"additional node; workers = processes - 1); every MPI configuration ran {repeat} time(s) (CPU times from the fastest, every other figure the median), the repeats spread over "
-             f"the measurement round after round rather than back to back (this machine's speed drifts); "
-             "the serial run as often (at least 3 times). Component mode: half the workers are PAs, PAs sync every "
-             "8 records, PRs send requests by 32; centralised and broadcast sync every 50 records (the paper's "
-             "settings, the renderer's defaults). `--threads 1` everywhere. Order of computation as in the paper: "
-             "the serial run and the traditional modes in scanline order (`--overture 0`); component mode at the "
-             f"renderer's default `--overture {common.DEFAULT_OVERTURE}`, which makes each PA compute the requests of "
-             "pixels on that grid first (src/parallel/component/order.rs; the paper credits the PAs' reordering "
-             "for fewer misses than the serial run). One process at that default is reported under each table, "
-             "with component mode's speed-up against it.\n")
+             "additional node; workers = processes - 1). `--threads 1` everywhere. Component mode: half the workers "
+             "are PAs, PAs sync every 8 records, PRs send requests by 32; centralised and broadcast sync every 50 "
+             "records (the paper's settings, the renderer's defaults). Every configuration's repeats are spread over "
+             "the measurement round after round rather than run back to back (this machine's speed drifts); CPU "
+             "times are the fastest repeat's, every other figure the median.\n")
+    L.append("Two orders of computation, side by side:\n")
+    L.append(f"- **the paper's setting**: the serial run and the traditional modes in scanline order (`--overture 0`), "
+             "as the paper's renderers computed; component mode at the renderer's default "
+             f"`--overture {common.DEFAULT_OVERTURE}`: each PR renders the pixels on that grid of the image first "
+             "and each PA computes the requests of those pixels first (src/render/pixel.rs render_tile, "
+             "src/parallel/component/order.rs; the paper credits the PAs' reordering for fewer misses than the "
+             f"serial run). Every MPI configuration ran {repeat} time(s), the serial run "
+             f"{'/'.join(map(str, serial_reps))} times.\n")
+    if runs_default:
+        L.append(f"- **every mode at its default** (`--overture {common.DEFAULT_OVERTURE}` for all): the serial run "
+                 "and the traditional modes make the records at that grid of each tile before its pixels, so they "
+                 "order their work as component mode does. Component mode's runs are the same as in the paper's "
+                 f"setting. The traditional modes' configurations ran {default_repeat} time(s) each"
+                 + (f" (fewer than the paper setting's {repeat}, to keep the bench's time reasonable; their "
+                    "intervals below are correspondingly wider)" if default_repeat < repeat else "")
+                 + f", the serial run {'/'.join(map(str, default_serial_reps))} times.\n")
+    else:
+        L.append("- every mode at its default: not run (`--default-repeat 0`).\n")
 
     L.append("## Measured runs (paper Figures 3, 7, 8, 9, 10)\n")
     for name in scenes:
@@ -132,11 +148,24 @@ def render(*, command, elapsed, runs, gains, rad_rows, sim_rows, cluster_rows, c
                          f(r["wall_speedup"], "{:.2f}"), f(r["idle_pct"], "{:.1f}"), f(r["relmse"], "{:.3e}"),
                          f(r["messages"], "{:.0f}"), f(r["bytes"] / 1e6, "{:.2f}")])
         L.append(f"### {name}\n")
+        L.append("The paper's setting:\n")
         L.append(table(["mode", "processes", "workers", "misses", "aggregated CPU s (fastest)", "median / slowest", "work speed-up",
                         "efficiency %", "wall speed-up", "idle %", "relMSE vs reference", "messages", "MB sent"],
                        rows))
+        order = ["serial"] + MODES
+        drows = sorted((r for r in runs_default if r["scene"] == name),
+                       key=lambda r: (order.index(r["mode"]) if r["mode"] in order else 99, r["processes"]))
+        if drows:
+            L.append(f"\nEvery mode at its default (`--overture {common.DEFAULT_OVERTURE}`; speed-ups against the serial "
+                     "run at that default; component mode's rows are the runs above):\n")
+            L.append(table(["mode", "processes", "workers", "misses", "aggregated CPU s (fastest)", "median / slowest",
+                            "repeats", "work speed-up", "efficiency %", "idle %", "relMSE vs reference"],
+                           [[r["mode"], r["processes"], r["workers"], f(r["misses"], "{:.0f}"), f(r["aggregated_s"]),
+                             f(r.get("aggregated_s_median")) + " / " + f(r.get("aggregated_s_max")),
+                             r.get("repeats", "-"), f(r["work_speedup"], "{:.2f}"), f(r["efficiency_pct"], "{:.1f}"),
+                             f(r["idle_pct"], "{:.1f}"), f(r["relmse"], "{:.3e}")] for r in drows]))
         d = setups[name].get("serial_default")
-        if d:
+        if d and not drows:
             comp = [r for r in runs if r["scene"] == name and r["mode"] == "component"]
             against = ", ".join(f"{r['workers'] * d['aggregated_s'] / r['aggregated_s']:.2f} at {r['processes']}"
                                 for r in comp)
@@ -153,19 +182,12 @@ def render(*, command, elapsed, runs, gains, rad_rows, sim_rows, cluster_rows, c
 
     L.append("## Gain of component mode over the second-best mode (paper Table 1)\n")
     if gains:
-        ws = sorted({g["workers"] for g in gains})
-        rows = []
-        for name in scenes:
-            cells = []
-            for w in ws:
-                g = next((g for g in gains if g["scene"] == name and g["workers"] == w), None)
-                cells.append(f"{g['gain_pct']:+.1f}% (vs {g['second_mode']})" if g else "-")
-            rows.append([name] + cells)
-        L.append(table(["scene"] + [f"{w} workers" for w in ws], rows))
-        L.append("\nOn the work speed-up (CPU time). The paper measured +7% to +16% at 4-24 processors "
-                 "on dedicated cores.\n")
+        L.append(gains_section(gains, scenes))
         if "table1-gain.png" in figures:
             L.append("![table1](results/table1-gain.png)\n")
+    L.append("## Misses: component mode against the mode with the fewest\n")
+    if gains:
+        L.append(misses_section(gains, scenes))
 
     L.append("## Radiance side by side\n")
     if rad_rows:
@@ -253,16 +275,19 @@ def render(*, command, elapsed, runs, gains, rad_rows, sim_rows, cluster_rows, c
         for r in [r for r in sim_rows if r["scene"] == name]:
             tag = " (calibration)" if "calibration" in r.get("costs_from", "") else ""
             rows.append([r["mode"] + tag, r["processes"], f(r["real_misses"], "{:.0f}"), r["sim_misses"],
-                         f(r["misses_err_pct"], "{:+.1f}%"), f(r["real_aggregated_s"]), f(r["sim_aggregated_s"]),
-                         f(r["time_err_pct"], "{:+.1f}%")])
+                         f(r["misses_err_pct"], "{:+.1f}%"), f(r["real_aggregated_s"]),
+                         f(r.get("real_median_s")) + " / " + f(r.get("real_slowest_s")), f(r["sim_aggregated_s"]),
+                         f(r["time_err_pct"], "{:+.1f}%"), f(r.get("time_err_median_pct"), "{:+.1f}%"),
+                         "yes" if r.get("within_spread") else "no"])
             if r["mode"] != "serial":
                 wm = worst.setdefault(name, [0.0, 0.0])
                 wm[0] = max(wm[0], abs(r["misses_err_pct"]))
                 if "calibration" not in r.get("costs_from", ""):
                     wm[1] = max(wm[1], abs(r["time_err_pct"]))
         L.append(f"### {name}\n")
-        L.append(table(["mode", "processes", "misses measured", "simulated", "error", "aggregated s measured",
-                        "simulated", "error"], rows))
+        L.append(table(["mode", "processes", "misses measured", "simulated", "error", "aggregated s measured (fastest)",
+                        "median / slowest", "simulated", "error", "error vs median", "within the repeats' range"],
+                       rows))
         L.append("")
     if worst:
         allm = max(v[0] for v in worst.values())
@@ -271,6 +296,21 @@ def render(*, command, elapsed, runs, gains, rad_rows, sim_rows, cluster_rows, c
                        [[k, f"{v[0]:.1f}%", f"{v[1]:.1f}%"] for k, v in worst.items()]))
         L.append(f"\nOver all scenes: misses within {allm:.1f}%, aggregated time within {allt:.1f}% "
                  f"(the bar is 15%: {'met' if allm < 15 and allt < 15 else 'NOT met'}).\n")
+        timed = [r for r in sim_rows if r["mode"] != "serial" and "calibration" not in r.get("costs_from", "")
+                 and r.get("real_slowest_s")]
+        if timed:
+            spreads = sorted(100.0 * (r["real_slowest_s"] / r["real_aggregated_s"] - 1.0) for r in timed)
+            inside = sum(1 for r in timed if r.get("within_spread"))
+            over = [r for r in timed if abs(r["time_err_pct"]) >= 15]
+            L.append(f"How much of that is noise: the measured time itself spread from the fastest to the slowest "
+                     f"repeat by {spreads[0]:.1f}% to {spreads[-1]:.1f}% (median {spreads[len(spreads) // 2]:.1f}%) "
+                     f"over these {len(timed)} runs; {inside} of them have their simulated time inside their "
+                     "repeats' range, where the error is within what this machine measures from run to run"
+                     + (". The runs beyond the bar: " + "; ".join(
+                         f"{r['scene']} {r['mode']} at {r['processes']} ({r['time_err_pct']:+.1f}%, "
+                         f"{'inside' if r.get('within_spread') else 'outside'} the repeats' range, "
+                         f"{r['time_err_median_pct']:+.1f}% against the median)" for r in over) if over else "")
+                     + ".\n")
     if "validation.png" in figures:
         L.append("![validation](results/validation.png)\n")
 
@@ -335,7 +375,7 @@ def render(*, command, elapsed, runs, gains, rad_rows, sim_rows, cluster_rows, c
             L.append(paper_checks(pred_rows, scenes, "1gbit-rpict"))
     L.append("\n## Files\n")
     L.append("CSVs (also in `bench/out/paper/` with the traces and references): `results/runs.csv` (every measured "
-             "configuration), `results/runs-all.csv` (every run of every configuration), `results/gains.csv`, `results/radiance.csv`, `results/validation.csv`, "
+             "configuration), `results/runs-default.csv` (every mode at its default overture), `results/runs-all.csv` (every run of every configuration, both settings), `results/gains.csv` (both settings, with the intervals and verdicts), `results/radiance.csv`, `results/validation.csv`, "
              "`results/cluster-validation.csv` (when the test bed's CSV exists), `results/prediction.csv`.\n")
     return "\n".join(L) + "\n"
 
@@ -368,4 +408,120 @@ def paper_checks(pred_rows, scenes, network):
     out.append(table(["scene", "fastest mode", "component gain over 2nd best (paper: +7..16%)",
                       "component efficiency (paper: 103-106% at 4, >90% at 24 for Cornell)",
                       "component idle (paper: <= 5.5%)", "component misses vs serial (paper: fewer)"], rows))
+    return "\n".join(out) + "\n"
+
+
+SETTING_NAMES = {"paper": "the paper's setting", "default": "every mode at its default"}
+
+
+def _interval(v, lo, hi):
+    if lo != lo or hi != hi:
+        return f"{v:+.1f}%"
+    return f"{v:+.1f}% [{lo:+.1f}, {hi:+.1f}]"
+
+
+def _where(items):
+    """'cornell at 2 and 3 workers; corridor at 4 workers' from (scene, workers) pairs."""
+    by = {}
+    for scene, w in items:
+        by.setdefault(scene, []).append(str(w))
+    parts = []
+    for scene, ws in by.items():
+        text = ws[0] if len(ws) == 1 else ", ".join(ws[:-1]) + " and " + ws[-1]
+        parts.append(f"{scene} at {text} worker{'s' if len(ws) > 1 or ws[0] != '1' else ''}")
+    return "; ".join(parts)
+
+
+def _verdict_prose(rows, key, labels):
+    """One sentence per verdict that occurs, naming where."""
+    out = []
+    for verdict, text in labels:
+        where = [(g["scene"], g["workers"]) for g in rows if g[key] == verdict]
+        if where:
+            out.append(f"{text} at {len(where)} of {len(rows)} ({_where(where)})")
+    return "; ".join(out) + "." if out else ""
+
+
+def gains_section(gains, scenes):
+    """Table 1 for each setting: the gain on the fastest repeats (the bench's estimate), its 95 %
+    bootstrap interval over the repeats, the same on the medians, and the verdicts in words."""
+    from paper import BOOTSTRAP, CONFIDENCE
+    out = []
+    out.append("On the work speed-up (CPU time): the gain is the second-best mode's aggregated time over component "
+               "mode's, less one, each configuration's time from its fastest repeat (the serial run cancels out). "
+               f"In brackets a {CONFIDENCE:.0%} percentile bootstrap interval: every configuration's repeats "
+               f"resampled with replacement {BOOTSTRAP} times and the gain (and which mode is second best) "
+               "recomputed. A gain whose interval contains 0 is **within noise**: these repeats cannot tell it from "
+               "no gain. The same on the medians of the repeats is beside it, a second estimator: the interval of "
+               "the fastest repeats can only reach down to the fastest run seen, so it is narrower than the truth "
+               "on one side, and the medians' is the more conservative. The **verdict** is the two estimators' "
+               "where they agree and within noise where they do not. The paper measured +7% to +16% at "
+               "4-24 processors on dedicated cores.\n")
+    for setting in ("paper", "default"):
+        mine = [g for g in gains if g.get("setting", "paper") == setting]
+        if not mine:
+            continue
+        out.append(f"### {SETTING_NAMES[setting].capitalize()}\n")
+        ws = sorted({g["workers"] for g in mine})
+        rows = []
+        for name in scenes:
+            cells = []
+            for w in ws:
+                g = next((g for g in mine if g["scene"] == name and g["workers"] == w), None)
+                cells.append(f"**{g['verdict']}**: {_interval(g['gain_pct'], g['gain_lo'], g['gain_hi'])} vs "
+                             f"{g['second_mode']}; medians "
+                             f"{_interval(g['gain_median_pct'], g['gain_median_lo'], g['gain_median_hi'])}"
+                             if g else "-")
+            rows.append([name] + cells)
+        out.append(table(["scene"] + [f"{w} workers" for w in ws], rows))
+        labels = [("faster", "faster than every other mode beyond noise"),
+                  ("within noise", "within noise of the second-best mode"),
+                  ("slower", "slower than the second-best mode beyond noise"),
+                  ("one run, no interval", "measured once (no interval, no verdict)")]
+        out.append("\nComponent mode is " + _verdict_prose(mine, "verdict", labels))
+        reps = sorted({(g["component_repeats"], g["other_repeats"]) for g in mine})
+        out.append("Repeats behind each interval (component mode, fewest of the others): "
+                   + ", ".join(f"{a}/{b}" for a, b in reps) + ".\n")
+    both = {(g["scene"], g["workers"]): {} for g in gains}
+    for g in gains:
+        both[(g["scene"], g["workers"])][g.get("setting", "paper")] = g
+    changed = [(k, v) for k, v in both.items() if len(v) == 2 and v["paper"]["verdict"] != v["default"]["verdict"]]
+    if changed:
+        out.append("Where the two settings' verdicts differ: " + "; ".join(
+            f"{k[0]} at {k[1]} workers: {v['paper']['verdict']} in the paper's setting "
+            f"({v['paper']['gain_pct']:+.1f}%), {v['default']['verdict']} with every mode at its default "
+            f"({v['default']['gain_pct']:+.1f}%)" for k, v in changed) + ".\n")
+    return "\n".join(out) + "\n"
+
+
+def misses_section(gains, scenes):
+    """Component mode's misses against the mode with the fewest, both settings, with intervals."""
+    from paper import CONFIDENCE
+    out = ["Component mode's misses (records made, the median of its repeats) against those of the mode with the "
+           "fewest at the same process count and setting, in percent (negative: component mode made fewer), with a "
+           f"{CONFIDENCE:.0%} bootstrap interval over the repeats as above; within noise when it contains 0.\n"]
+    ws = sorted({g["workers"] for g in gains})
+    rows = []
+    for name in scenes:
+        for setting in ("paper", "default"):
+            mine = [g for g in gains if g.get("setting", "paper") == setting and g["scene"] == name]
+            if not mine:
+                continue
+            cells = []
+            for w in ws:
+                g = next((g for g in mine if g["workers"] == w), None)
+                cells.append(f"{g['component_misses']:.0f} vs {g['fewest_misses']:.0f} ({g['fewest_mode']}): "
+                             f"{_interval(g['misses_pct'], g['misses_lo'], g['misses_hi'])}, {g['misses_verdict']}"
+                             if g else "-")
+            rows.append([name, SETTING_NAMES[setting]] + cells)
+    out.append(table(["scene", "setting"] + [f"{w} workers" for w in ws], rows))
+    labels = [("fewer", "fewer records than every other mode beyond noise"),
+              ("within noise", "as many as the mode with the fewest, within noise"),
+              ("more", "more than the mode with the fewest, beyond noise"),
+              ("one run, no interval", "a count measured once (no interval, no verdict)")]
+    for setting in ("paper", "default"):
+        mine = [g for g in gains if g.get("setting", "paper") == setting]
+        if mine:
+            out.append(f"\n{SETTING_NAMES[setting].capitalize()}: component mode made "
+                       + _verdict_prose(mine, "misses_verdict", labels))
     return "\n".join(out) + "\n"

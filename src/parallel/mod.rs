@@ -475,8 +475,9 @@ impl Ready<'_, '_> {
             }
             Layout::Component(roles) => {
                 // The overture's grid orders each PA's queue (component::order). A PR makes no
-                // records before its pixels: its misses go to the PAs.
-                let grid = std::mem::take(&mut self.job.settings.overture);
+                // records before its pixels (its misses go to the PAs): it renders the grid's pixels
+                // first instead, so that their requests reach the PA first (render::render_tile).
+                let grid = self.job.settings.overture;
                 let setup = WorkerSetup::new(&self.job, &self.tiles, comm.counters);
                 let sync = SyncThreshold::of(job_in.sync, SyncThreshold::COMPONENT);
                 if roles.pas.contains(&comm.rank()) {

@@ -160,8 +160,34 @@ pub fn render_pixel(
     pixel
 }
 
+/// Whether a pixel is on the overture's grid in the image's own coordinates: the centre of its
+/// stride x stride block of the image (the grid a component-mode PA computes first,
+/// `parallel::component::order`).
+pub fn on_image_grid(x: u32, y: u32, stride: u32) -> bool {
+    stride > 1 && x % stride == stride / 2 && y % stride == stride / 2
+}
+
+/// The order in which a tile's pixels render: scanline order, or with `grid_stride` > 1 the
+/// pixels on the image's grid of that spacing (`on_image_grid`) first, then the others, each
+/// group in scanline order.
+pub fn pixel_order(tile: &Tile, grid_stride: u32) -> Vec<(u32, u32)> {
+    let pixels = (tile.y0..tile.y1).flat_map(|y| (tile.x0..tile.x1).map(move |x| (x, y)));
+    let (mut first, rest): (Vec<_>, Vec<_>) = pixels.partition(|&(x, y)| on_image_grid(x, y, grid_stride));
+    first.extend(rest);
+    first
+}
+
 /// Renders a tile's pixels in scanline order. `after_pixel` runs after each pixel (the MPI
 /// modes share cache records there).
+///
+/// With the overture on, a rank with a cache of its own first makes the records at the tile's
+/// grid pixels (`Integrator::prepare_records`). A rank that defers its misses (a component-mode
+/// PR, whose misses become requests to a PA) has no records to make; it renders the pixels on
+/// the image's grid first instead, then the others, so that its PA receives the grid's requests
+/// first and computes them first even when its queue holds little else (the PA's own reordering
+/// only reorders what has arrived: measured on the 128x128 Cornell box at 5 processes, 32x32
+/// tiles, the PAs' queues were empty at 58-81 % of their syncs and the overture saved component
+/// mode 3.5 % of its records against 9 % for broadcast and centralised).
 pub fn render_tile(
     integrator: &Integrator<'_>,
     camera: &Camera,
@@ -172,8 +198,9 @@ pub fn render_tile(
 ) -> Vec<PixelValue> {
     let width = (tile.x1 - tile.x0) as usize;
     let mut values = vec![PixelValue::default(); width * (tile.y1 - tile.y0) as usize];
-    if settings.overture > 0 {
-        let stride = settings.overture;
+    let stride = settings.overture;
+    let grid_first = stride > 1 && integrator.defer.is_some();
+    if stride > 0 && !grid_first {
         for y in (tile.y0..tile.y1).skip((stride / 2) as usize).step_by(stride as usize) {
             for x in (tile.x0..tile.x1).skip((stride / 2) as usize).step_by(stride as usize) {
                 let before = counts.records_level0;
@@ -189,15 +216,13 @@ pub fn render_tile(
             }
         }
     }
-    for y in tile.y0..tile.y1 {
-        for x in tile.x0..tile.x1 {
-            let before = counts.records_level0;
-            let components = render_pixel(integrator, camera, settings, x, y, counts);
-            let value = &mut values[(y - tile.y0) as usize * width + (x - tile.x0) as usize];
-            value.components = components;
-            value.records += (counts.records_level0 - before) as f32;
-            after_pixel(counts);
-        }
+    for (x, y) in pixel_order(tile, if grid_first { stride } else { 0 }) {
+        let before = counts.records_level0;
+        let components = render_pixel(integrator, camera, settings, x, y, counts);
+        let value = &mut values[(y - tile.y0) as usize * width + (x - tile.x0) as usize];
+        value.components = components;
+        value.records += (counts.records_level0 - before) as f32;
+        after_pixel(counts);
     }
     values
 }
@@ -205,6 +230,37 @@ pub fn render_tile(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn pixel_order_puts_the_image_grid_first() {
+        // Columns 2..7 and rows 1..4 of an image; stride 3: the grid is x, y = 1, 4, 7, ...
+        let tile = Tile {
+            x0: 2,
+            y0: 1,
+            x1: 7,
+            y1: 4,
+        };
+        let scanline: Vec<(u32, u32)> = (1..4).flat_map(|y| (2..7).map(move |x| (x, y))).collect();
+        assert_eq!(pixel_order(&tile, 0), scanline);
+        assert_eq!(pixel_order(&tile, 1), scanline);
+        let order = pixel_order(&tile, 3);
+        assert_eq!(&order[..1], &[(4, 1)]);
+        assert_eq!(order.len(), scanline.len());
+        let rest: Vec<(u32, u32)> = scanline.into_iter().filter(|&p| p != (4, 1)).collect();
+        assert_eq!(&order[1..], &rest[..]);
+        // Every grid pixel before every other, in scanline order, over a larger tile.
+        let tile = Tile {
+            x0: 0,
+            y0: 0,
+            x1: 16,
+            y1: 16,
+        };
+        let order = pixel_order(&tile, 3);
+        let grid = order.iter().take_while(|&&(x, y)| on_image_grid(x, y, 3)).count();
+        assert_eq!(grid, 25);
+        assert!(order[grid..].iter().all(|&(x, y)| !on_image_grid(x, y, 3)));
+        assert!(order[..grid].windows(2).all(|w| (w[0].1, w[0].0) < (w[1].1, w[1].0)));
+    }
 
     #[test]
     fn strata_tile_the_pixel_for_any_count() {
