@@ -512,7 +512,18 @@ fn load_balancing_resolves_a_forced_imbalance() {
         &scene,
         "imbalance",
         Some(5),
-        &["--mode", "component", "--pa", "1", "--send", "1", "-ad", "4096", "-aa", "0.02"],
+        &[
+            "--mode",
+            "component",
+            "--pa",
+            "1",
+            "--send",
+            "1",
+            "-ad",
+            "4096",
+            "-aa",
+            "0.02",
+        ],
     );
     let s = &run.stats;
     assert!(u(s, "requests_forwarded") > 0, "no request was forwarded: {s}");
@@ -551,8 +562,20 @@ fn a_full_pa_queue_holds_the_prs_back() {
     let _one_job = one_job_at_a_time();
     let dir = tempfile::tempdir().unwrap();
     let scene = project_dir().join("scenes/cornell.gltf");
-    // Dear records (-ad 4096) so that one PA falls behind two PRs, as in the imbalance test.
-    let common = ["--mode", "component", "--pa", "1", "--send", "4", "-ad", "4096"];
+    // Dear records, and many (-ad 4096 -aa 0.02), so that one PA falls behind two PRs, as in the
+    // imbalance test.
+    let common = [
+        "--mode",
+        "component",
+        "--pa",
+        "1",
+        "--send",
+        "4",
+        "-ad",
+        "4096",
+        "-aa",
+        "0.02",
+    ];
     let free = render(dir.path(), &scene, "unbounded", Some(4), &common);
     let (bound, send) = (16, 4);
     let mut args = common.to_vec();

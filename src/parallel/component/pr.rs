@@ -25,7 +25,7 @@ use std::time::Instant;
 const BATCHES_IN_FLIGHT: usize = 16;
 
 /// Hands request batches to the courier. Every request of a tile goes to one PA, the tile's
-/// index choosing it (tile i to PA i mod n): a PA then sees a tile's neighbouring points
+/// place in the image choosing it (`pa_of_tiles`): a PA then sees a tile's neighbouring points
 /// together and reuses its own records, where spreading one tile's batches over every PA had
 /// several PAs compute near-identical records for the same spot (measured on the Cornell box at
 /// 8 ranks: 934-968 records against 765-772, fewer than centralised or broadcast sharing).
@@ -34,6 +34,8 @@ struct Sender<'c> {
     /// Where the renderer's waits for a full outbox are counted (its idle time).
     idle_ns: &'c AtomicU64,
     pas: &'c [i32],
+    /// Each tile's PA (an index into `pas`).
+    pa_of_tile: Vec<usize>,
     /// The PA of the tile being rendered.
     pa: usize,
     sent: u64,
@@ -45,7 +47,7 @@ struct Sender<'c> {
 impl Sender<'_> {
     /// Requests from now on belong to this tile.
     fn start_tile(&mut self, index: u32) {
-        self.pa = index as usize % self.pas.len().max(1);
+        self.pa = self.pa_of_tile.get(index as usize).copied().unwrap_or(0);
     }
 
     /// Sends the buffered requests to the current tile's PA.
@@ -148,6 +150,7 @@ pub fn run(setup: &WorkerSetup<'_>, roles: &Roles, send_at: usize, sync: SyncThr
         outbox: Some(outbox),
         idle_ns: &counters.idle_ns,
         pas: &roles.pas,
+        pa_of_tile: pa_of_tiles(&setup.tiles, roles.pas.len()),
         pa: 0,
         sent: 0,
         handling_ns: 0,
@@ -310,6 +313,68 @@ impl Pr<'_, '_> {
             && let Ok(Message::RecordsDown { records, .. }) = reply.message
         {
             self.intake.take(cache, records);
+        }
+    }
+}
+
+/// Which PA (an index below `pas`) each tile's requests go to: the image cut into as many
+/// vertical bands as there are PAs, a tile going to the band of its left edge; in horizontal
+/// bands where there are fewer tile columns than PAs, and tile by tile (tile i to PA i mod n)
+/// where there are fewer rows too. Only where two bands meet do two PAs make records for
+/// neighbouring points without having each other's yet. Tile i to PA i mod n, before, made
+/// every tile border such a seam: at 5 processes (two PAs) component mode made 770-836 records on
+/// scenes/cornell.gltf (128x128, -aa 0.2, 32x32 tiles, progressive) where one PA made 733-774;
+/// with bands 742-789 (six runs; broadcast 782-812 beside them).
+fn pa_of_tiles(tiles: &[crate::tiles::Tile], pas: usize) -> Vec<usize> {
+    let pas = pas.max(1);
+    let distinct = |key: fn(&crate::tiles::Tile) -> u32| {
+        let mut keys: Vec<u32> = tiles.iter().map(key).collect();
+        keys.sort_unstable();
+        keys.dedup();
+        keys
+    };
+    let (columns, rows) = (distinct(|t| t.x0), distinct(|t| t.y0));
+    let band = |starts: &[u32], start: u32| {
+        let place = starts.partition_point(|&s| s < start);
+        place * pas / starts.len()
+    };
+    tiles
+        .iter()
+        .enumerate()
+        .map(|(i, t)| {
+            if columns.len() >= pas {
+                band(&columns, t.x0)
+            } else if rows.len() >= pas {
+                band(&rows, t.y0)
+            } else {
+                i % pas
+            }
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::pa_of_tiles;
+    use crate::tiles::tiles;
+
+    #[test]
+    fn tiles_go_to_their_pa_in_vertical_bands_else_rows_else_one_by_one() {
+        // 8 x 4 tiles, 3 PAs: columns 0-2 to PA 0, 3-5 to PA 1, 6-7 to PA 2, whatever the row.
+        let grid = tiles(128, 64, 16, 16);
+        let pa = pa_of_tiles(&grid, 3);
+        for (t, &p) in grid.iter().zip(&pa) {
+            assert_eq!(p, (t.x0 / 16) as usize * 3 / 8, "tile at {},{}", t.x0, t.y0);
+        }
+        // One column of tiles: bands of rows.
+        let column = tiles(16, 64, 16, 16);
+        assert_eq!(pa_of_tiles(&column, 2), vec![0, 0, 1, 1]);
+        // Two tiles, three PAs: one by one.
+        assert_eq!(pa_of_tiles(&tiles(32, 16, 16, 16), 3), vec![0, 1]);
+        // Every PA gets tiles wherever there are at least as many columns or rows as PAs.
+        for pas in 1..=8 {
+            let pa = pa_of_tiles(&grid, pas);
+            assert!((0..pas).all(|p| pa.contains(&p)), "{pas} PAs: {pa:?}");
         }
     }
 }
