@@ -150,7 +150,7 @@ pub fn run(setup: &WorkerSetup<'_>, roles: &Roles, send_at: usize, sync: SyncThr
         outbox: Some(outbox),
         idle_ns: &counters.idle_ns,
         pas: &roles.pas,
-        pa_of_tile: pa_of_tiles(&setup.tiles, roles.pas.len()),
+        pa_of_tile: pa_of_tiles(setup.tiles, roles.pas.len()),
         pa: 0,
         sent: 0,
         handling_ns: 0,
