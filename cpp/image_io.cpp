@@ -10,6 +10,8 @@
 
 #include <algorithm>
 #include <climits>
+#include <cmath>
+#include <cstdlib>
 #include <cstring>
 #include <exception>
 #include <map>
@@ -113,7 +115,17 @@ extern "C" int icr_exr_write(const char *path, uint32_t width, uint32_t height, 
         for (size_t i = 0; i < attribute_count; ++i) {
             if (!attributes[i].name || !*attributes[i].name)
                 return write_error(err, err_len, "attribute " + std::to_string(i) + " has no name");
-            spec.attribute(attributes[i].name, attributes[i].value ? attributes[i].value : "");
+            const std::string name = attributes[i].name, value = attributes[i].value ? attributes[i].value : "";
+            if (name == "PixelAspectRatio") {
+                // OpenEXR's standard attribute is a float; every other attribute here is text.
+                char *end = nullptr;
+                const float ratio = std::strtof(value.c_str(), &end);
+                if (value.empty() || *end != '\0' || !(ratio > 0.0f) || !std::isfinite(ratio))
+                    return write_error(err, err_len, "PixelAspectRatio " + value + " is not a positive number");
+                spec.attribute("PixelAspectRatio", ratio);
+            } else {
+                spec.attribute(name, value);
+            }
         }
 
         // By format name: the path is a temporary name whose extension says nothing.

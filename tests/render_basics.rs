@@ -377,3 +377,45 @@ fn info_and_compare_commands() {
     ]));
     assert!(printed.contains("composite") && printed.contains("relmse"), "{printed}");
 }
+
+/// Both angles given at another aspect than the image's: the pixels are not square, the EXR's
+/// PixelAspectRatio says by how much (pixel width over height on the image plane), and the user
+/// is told which angle goes with the other; one angle alone keeps them square.
+#[test]
+fn a_view_with_non_square_pixels_says_so_in_the_exr_and_on_stderr() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = default_scene();
+    let aspect_of = |name: &str, view: &[&str]| {
+        let out = dir.path().join(format!("{name}.exr"));
+        let mut args = vec![
+            "render",
+            scene.as_str(),
+            "-o",
+            out.to_str().unwrap(),
+            "-x",
+            "64",
+            "-y",
+            "48",
+        ];
+        args.extend_from_slice(&["-ad", "16", "--no-preview"]);
+        args.extend_from_slice(view);
+        let output = run_ok(&args);
+        let image = read_image(&out, &["PixelAspectRatio"]).unwrap();
+        let ratio: f64 = image.attribute("PixelAspectRatio").unwrap().parse().unwrap();
+        (ratio, stderr(&output))
+    };
+    let (stretched, said) = aspect_of("stretched", &["--vh", "74", "--vv", "60"]);
+    // tan(37 deg) / 64 over tan(30 deg) / 48.
+    let expected = (37f64.to_radians().tan() / 64.0) / (30f64.to_radians().tan() / 48.0);
+    assert!(
+        (stretched - expected).abs() < 1e-4,
+        "PixelAspectRatio {stretched}, expected {expected}"
+    );
+    assert!(
+        said.contains("PixelAspectRatio") && said.contains("-vh 75.1782"),
+        "{said}"
+    );
+    let (square, said) = aspect_of("square", &["--vh", "74"]);
+    assert_eq!(square, 1.0);
+    assert!(!said.contains("PixelAspectRatio"), "{said}");
+}

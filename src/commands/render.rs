@@ -218,6 +218,8 @@ impl Outputs {
             ("icrender/scene".to_string(), args.scene.display().to_string()),
             ("icrender/options".to_string(), options_line(args)),
             ("icrender/view".to_string(), job.view.radiance_options(job.scene.origin)),
+            // OpenEXR's own attribute (a float: see cpp/image_io.cpp), for viewers and compositors.
+            ("PixelAspectRatio".to_string(), job.camera.pixel_aspect().to_string()),
             ("icrender/mode".to_string(), stats.mode.to_string()),
             ("icrender/ranks".to_string(), stats.ranks.to_string()),
             ("icrender/render_time_s".to_string(), format!("{:.3}", stats.render_s)),

@@ -85,7 +85,18 @@ pub fn choose_view(
     }
     // One angle given: the other follows from the image's aspect, so pixels stay square.
     match (args.vh, args.vv) {
-        (Some(h), Some(v)) => (view.horizontal, view.vertical) = (h, v),
+        (Some(h), Some(v)) => {
+            (view.horizontal, view.vertical) = (h, v);
+            let square_h = View::horizontal_for_aspect(view.projection, v, aspect);
+            let pixel_aspect = view.camera(width, height).pixel_aspect();
+            if (pixel_aspect - 1.0).abs() > 1e-3 {
+                note = Some(format!(
+                    "-vh {h} with -vv {v} at {width}x{height} makes pixels {pixel_aspect:.4} times as wide as high \
+                     (the EXR's PixelAspectRatio says so); give one of the two (-vh {square_h:.4} goes with -vv {v}) \
+                     to keep pixels square"
+                ));
+            }
+        }
         (Some(h), None) => {
             view.horizontal = h;
             view.vertical = View::horizontal_for_aspect(view.projection, h, 1.0 / aspect);

@@ -125,6 +125,13 @@ impl View {
 }
 
 impl Camera {
+    /// A pixel's width over its height on the image plane: 1 unless -vh and -vv were both given
+    /// at another aspect than the image's.
+    pub fn pixel_aspect(&self) -> f32 {
+        let ratio = (self.half_width / self.width.max(1) as f32) / (self.half_height / self.height.max(1) as f32);
+        if ratio.is_finite() && ratio > 0.0 { ratio } else { 1.0 }
+    }
+
     /// Where `point` appears in the image, in pixels as `ray` takes them; None behind a
     /// perspective camera (at or behind its position's plane).
     pub fn project(&self, point: Vec3) -> Option<(f32, f32)> {
