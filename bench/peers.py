@@ -3,11 +3,12 @@
 at equal error: error against a converged reference as a function of render time, all on the
 same cores in the same run.
 
-    python3 bench/peers.py                          # Cornell box, conference room, Sibenik
-    python3 bench/peers.py --scenes cornell         # one scene
+    python3 bench/peers.py                          # Cornell box, conference room, Sibenik, two views each
+    python3 bench/peers.py --scenes cornell --views default   # one scene, one view
+    python3 bench/peers.py --references-only        # make the references ahead (untimed)
     python3 bench/peers.py --scenes cornell --repeats 3 --peer-spp 4,8,16,32,64
 
-For each scene, under bench/out/peers/SCENE/:
+For each scene and view, under bench/out/peers/SCENE/ (SCENE-VIEW/ for a second view):
   1. icrender renders once to fix the view (its EXR's icrender/view), and that view is given
      to every renderer;
   2. the converged reference is made twice, by icrender's brute force (`icrender reference`)
@@ -19,9 +20,9 @@ For each scene, under bench/out/peers/SCENE/:
      OpenImageDenoise) render at --peer-spp, icrender at its sweep of -aa / -ad / --spp;
      each pass over all renderers is repeated --repeats times back to back, and the fastest
      time of each run is kept (the machine is shared; errors do not change between repeats);
-  4. writes docs/peers/peers-SCENE.csv and .png (relMSE, relMSE of 4x4-averaged pixels as in
+  4. writes docs/peers/peers-SCENE[-VIEW].csv and .png (relMSE, relMSE of 4x4-averaged pixels as in
      DESIGN.md, and RMSE, against wall time and against CPU time over the cores), and prints the
-     targets of issue 9 on each measure.
+     targets of issue 18 on each measure.
 
 Times: icrender's render_s, Mitsuba's mi.render, Cycles' render after a warm-up render that
 built its BVH (persistent data): rendering alone, without loading or BVH building, for all.
