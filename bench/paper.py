@@ -904,7 +904,8 @@ def write_outputs(args, runs, gains, rad_rows, sim_rows, cluster_rows, cluster_n
                          sim_rows=sim_rows, cluster_rows=cluster_rows, cluster_note=cluster_note,
                          pred_rows=pred_rows, setups=setups, scenes=scenes, ranks=ranks, repeat=repeat,
                          rad_version=rad_version, figures=figures, predict=predict, args=args,
-                         runs_default=list(runs_default), default_repeat=default_repeat)
+                         runs_default=list(runs_default), default_repeat=default_repeat,
+                         confidence=CONFIDENCE, resamples=BOOTSTRAP)
     path = os.path.join(args.docs, "RESULTS.md")
     with open(path, "w") as f:
         f.write(text)

@@ -70,7 +70,10 @@ def table(headers, rows):
 
 
 def render(*, command, elapsed, runs, gains, rad_rows, sim_rows, cluster_rows, cluster_note, pred_rows, setups, scenes,
-           ranks, repeat, rad_version, figures, predict, args, runs_default=(), default_repeat=0):
+           ranks, repeat, rad_version, figures, predict, args, runs_default=(), default_repeat=0,
+           confidence=0.95, resamples=0):
+    """The report's text. `confidence` and `resamples`: the bootstrap intervals' level and count,
+    as bench/paper.py computed them (passed in, so that this module imports nothing of paper.py)."""
     m = machine()
     now = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     L = []
@@ -182,12 +185,12 @@ def render(*, command, elapsed, runs, gains, rad_rows, sim_rows, cluster_rows, c
 
     L.append("## Gain of component mode over the second-best mode (paper Table 1)\n")
     if gains:
-        L.append(gains_section(gains, scenes))
+        L.append(gains_section(gains, scenes, confidence, resamples))
         if "table1-gain.png" in figures:
             L.append("![table1](results/table1-gain.png)\n")
     L.append("## Misses: component mode against the mode with the fewest\n")
     if gains:
-        L.append(misses_section(gains, scenes))
+        L.append(misses_section(gains, scenes, confidence))
 
     L.append("## Radiance side by side\n")
     if rad_rows:
@@ -442,15 +445,14 @@ def _verdict_prose(rows, key, labels):
     return "; ".join(out) + "." if out else ""
 
 
-def gains_section(gains, scenes):
-    """Table 1 for each setting: the gain on the fastest repeats (the bench's estimate), its 95 %
+def gains_section(gains, scenes, confidence, resamples):
+    """Table 1 for each setting: the gain on the fastest repeats (the bench's estimate), its
     bootstrap interval over the repeats, the same on the medians, and the verdicts in words."""
-    from paper import BOOTSTRAP, CONFIDENCE
     out = []
     out.append("On the work speed-up (CPU time): the gain is the second-best mode's aggregated time over component "
                "mode's, less one, each configuration's time from its fastest repeat (the serial run cancels out). "
-               f"In brackets a {CONFIDENCE:.0%} percentile bootstrap interval: every configuration's repeats "
-               f"resampled with replacement {BOOTSTRAP} times and the gain (and which mode is second best) "
+               f"In brackets a {confidence:.0%} percentile bootstrap interval: every configuration's repeats "
+               f"resampled with replacement {resamples} times and the gain (and which mode is second best) "
                "recomputed. A gain whose interval contains 0 is **within noise**: these repeats cannot tell it from "
                "no gain. The same on the medians of the repeats is beside it, a second estimator: the interval of "
                "the fastest repeats can only reach down to the fastest run seen, so it is narrower than the truth "
@@ -494,12 +496,11 @@ def gains_section(gains, scenes):
     return "\n".join(out) + "\n"
 
 
-def misses_section(gains, scenes):
+def misses_section(gains, scenes, confidence):
     """Component mode's misses against the mode with the fewest, both settings, with intervals."""
-    from paper import CONFIDENCE
     out = ["Component mode's misses (records made, the median of its repeats) against those of the mode with the "
            "fewest at the same process count and setting, in percent (negative: component mode made fewer), with a "
-           f"{CONFIDENCE:.0%} bootstrap interval over the repeats as above; within noise when it contains 0.\n"]
+           f"{confidence:.0%} bootstrap interval over the repeats as above; within noise when it contains 0.\n"]
     ws = sorted({g["workers"] for g in gains})
     rows = []
     for name in scenes:
