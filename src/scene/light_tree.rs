@@ -138,11 +138,8 @@ impl LightTree {
     }
 
     /// What a node is estimated to give at the receiver: power over squared distance, the
-    /// distance kept at least the node's half-diagonal; zero where it is dark.
+    /// distance kept at least the node's half-diagonal.
     fn importance(&self, node: usize, at: Receiver) -> f64 {
-        if self.dark_at(node, at) {
-            return 0.0;
-        }
         let n = &self.nodes[node];
         let d2 = (n.centre - at.point).length_squared().max(n.radius2) as f64;
         if d2 > 0.0 && d2.is_finite() {
@@ -153,23 +150,21 @@ impl LightTree {
     }
 
     /// The probability of going to the first child of inner node `node`; None where neither
-    /// child can light the receiver.
+    /// child can light the receiver. A child that is dark there or has no power gets nothing.
     fn first_child_probability(&self, node: usize, at: Receiver) -> Option<f64> {
         let (left, right) = (node + 1, self.nodes[node].second as usize);
-        let (wl, wr) = (self.importance(left, at), self.importance(right, at));
-        let p = wl / (wl + wr);
-        if p.is_finite() && p > 0.0 && p < 1.0 {
-            return Some(p);
-        }
-        let (dark_left, dark_right) = (self.dark_at(left, at), self.dark_at(right, at));
-        let (pl, pr) = (self.nodes[left].power, self.nodes[right].power);
-        // A dark or powerless side gets nothing; otherwise the estimates degenerated
-        // (overflow): an even split.
-        match (dark_left || pl <= 0.0, dark_right || pr <= 0.0) {
-            (true, true) => None,
-            (false, true) => Some(1.0),
-            (true, false) => Some(0.0),
-            (false, false) => Some(0.5),
+        let lit = |child: usize| {
+            (self.nodes[child].power > 0.0 && !self.dark_at(child, at)).then(|| self.importance(child, at))
+        };
+        match (lit(left), lit(right)) {
+            (None, None) => None,
+            (Some(_), None) => Some(1.0),
+            (None, Some(_)) => Some(0.0),
+            (Some(wl), Some(wr)) => {
+                let p = wl / (wl + wr);
+                // Estimates that overflow or vanish: an even split.
+                Some(if p.is_finite() && p > 0.0 && p < 1.0 { p } else { 0.5 })
+            }
         }
     }
 
@@ -198,8 +193,9 @@ impl LightTree {
                 node = self.nodes[node].second as usize;
             }
         }
-        let lit = !self.dark_at(node, at) && probability > 0.0;
-        lit.then_some((self.nodes[node].triangle as usize, probability))
+        // A dark or powerless leaf is only reached with probability zero (its parent gives it
+        // none); the root, a leaf itself for one emitter, was tested above.
+        (probability > 0.0).then_some((self.nodes[node].triangle as usize, probability))
     }
 
     /// The probability that `pick` at the receiver returns emitter `target` (walks every path:
@@ -208,8 +204,7 @@ impl LightTree {
         fn walk(tree: &LightTree, node: usize, at: Receiver, target: usize, p: f64) -> f64 {
             let n = &tree.nodes[node];
             if n.leaf {
-                let picked = n.triangle as usize == target && !tree.dark_at(node, at);
-                return if picked { p } else { 0.0 };
+                return if n.triangle as usize == target { p } else { 0.0 };
             }
             let Some(p_left) = tree.first_child_probability(node, at) else {
                 return 0.0;
