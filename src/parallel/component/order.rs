@@ -11,6 +11,7 @@
 //! 55-93 % of a PA's syncs), and a PA can only reorder what has arrived; so the PRs also render
 //! the grid's pixels first (`render::render_tile`), and their requests arrive in this order.
 
+use crate::render::pixel::on_image_grid;
 use crate::shading::request::AmbientRequest;
 use std::collections::VecDeque;
 
@@ -34,16 +35,11 @@ impl RequestQueue {
         }
     }
 
-    /// Whether the pixel is one of the grid's: the centre of its stride x stride block of the
-    /// image (the serial overture counts its blocks from each tile's corner instead; a PA's
-    /// queue mixes tiles, so here the image's own grid).
+    /// Whether the pixel is one of the grid's: the image's own grid (the serial overture counts
+    /// its blocks from each tile's corner instead; a PA's queue mixes tiles), the same grid whose
+    /// pixels the PRs render first.
     fn on_grid(&self, pixel: u32) -> bool {
-        if self.stride <= 1 {
-            return false;
-        }
-        let (x, y) = (pixel % self.width, pixel / self.width);
-        let centre = self.stride / 2;
-        x % self.stride == centre && y % self.stride == centre
+        on_image_grid(pixel % self.width, pixel / self.width, self.stride)
     }
 
     pub fn len(&self) -> usize {
