@@ -9,9 +9,7 @@
 mod requests;
 pub mod wire;
 
-#[cfg(test)]
-pub(crate) use requests::sample_request;
-pub use requests::{REQUEST_BYTES, Requests};
+pub use requests::Requests;
 
 use crate::image::components::Components;
 use crate::image::framebuffer::{Layer, PixelValue};
@@ -32,30 +30,49 @@ const RECORDS_DOWN_BASE: Tag = 2000;
 /// The most rendering threads a rank may have (their reply tags must not overlap).
 pub const MAX_THREADS: u32 = 999;
 
-/// Every message's kind and its MPI tag, in one place.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Kind {
-    Heartbeat = 1,
-    InitialRecords = 2,
-    PrepassStart = 3,
-    PrepassRound = 4,
-    WorkRequest = 5,
-    RecordsUp = 6,
-    RecordsBroadcast = 7,
-    FinalRecords = 8,
-    Stats = 9,
-    Requests = 10,
-    Forwarded = 11,
-    Idle = 12,
-    PaStatus = 13,
-    ForwardOrder = 14,
-    Finish = 15,
-    Image = 16,
-    Results = 17,
+/// Declares `Kind` from one table: each kind's MPI tag and its name in errors.
+macro_rules! kinds {
+    ($($(#[$doc:meta])* $kind:ident = $tag:expr, $name:literal;)*) => {
+        /// Every message's kind and its MPI tag, in one place.
+        #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+        pub enum Kind {
+            $($(#[$doc])* $kind = $tag,)*
+        }
+
+        impl Kind {
+            const ALL: &[Kind] = &[$(Kind::$kind),*];
+
+            fn name(self) -> &'static str {
+                match self {
+                    $(Kind::$kind => $name,)*
+                }
+            }
+        }
+    };
+}
+
+kinds! {
+    Heartbeat = 1, "heartbeat";
+    InitialRecords = 2, "initial records";
+    PrepassStart = 3, "prepass start";
+    PrepassRound = 4, "prepass round";
+    WorkRequest = 5, "work request";
+    RecordsUp = 6, "records up";
+    RecordsBroadcast = 7, "record broadcast";
+    FinalRecords = 8, "final records";
+    Stats = 9, "statistics";
+    Requests = 10, "request buffer";
+    Forwarded = 11, "forwarded requests";
+    Idle = 12, "idle report";
+    PaStatus = 13, "PA status";
+    ForwardOrder = 14, "forward order";
+    Finish = 15, "finish";
+    Image = 16, "image";
+    Results = 17, "results";
     /// Tags WORK_BASE + thread.
-    Work = WORK_BASE as isize,
+    Work = WORK_BASE as isize, "work";
     /// Tags RECORDS_DOWN_BASE + thread.
-    RecordsDown = RECORDS_DOWN_BASE as isize,
+    RecordsDown = RECORDS_DOWN_BASE as isize, "records down";
 }
 
 impl Kind {
@@ -72,36 +89,15 @@ impl Kind {
 
     /// The kind a tag names, and the thread for the per-thread kinds.
     pub fn of_tag(tag: Tag) -> Option<(Kind, u32)> {
-        use Kind::*;
-        let plain = [
-            Heartbeat,
-            InitialRecords,
-            PrepassStart,
-            PrepassRound,
-            WorkRequest,
-            RecordsUp,
-            RecordsBroadcast,
-            FinalRecords,
-            Stats,
-            Requests,
-            Forwarded,
-            Idle,
-            PaStatus,
-            ForwardOrder,
-            Finish,
-            Image,
-            Results,
-        ];
-        if let Some(&kind) = plain.iter().find(|k| k.tag() == tag) {
+        if let Some(&kind) = Kind::ALL.iter().find(|k| k.tag() == tag) {
             return Some((kind, 0));
         }
-        for base in [Work, RecordsDown] {
+        [Kind::Work, Kind::RecordsDown].into_iter().find_map(|base| {
             let thread = tag - base.tag();
-            if (0..=MAX_THREADS as Tag).contains(&thread) {
-                return Some((base, thread as u32));
-            }
-        }
-        None
+            (0..=MAX_THREADS as Tag)
+                .contains(&thread)
+                .then_some((base, thread as u32))
+        })
     }
 }
 
@@ -297,7 +293,7 @@ impl Message {
 
     pub fn decode(tag: Tag, bytes: &[u8]) -> Result<Message, ProtocolError> {
         let (kind, thread) = Kind::of_tag(tag).ok_or_else(|| ProtocolError(format!("unknown message tag {tag}")))?;
-        let mut r = Reader::new(bytes, kind_name(kind));
+        let mut r = Reader::new(bytes, kind.name());
         let version = r.u8()?;
         if version != PROTOCOL_VERSION {
             return Err(r.error(format_args!(
@@ -390,30 +386,6 @@ impl Message {
         };
         r.finish()?;
         Ok(message)
-    }
-}
-
-fn kind_name(kind: Kind) -> &'static str {
-    match kind {
-        Kind::Heartbeat => "heartbeat",
-        Kind::InitialRecords => "initial records",
-        Kind::PrepassStart => "prepass start",
-        Kind::PrepassRound => "prepass round",
-        Kind::WorkRequest => "work request",
-        Kind::Work => "work",
-        Kind::RecordsUp => "records up",
-        Kind::RecordsDown => "records down",
-        Kind::RecordsBroadcast => "record broadcast",
-        Kind::FinalRecords => "final records",
-        Kind::Stats => "statistics",
-        Kind::Requests => "request buffer",
-        Kind::Forwarded => "forwarded requests",
-        Kind::Idle => "idle report",
-        Kind::PaStatus => "PA status",
-        Kind::ForwardOrder => "forward order",
-        Kind::Finish => "finish",
-        Kind::Image => "image",
-        Kind::Results => "results",
     }
 }
 
@@ -530,4 +502,4 @@ pub fn take_results(r: &mut Reader<'_>, count: usize) -> Result<Vec<RequestResul
 }
 
 #[cfg(test)]
-mod tests;
+pub(crate) mod tests;
