@@ -81,7 +81,7 @@ impl RequestQueue {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::parallel::protocol::sample_request as request;
+    use crate::parallel::protocol::tests::sample_request as request;
 
     fn pixels(q: &mut RequestQueue) -> Vec<u32> {
         std::iter::from_fn(|| q.pop()).map(|r| r.pixel).collect()

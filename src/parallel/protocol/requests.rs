@@ -95,22 +95,3 @@ pub fn take(reader: &mut Reader<'_>) -> Result<Requests, ProtocolError> {
     }
     Ok(out)
 }
-
-/// A request with every field set, for tests of code that moves requests around.
-#[cfg(test)]
-pub(crate) fn sample_request(pixel: u32) -> AmbientRequest {
-    AmbientRequest {
-        pixel,
-        layer: Layer::Specular,
-        specular_depth: 2,
-        position: Vec3::new(1.0, 2.0, 3.0),
-        geometric_normal: Vec3::Y,
-        normal: Vec3::Y,
-        facing_normal: -Vec3::Y,
-        coefficient: Vec3::new(0.1, 0.2, 0.3),
-        weight: 0.5,
-        direction: Vec3::X,
-        material: 7,
-        stream: 0xdead_beef_0000_0001,
-    }
-}

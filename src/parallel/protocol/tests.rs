@@ -1,6 +1,25 @@
 use super::*;
 use crate::irradiance::record::tests::flat_record;
+use crate::shading::request::AmbientRequest;
 use glam::Vec3;
+
+/// A request with every field set, for tests of code that moves requests around.
+pub(crate) fn sample_request(pixel: u32) -> AmbientRequest {
+    AmbientRequest {
+        pixel,
+        layer: Layer::Specular,
+        specular_depth: 2,
+        position: Vec3::new(1.0, 2.0, 3.0),
+        geometric_normal: Vec3::Y,
+        normal: Vec3::Y,
+        facing_normal: -Vec3::Y,
+        coefficient: Vec3::new(0.1, 0.2, 0.3),
+        weight: 0.5,
+        direction: Vec3::X,
+        material: 7,
+        stream: 0xdead_beef_0000_0001,
+    }
+}
 
 fn record(i: u32) -> Record {
     let mut r = flat_record(0.1 + i as f32, 0.5);
