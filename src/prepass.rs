@@ -23,6 +23,7 @@ use crate::sampling::Rng;
 use crate::scene::view::Camera;
 use crate::shading::{Integrator, RayCounts, Work};
 use crate::tracer::SurfaceHit;
+use std::convert::Infallible;
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
@@ -349,20 +350,21 @@ fn site_records(
 
 /// Runs the whole prepass in this process into `integrator`'s cache (nothing to do without one).
 pub fn run(integrator: &Integrator<'_>, camera: &Camera, settings: &RenderSettings) -> PrepassOutcome {
-    run_shared(integrator, camera, settings, Share::All, &mut |mine| mine)
+    let Ok(outcome) = run_shared::<Infallible>(integrator, camera, settings, Share::All, &mut Ok);
+    outcome
 }
 
 /// Runs the prepass as one of several processes: each round this process computes its `share`
 /// of the sites, `exchange` turns its records into the round's records from every process (in
 /// site order), and all of them join the cache in that order, so every process ends each
-/// round with the same cache as one process alone would.
-pub fn run_shared(
+/// round with the same cache as one process alone would. An error of `exchange` ends it.
+pub fn run_shared<E>(
     integrator: &Integrator<'_>,
     camera: &Camera,
     settings: &RenderSettings,
     share: Share,
-    exchange: &mut dyn FnMut(RoundRecords) -> RoundRecords,
-) -> PrepassOutcome {
+    exchange: &mut dyn FnMut(RoundRecords) -> Result<RoundRecords, E>,
+) -> Result<PrepassOutcome, E> {
     let start = Instant::now();
     let mut outcome = PrepassOutcome {
         records_per_pixel: vec![0; (camera.width * camera.height) as usize],
@@ -370,10 +372,10 @@ pub fn run_shared(
         ..Default::default()
     };
     let Some(cache) = integrator.cache else {
-        return outcome;
+        return Ok(outcome);
     };
     if integrator.options.ambient_bounces == 0 {
-        return outcome;
+        return Ok(outcome);
     }
     let pass = Pass {
         integrator,
@@ -383,10 +385,10 @@ pub fn run_shared(
     };
     // The rounds look records up in a lock-free copy of the cache, which grows with it.
     let mut snapshot = cache.snapshot();
-    let mut run = |sites: Vec<Site>, snapshot: &mut FrozenIndex, outcome: &mut PrepassOutcome| {
+    let mut run = |sites: Vec<Site>, snapshot: &mut FrozenIndex, outcome: &mut PrepassOutcome| -> Result<(), E> {
         let mine = share.indices(sites.len());
         let made = run_round(pass, &sites, &mine, snapshot, &mut outcome.threads);
-        let mut made = exchange(made);
+        let mut made = exchange(made)?;
         made.sort_by_key(|(index, _)| *index);
         for (index, record) in made {
             let Some(&site) = sites.get(index as usize) else {
@@ -404,21 +406,22 @@ pub fn run_shared(
         }
         outcome.sites += sites.len() as u64;
         outcome.rounds += 1;
+        Ok(())
     };
     for sites in rounds(camera.width, camera.height) {
-        run(sites, &mut snapshot, &mut outcome);
+        run(sites, &mut snapshot, &mut outcome)?;
     }
     if settings.spp > 1 || settings.jitter {
         let needs = pixels_needing_samples(pass, &snapshot, &mut outcome.threads);
         outcome.pixels_sampled = needs.iter().filter(|&&n| n).count() as u64;
         for sites in sample_rounds(camera.width, camera.height, settings.spp, &needs) {
-            run(sites, &mut snapshot, &mut outcome);
+            run(sites, &mut snapshot, &mut outcome)?;
         }
     }
     // The cache is complete: from now on lookups read its lock-free copy.
     cache.freeze();
     outcome.seconds = start.elapsed().as_secs_f64();
-    outcome
+    Ok(outcome)
 }
 
 #[cfg(test)]
