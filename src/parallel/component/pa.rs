@@ -11,7 +11,7 @@ use crate::image::framebuffer::FrameBuffer;
 use crate::irradiance::IrradianceCache;
 use crate::parallel::comm::{Comm, Counters, kind};
 use crate::parallel::protocol::{Kind, Message, Records, Requests};
-use crate::parallel::{SyncThreshold, WorkerSetup, send_report};
+use crate::parallel::{Intake, SyncThreshold, WorkerSetup, send_report};
 use crate::render::{ThreadClock, ThreadStats};
 use crate::shading::request::AmbientRequest;
 use crate::shading::request::RequestResult;
@@ -75,16 +75,14 @@ struct Replies<'a> {
     cache: Option<&'a IrradianceCache>,
     /// Statuses sent whose reply has not been taken in.
     pending: AtomicU64,
-    /// Records received from the master.
-    records: AtomicU64,
+    intake: Intake,
 }
 
 impl Replies<'_> {
     fn take(&self, records: Records) {
         self.pending.fetch_sub(1, Ordering::AcqRel);
         if let Some(cache) = self.cache {
-            self.records.fetch_add(records.records.len() as u64, Ordering::Relaxed);
-            records.records.into_iter().for_each(|r| cache.insert_shared(r));
+            self.intake.take(cache, records);
         }
     }
 }
@@ -198,7 +196,7 @@ pub fn run(setup: &WorkerSetup<'_>, sync: SyncThreshold, seed: u64, journal: boo
     let replies = Replies {
         cache,
         pending: AtomicU64::new(0),
-        records: AtomicU64::new(0),
+        intake: Intake::default(),
     };
 
     if let Some(initial) = comm.receive(&[kind(Some(0), Kind::InitialRecords)], None)
@@ -209,7 +207,7 @@ pub fn run(setup: &WorkerSetup<'_>, sync: SyncThreshold, seed: u64, journal: boo
 
     let mut frame = FrameBuffer::new(width, height);
     let mut stats = ThreadStats::default();
-    let mut done = 0u64;
+    let (mut done, mut reported) = (0u64, u64::MAX);
     let mut queue_samples = Vec::new();
     let mut results: Vec<RequestResult> = Vec::new();
     std::thread::scope(|scope| {
@@ -217,55 +215,44 @@ pub fn run(setup: &WorkerSetup<'_>, sync: SyncThreshold, seed: u64, journal: boo
             scope.spawn(|| communicate(&comm_counters, &queue, width * height, &tallies, &replies, bound));
         let integrator = setup.integrator();
         let clock = ThreadClock::start();
-        let mut reported = u64::MAX;
-        // Syncs with the master: new records up, and the queue length and the count of
-        // computed requests, which the master's termination check relies on. The reply is not
-        // waited for (see `Replies`).
-        let sync_with_master =
-            |left: usize, done: u64, samples: &mut Vec<(f64, u32)>, results: &mut Vec<RequestResult>| {
-                // The results first: the status counts them as done.
-                send_results(&comm, results);
-                let records = cache.map_or_else(Vec::new, |c| c.take_outbox());
-                // Refused requests count as done: the PR counted them as sent.
-                let finished = done + tallies.rejected.load(Ordering::Relaxed);
-                replies.pending.fetch_add(1, Ordering::AcqRel);
-                let status = Message::PaStatus {
-                    queue: left as u64,
-                    done: finished,
-                    records: Records::from(records),
-                };
-                comm.send(0, &status);
-                samples.push((start.elapsed().as_secs_f64(), left as u32));
-            };
         loop {
             let next = queue.lock().requests.pop();
-            let Some(request) = next else {
-                // Going idle: the master must know everything done so far first (the queue
-                // may also have been emptied by a forward order while a request was computed).
-                if done != reported {
-                    sync_with_master(0, done, &mut queue_samples, &mut results);
-                    reported = done;
+            // The queue length to report: a sync every --sync new records, and before going
+            // idle, when the master must know everything done so far (the queue may also have
+            // been emptied by a forward order while a request was computed).
+            let left = match next {
+                Some(request) => {
+                    let kept = journal.then_some(&mut results);
+                    compute_request(&integrator, &request, seed, &mut stats.rays, &mut frame, kept);
+                    done += 1;
+                    if !sync.reached(cache.map_or(0, |c| c.outbox_len())) {
+                        continue;
+                    }
+                    queue.lock().requests.len()
+                }
+                None if done == reported => {
+                    if queue.wait(&counters.idle_ns) {
+                        break;
+                    }
                     continue;
                 }
-                if queue.wait(&counters.idle_ns) {
-                    break;
-                }
-                continue;
+                None => 0,
             };
-            compute_request(
-                &integrator,
-                &request,
-                seed,
-                &mut stats.rays,
-                &mut frame,
-                journal.then_some(&mut results),
-            );
-            done += 1;
-            if sync.reached(cache.map_or(0, |c| c.outbox_len())) {
-                let left = queue.lock().requests.len();
-                sync_with_master(left, done, &mut queue_samples, &mut results);
-                reported = done;
-            }
+            // The sync: new records up, and the queue length and the count of computed
+            // requests, which the master's termination check relies on. The results go first
+            // (the status counts them as done); the reply is not waited for (see `Replies`).
+            send_results(&comm, &mut results);
+            let records = cache.map_or_else(Vec::new, |c| c.take_outbox());
+            replies.pending.fetch_add(1, Ordering::AcqRel);
+            let status = Message::PaStatus {
+                queue: left as u64,
+                // Refused requests count as done: the PR counted them as sent.
+                done: done + tallies.rejected.load(Ordering::Relaxed),
+                records: Records::from(records),
+            };
+            comm.send(0, &status);
+            queue_samples.push((start.elapsed().as_secs_f64(), left as u32));
+            reported = done;
         }
         clock.stop(&mut stats);
         let _ = comm_thread.join();
@@ -284,7 +271,7 @@ pub fn run(setup: &WorkerSetup<'_>, sync: SyncThreshold, seed: u64, journal: boo
 
     comm.send(0, &Message::Image(frame.to_floats()));
     let mut report = setup.report(&comm, "pa", vec![stats], &comm_counters);
-    report.records_received = replies.records.load(Ordering::Relaxed);
+    report.records_received = replies.intake.totals().0;
     report.records_rejected = tallies.rejected.load(Ordering::Relaxed);
     report.requests_computed = done;
     report.requests_forwarded = tallies.forwarded.load(Ordering::Relaxed);
