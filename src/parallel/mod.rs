@@ -26,7 +26,7 @@ use crate::stats::{RankReport, RenderStats, ThreadReport};
 use crate::tiles::{Tile, tiles};
 use comm::{Comm, Counters, Hosts};
 use mpi::Threading;
-use protocol::{Message, Records};
+use protocol::{Kind, Message, Records};
 use sharing::{TraditionalSharing, WorkerSharing};
 use std::sync::atomic::AtomicU64;
 use std::sync::atomic::Ordering::Relaxed;
@@ -186,6 +186,17 @@ impl Intake {
         records.records.into_iter().for_each(|r| cache.insert_shared(r));
     }
 
+    /// A sync of rendering thread `thread` through the master (centralised mode, helping PRs):
+    /// sends the records made here and takes in those of the others it answers with.
+    pub fn sync(&self, comm: &Comm<'_>, thread: u32, cache: &IrradianceCache) {
+        let records = Records::from(cache.take_outbox());
+        comm.send(0, &Message::RecordsUp { thread, records });
+        let reply = comm.receive(&[(Some(0), Some(Kind::RecordsDown.for_thread(thread)))], None);
+        if let Some(Ok(Message::RecordsDown { records, .. })) = reply.map(|r| r.message) {
+            self.take(cache, records);
+        }
+    }
+
     pub fn reject(&self, count: usize) {
         self.rejected.fetch_add(count as u64, Relaxed);
     }
@@ -300,38 +311,6 @@ fn check_layout(job: &ParallelJob<'_>, size: i32, tile_count: usize, threads: us
     Ok(())
 }
 
-/// MPI for this process and the heartbeats that run while it is up, ended in that order (a
-/// field's drop runs in declaration order): no thread may use MPI once it is finalized.
-struct MpiSession {
-    _pulse: Option<pulse::Pulse>,
-    _universe: mpi::environment::Universe,
-}
-
-impl MpiSession {
-    /// Heartbeats from here on (see `liveness`): every rank hears from its master and the
-    /// master from every rank while the job runs (the pulse needs MPI_THREAD_MULTIPLE).
-    fn start(
-        universe: mpi::environment::Universe,
-        granted: Threading,
-        comm: &Comm<'_>,
-        hosts: &Hosts,
-        limit: Duration,
-    ) -> Self {
-        liveness::begin(comm.size() as usize);
-        let rank = comm.rank();
-        let lost_master = format!(
-            "rank {rank} on {}: no word from the master (rank 0 on {}) for {:.0} s: it is gone or hangs; this rank ends",
-            hosts.of(rank),
-            hosts.of(0),
-            limit.as_secs_f64()
-        );
-        MpiSession {
-            _pulse: (granted == Threading::Multiple).then(|| pulse::Pulse::start(limit, lost_master)),
-            _universe: universe,
-        }
-    }
-}
-
 /// Ends a job that every rank stops together: each rank says its `line` if it has one (for a
 /// verdict all ranks share, rank 0 alone has one), then all meet at a barrier before any exits.
 /// A rank that exits with an error first makes mpirun kill the job, rank 0 included, before its
@@ -399,7 +378,18 @@ pub fn run(job_in: &ParallelJob<'_>) -> CommandResult {
         return fail(e);
     }
     let hosts = comm.host_names();
-    let session = MpiSession::start(universe, granted, &comm, &hosts, job_in.silence_limit);
+    // Heartbeats from here on (see `liveness`): every rank hears from its master and the master
+    // from every rank while the job runs (the pulse needs MPI_THREAD_MULTIPLE). The pulse stops
+    // before MPI is finalized (a tuple's fields drop in order): no thread may use MPI then.
+    liveness::begin(size as usize);
+    let lost_master = format!(
+        "rank {rank} on {}: no word from the master (rank 0 on {}) for {:.0} s: it is gone or hangs; this rank ends",
+        hosts.of(rank),
+        hosts.of(0),
+        job_in.silence_limit.as_secs_f64()
+    );
+    let pulse = (granted == Threading::Multiple).then(|| pulse::Pulse::start(job_in.silence_limit, lost_master));
+    let session = (pulse, universe);
     // From here on a failure may hit one rank only (its files, its file system): that rank says
     // why and ends the whole job, or the others would wait for it for ever.
     // Every rank loads the scene; only the master opens the cache file.
@@ -460,10 +450,7 @@ impl Ready<'_, '_> {
     /// A worker rank's part: a traditional mode's worker, or component mode's PA or PR.
     fn work(mut self, layout: &Layout) {
         let (job_in, comm) = (self.job_in, self.comm);
-        let keeps_outbox = match layout {
-            Layout::Traditional(way) => *way != WorkerSharing::Kept || job_in.cache_file,
-            Layout::Component(_) => true,
-        };
+        let keeps_outbox = !matches!(layout, Layout::Traditional(WorkerSharing::Kept)) || job_in.cache_file;
         if keeps_outbox && let Some(cache) = self.job.cache.as_mut() {
             cache.keep_outbox();
         }

@@ -39,24 +39,13 @@ impl Sharer<'_> {
     /// calling rendering thread (replies come back on its own tag). The `end` of broadcasting
     /// is marked, records or none (without a cache too): every receiver waits for the marker.
     fn share(&self, comm: &Comm<'_>, thread: u32, end: bool) {
-        let records = self.cache.map_or_else(Vec::new, |c| c.take_outbox());
-        match self.way {
-            WorkerSharing::ThroughMaster if !records.is_empty() => {
-                let up = Message::RecordsUp {
-                    thread,
-                    records: Records::from(records),
-                };
-                comm.send(0, &up);
-                let reply = comm.receive(&[(Some(0), Some(Kind::RecordsDown.for_thread(thread)))], None);
-                if let (Some(cache), Some(Ok(Message::RecordsDown { records, .. }))) =
-                    (self.cache, reply.map(|r| r.message))
-                {
-                    self.intake.take(cache, records);
-                }
+        match (self.way, self.cache) {
+            (WorkerSharing::ThroughMaster, Some(cache)) if cache.outbox_len() > 0 => {
+                self.intake.sync(comm, thread, cache)
             }
-            WorkerSharing::ToEveryone if end || !records.is_empty() => {
+            (WorkerSharing::ToEveryone, cache) if end || cache.is_some_and(|c| c.outbox_len() > 0) => {
                 let batch = Message::RecordsBroadcast {
-                    records: Records::from(records),
+                    records: Records::from(cache.map_or_else(Vec::new, |c| c.take_outbox())),
                     last: end,
                 };
                 // The master is a recipient too: it keeps the cache file.

@@ -7,7 +7,6 @@
 use super::{Roles, compute_request, send_results};
 use crate::checkpoint::RequestResult;
 use crate::image::framebuffer::FrameBuffer;
-use crate::irradiance::IrradianceCache;
 use crate::parallel::comm::{Comm, Counters, Marker, kind};
 use crate::parallel::protocol::{FinishedTile, Kind, Message, Records, Requests};
 use crate::parallel::{Intake, SyncThreshold, WorkerSetup, send_report};
@@ -286,7 +285,7 @@ impl Pr<'_, '_> {
                             && sync.reached(cache.outbox_len())
                         {
                             send_results(&self.comm, &mut results);
-                            self.sync_records(cache);
+                            self.intake.sync(&self.comm, 0, cache);
                         }
                     }
                     // Refused requests are counted as computed (with nothing added) so the
@@ -300,20 +299,6 @@ impl Pr<'_, '_> {
             }
         }
         helped
-    }
-
-    /// Sends the records made here and takes in those the master has from others.
-    fn sync_records(&self, cache: &IrradianceCache) {
-        let up = Message::RecordsUp {
-            thread: 0,
-            records: Records::from(cache.take_outbox()),
-        };
-        self.comm.send(0, &up);
-        if let Some(reply) = self.comm.receive(&[kind(Some(0), Kind::RecordsDown)], None)
-            && let Ok(Message::RecordsDown { records, .. }) = reply.message
-        {
-            self.intake.take(cache, records);
-        }
     }
 }
 
