@@ -169,11 +169,7 @@ impl<'a, 'c> MasterCore<'a, 'c> {
 
     /// A finished tile from `source`: into the journal, and into the image if `keep`.
     fn take_tile(&mut self, source: i32, finished: FinishedTile, keep: bool) -> Result<(), String> {
-        let FinishedTile {
-            tile: index,
-            requests,
-            pixels,
-        } = finished;
+        let (index, pixels) = (finished.tile, finished.pixels);
         let tile = self
             .plan
             .tiles
@@ -184,7 +180,7 @@ impl<'a, 'c> MasterCore<'a, 'c> {
             return Err(format!("rank {source} returned tile {index} with the wrong size"));
         }
         if let Some((journal, _)) = self.plan.resume {
-            journal.tile(index, requests, &pixels);
+            journal.tile(index, finished.requests, &pixels);
         }
         if keep {
             store_tile(&mut self.frame, tile, &pixels);
@@ -194,7 +190,7 @@ impl<'a, 'c> MasterCore<'a, 'c> {
     }
 
     /// What the core handles in every mode; the rest goes back to the policy.
-    fn handle(&mut self, sharing: &mut dyn Sharing, source: i32, message: Message) -> Result<(), String> {
+    pub fn handle(&mut self, sharing: &mut dyn Sharing, source: i32, message: Message) -> Result<(), String> {
         match message {
             Message::WorkRequest { thread, finished } => {
                 if let Some(finished) = finished {

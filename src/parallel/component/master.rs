@@ -153,12 +153,7 @@ impl Sharing for ComponentSharing {
                     core.frame.accumulate(&part);
                     has_image[source as usize] = true;
                 }
-                Message::Stats(report) => core.reports[source as usize] = Some(*report),
-                Message::Results(results) => {
-                    if let Some((journal, _)) = core.plan.resume {
-                        journal.results(&results);
-                    }
-                }
+                common @ (Message::Stats(_) | Message::Results(_)) => core.handle(self, source, common)?,
                 Message::PaStatus { records, .. } => {
                     core.relay.keep(records);
                     let reply = Message::RecordsDown {
