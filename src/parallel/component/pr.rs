@@ -206,44 +206,38 @@ impl Pr<'_, '_> {
     /// come with the next tile are one tile older than they would have been.
     fn render_tiles(&mut self, sender: &mut Sender<'_>, sink: &RequestBuffer, send_at: usize) {
         self.ask(None);
-        let mut next = self.answer();
-        let mut finished_tile: Option<FinishedTile> = None;
+        let mut finished: Option<FinishedTile> = None;
         loop {
-            let Some(index) = next else {
-                if finished_tile.is_none() {
-                    break;
-                }
-                // The last tile's report still has to reach the master: one more request (its
-                // answer is no tile; were it one, the loop renders it).
-                self.ask(finished_tile.take());
-                next = self.answer();
-                continue;
-            };
-            self.ask(finished_tile.take());
-            let tile = &self.setup.tiles[index as usize];
-            sender.start_tile(index);
-            // The outgoing buffer is empty here (flushed at every tile's end), so what this tile
-            // sent is the change in the count sent.
-            let sent_before = sender.sent;
-            let (camera, settings) = (&self.setup.job.camera, &self.setup.job.settings);
-            let pixels = render_tile(&self.integrator, camera, settings, tile, &mut self.stats.rays, |_| {
-                if sink.len() >= send_at {
-                    sender.send(sink);
-                }
-            });
-            // The tile's last requests go to its PA now, not with the next tile's.
-            sender.send(sink);
-            if self.journal {
-                let requests = (sender.sent - sent_before) as u32;
-                finished_tile = Some(FinishedTile {
-                    tile: index,
-                    requests,
-                    pixels: pixels.clone(),
+            while let Some(index) = self.answer() {
+                self.ask(finished.take());
+                let tile = &self.setup.tiles[index as usize];
+                sender.start_tile(index);
+                // The outgoing buffer is empty here (flushed at every tile's end), so what this
+                // tile sent is the change in the count sent.
+                let sent_before = sender.sent;
+                let (camera, settings) = (&self.setup.job.camera, &self.setup.job.settings);
+                let pixels = render_tile(&self.integrator, camera, settings, tile, &mut self.stats.rays, |_| {
+                    if sink.len() >= send_at {
+                        sender.send(sink);
+                    }
                 });
+                // The tile's last requests go to its PA now, not with the next tile's.
+                sender.send(sink);
+                if self.journal {
+                    let requests = (sender.sent - sent_before) as u32;
+                    finished = Some(FinishedTile {
+                        tile: index,
+                        requests,
+                        pixels: pixels.clone(),
+                    });
+                }
+                store_tile(&mut self.frame, tile, &pixels);
+                self.stats.tiles += 1;
             }
-            store_tile(&mut self.frame, tile, &pixels);
-            self.stats.tiles += 1;
-            next = self.answer();
+            // The last tile's report still has to reach the master: one more request (its
+            // answer is no tile; were it one, the loop renders it).
+            let Some(last) = finished.take() else { break };
+            self.ask(Some(last));
         }
     }
 
