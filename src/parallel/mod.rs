@@ -454,22 +454,17 @@ impl Ready<'_, '_> {
         if keeps_outbox && let Some(cache) = self.job.cache.as_mut() {
             cache.keep_outbox();
         }
+        let setup = WorkerSetup::new(&self.job, &self.tiles, comm.counters);
         match layout {
             Layout::Traditional(way) => {
                 let sync = SyncThreshold::of(job_in.sync, SyncThreshold::TRADITIONAL);
-                let setup = WorkerSetup::new(&self.job, &self.tiles, comm.counters);
                 worker::run(&setup, *way, sync, job_in.cache_file);
             }
             Layout::Component(roles) => {
-                // The overture's grid orders each PA's queue (component::order). A PR makes no
-                // records before its pixels (its misses go to the PAs): it renders the grid's pixels
-                // first instead, so that their requests reach the PA first (render::render_tile).
-                let grid = self.job.settings.overture;
-                let setup = WorkerSetup::new(&self.job, &self.tiles, comm.counters);
                 let sync = SyncThreshold::of(job_in.sync, SyncThreshold::COMPONENT);
                 if roles.pas.contains(&comm.rank()) {
                     let bound = job_in.pa_queue.max(1) as usize;
-                    component::pa::run(&setup, sync, job_in.seed, job_in.journal, bound, grid);
+                    component::pa::run(&setup, sync, job_in.seed, job_in.journal, bound);
                 } else {
                     let send_at = job_in.send.max(1) as usize;
                     component::pr::run(&setup, roles, send_at, sync, job_in.seed, job_in.journal);

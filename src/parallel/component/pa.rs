@@ -176,8 +176,7 @@ fn communicate(
 
 /// `journal`: --checkpoint is on, so computed requests are reported to the master.
 /// `bound`: the most requests the queue takes (see `communicate`).
-/// `grid`: the spacing in pixels of the requests computed first (see `order`); 0: arrival order.
-pub fn run(setup: &WorkerSetup<'_>, sync: SyncThreshold, seed: u64, journal: bool, bound: usize, grid: u32) {
+pub fn run(setup: &WorkerSetup<'_>, sync: SyncThreshold, seed: u64, journal: bool, bound: usize) {
     let counters = Counters::default();
     let comm_counters = Counters::default();
     let comm = Comm::new(&counters);
@@ -186,7 +185,10 @@ pub fn run(setup: &WorkerSetup<'_>, sync: SyncThreshold, seed: u64, journal: boo
     let cache = setup.cache();
     let queue = Queue {
         queued: Mutex::new(Queued {
-            requests: RequestQueue::new(width, grid),
+            // The overture's grid orders the queue (see `order`; 0: arrival order). A PR makes
+            // no records before its pixels (its misses go to the PAs): it renders the grid's
+            // pixels first instead, so that their requests reach the PA first (`render_tile`).
+            requests: RequestQueue::new(width, setup.job.settings.overture),
             finish: false,
             longest: 0,
         }),
