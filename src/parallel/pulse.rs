@@ -45,7 +45,7 @@ impl Pulse {
 }
 
 /// Dropping the pulse stops the heartbeats (before the rank leaves MPI: no thread may use it
-/// then; see `MpiSession`).
+/// then; `parallel::run` drops the pulse before MPI's universe).
 impl Drop for Pulse {
     fn drop(&mut self) {
         self.stop.store(true, Ordering::Relaxed);
