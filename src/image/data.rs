@@ -194,6 +194,19 @@ impl PixelDataSum {
     }
 }
 
+/// Whether an EXR layer name is one of the data layers or a Cryptomatte rank layer (values
+/// that are not light: no error metric or non-negativity applies to them).
+pub fn is_data_layer(layer: &str) -> bool {
+    let crypto_rank = |prefix: &str| {
+        layer
+            .strip_prefix(prefix)
+            .is_some_and(|n| n.len() == 2 && n.bytes().all(|b| b.is_ascii_digit()))
+    };
+    matches!(layer, "albedo" | "normal" | "depth" | "position")
+        || crypto_rank("CryptoObject")
+        || crypto_rank("CryptoMaterial")
+}
+
 /// The data layers and Cryptomatte types a render may write (`--aovs`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Aov {
@@ -339,6 +352,23 @@ mod tests {
             },
         ];
         assert!(bad.iter().all(|d| !d.healthy()));
+    }
+
+    #[test]
+    fn data_layers_are_told_from_light() {
+        for l in [
+            "albedo",
+            "normal",
+            "depth",
+            "position",
+            "CryptoObject00",
+            "CryptoMaterial02",
+        ] {
+            assert!(is_data_layer(l), "{l}");
+        }
+        for l in ["", "direct", "indirect", "CryptoObject", "CryptoObjectAB", "ic_records"] {
+            assert!(!is_data_layer(l), "{l}");
+        }
     }
 
     #[test]
