@@ -111,6 +111,13 @@ extern "C" int icr_exr_write(const char *path, uint32_t width, uint32_t height, 
             if (spec.channelnames.back() == "A") spec.alpha_channel = int(c);
             if (spec.channelnames.back() == "Z") spec.z_channel = int(c);
         }
+        // Per-channel formats only when they differ: a file of one format keeps spec.format.
+        if (half_float && std::any_of(channels, channels + channel_count, [](const icr_channel &ch) {
+                return ch.full_float != 0;
+            })) {
+            for (size_t c = 0; c < channel_count; ++c)
+                spec.channelformats.push_back(channels[c].full_float ? OIIO::TypeDesc::FLOAT : OIIO::TypeDesc::HALF);
+        }
         spec.attribute("compression", "zip");
         for (size_t i = 0; i < attribute_count; ++i) {
             if (!attributes[i].name || !*attributes[i].name)

@@ -1475,6 +1475,8 @@ class Converter {
         const Mat4 world = mul(parent, local_transform(node, label));
 
         if (node.mesh >= 0) {
+            // One copy of the name for all the node's primitives.
+            const char *node_name = s_.keep(node.name);
             if (size_t(node.mesh) >= m_.meshes.size())
                 fail(label + ": mesh " + std::to_string(node.mesh) + " out of range");
             if (node.skin >= 0 && !warned_skin_) {
@@ -1486,6 +1488,8 @@ class Converter {
                 icr_instance inst{};
                 inst.mesh = uint32_t(mi);
                 for (size_t i = 0; i < 16; ++i) inst.world[i] = world[i];
+                inst.node = uint32_t(ni);
+                inst.node_name = node_name;
                 s_.instances.push_back(inst);
             }
         } else if (node.mesh < -1) {

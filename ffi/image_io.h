@@ -17,6 +17,7 @@ extern "C" {
 typedef struct icr_channel {
     const char *name;         /* e.g. "R", "direct.G" */
     const float *data;
+    int32_t full_float;       /* 1: stored as 32-bit float even when the file is half */
 } icr_channel;
 
 /* A string attribute for the file header, e.g. {"icrender:options", "-ab 1 ..."}. */
@@ -26,7 +27,8 @@ typedef struct icr_attribute {
 } icr_attribute;
 
 /*
- * Writes an OpenEXR (half or float, chosen by `half_float`) with the channels in the order given,
+ * Writes an OpenEXR (half or float, chosen by `half_float`, except channels marked full_float,
+ * which stay float: OpenImageIO's per-channel formats) with the channels in the order given,
  * to exactly `path` (which need not end in .exr: the caller writes to a temporary name and
  * renames). Compression ZIP.
  */

@@ -31,6 +31,8 @@ typedef struct icr_mesh {
 typedef struct icr_instance {
     uint32_t mesh;           /* index into meshes */
     double world[16];         /* column-major 4x4, as glTF stores matrices */
+    uint32_t node;           /* index of the glTF node that places it */
+    const char *node_name;   /* that node's name; never NULL, "" when unnamed */
 } icr_instance;
 
 enum icr_alpha_mode { ICR_ALPHA_OPAQUE = 0, ICR_ALPHA_MASK = 1, ICR_ALPHA_BLEND = 2 };

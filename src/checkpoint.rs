@@ -30,7 +30,10 @@ use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 
-const MAGIC: &[u8; 8] = b"ICRJRNL1";
+/// The journal's format: 2 added the data layers to every pixel (`image::data`).
+const MAGIC: &[u8; 8] = b"ICRJRNL2";
+/// The formats before, refused with a message that says so.
+const OLD_MAGICS: [&[u8; 8]; 1] = [b"ICRJRNL1"];
 const KIND_START: u8 = 0;
 const KIND_TILE: u8 = 1;
 const KIND_RESULTS: u8 = 2;
@@ -214,10 +217,9 @@ fn restore(entries: Vec<Entry>, tiles: &[Tile], width: u32, height: u32) -> (Fra
         if done[tile] || found.len() != *requests as usize {
             continue;
         }
-        let all_finite = pixels
-            .iter()
-            .all(|p| p.records.is_finite() && p.components.as_array().iter().all(|v| v.is_finite()))
-            && found.iter().all(|r| r.value.is_finite());
+        let all_finite = pixels.iter().all(|p| {
+            p.records.is_finite() && p.components.as_array().iter().all(|v| v.is_finite()) && p.data.healthy()
+        }) && found.iter().all(|r| r.value.is_finite());
         if !all_finite {
             continue;
         }
@@ -255,6 +257,13 @@ impl Checkpoint {
             std::fs::write(&path, &ours).map_err(context)?;
             bytes = ours.clone();
             (Vec::new(), ours.len())
+        } else if OLD_MAGICS.iter().any(|old| bytes.starts_with(*old)) {
+            return Err(format!(
+                "{}: a checkpoint of an older icrender (journal format {}, without the data layers); \
+                 it cannot be resumed by this version: delete it or give another --checkpoint directory",
+                path.display(),
+                char::from(bytes[7])
+            ));
         } else if !bytes.starts_with(MAGIC) {
             return Err(format!("{}: not an icrender checkpoint journal", path.display()));
         } else if !bytes.starts_with(&ours) {
@@ -389,6 +398,7 @@ mod tests {
                     indirect: Vec3::splat(0.25),
                 },
                 records: 1.0,
+                data: Default::default(),
             };
             n
         ]
@@ -491,6 +501,36 @@ mod tests {
         std::fs::write(dir.path().join("tiles.journal"), b"garbage that is long enough").unwrap();
         let err = Checkpoint::open(dir.path(), "job", &all, 4, 4).err().unwrap();
         assert!(err.contains("not an icrender checkpoint"), "{err}");
+        // A journal of the format before the data layers: refused, saying why.
+        let mut old = b"ICRJRNL1".to_vec();
+        old.extend_from_slice(&3u32.to_le_bytes());
+        old.extend_from_slice(b"job");
+        std::fs::write(dir.path().join("tiles.journal"), &old).unwrap();
+        let err = Checkpoint::open(dir.path(), "job", &all, 4, 4).err().unwrap();
+        assert!(err.contains("older icrender") && err.contains("format 1"), "{err}");
+    }
+
+    #[test]
+    fn data_layers_come_back_from_the_journal() {
+        let dir = tempfile::tempdir().unwrap();
+        let all = tiles(4, 4, 4, 4);
+        let (journal, _) = Checkpoint::open(dir.path(), "job", &all, 4, 4).unwrap();
+        let mut tile = pixels(&all[0], 1.0);
+        let mut sum = crate::image::data::PixelDataSum::new(1);
+        let hit = crate::image::data::SampleHit {
+            position: Vec3::new(1.0, 2.0, 3.0),
+            depth: 4.5,
+            normal: Vec3::X,
+            object: crate::image::cryptomatte::id_of("chair"),
+            material: crate::image::cryptomatte::id_of("oak"),
+        };
+        sum.add(Vec3::splat(0.25), Some(hit));
+        tile[5].data = sum.finish();
+        journal.tile(0, 0, &tile);
+        drop(journal);
+        let (_, restored) = Checkpoint::open(dir.path(), "job", &all, 4, 4).unwrap();
+        assert_eq!(restored.frame.data()[5], tile[5].data);
+        assert_eq!(restored.frame.data()[4], tile[4].data);
     }
 
     #[test]

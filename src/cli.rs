@@ -1,6 +1,7 @@
 //! Command-line arguments. Radiance's option names (-ab, -vp, ...) are accepted as they are
 //! written for rpict: they are rewritten to long options before clap sees them.
 
+use crate::image::data::Aov;
 use clap::{Args, Parser, Subcommand};
 use std::path::PathBuf;
 
@@ -234,14 +235,36 @@ pub struct RenderArgs {
     /// moment and started again with the same command resumes instead of starting over.
     #[arg(long = "checkpoint", value_name = "DIR")]
     pub checkpoint: Option<PathBuf>,
-    /// Store half floats in the EXR (default: full floats).
+    /// Store half floats in the EXR's light layers (default: full floats); data layers and
+    /// Cryptomatte always stay full floats.
     #[arg(long = "half")]
     pub half: bool,
+    /// Data layers and Cryptomatte types to write, comma-separated: albedo, normal, depth,
+    /// position, crypto_object, crypto_material; or none, or all (default: all but position).
+    #[arg(long = "aovs", value_name = "LIST", value_parser = parse_aovs)]
+    pub aovs: Option<AovList>,
     /// No progress bar and no summary.
     #[arg(short = 'q', long = "quiet")]
     pub quiet: bool,
     #[command(flatten)]
     pub view: ViewArgs,
+}
+
+/// The `--aovs` list (a type of its own, so clap takes it as one value).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct AovList(pub Vec<Aov>);
+
+fn parse_aovs(text: &str) -> Result<AovList, String> {
+    Aov::parse_list(text).map(AovList)
+}
+
+impl RenderArgs {
+    /// The data layers to write: `--aovs`, or the default set.
+    pub fn aovs(&self) -> Vec<Aov> {
+        self.aovs
+            .as_ref()
+            .map_or_else(|| Aov::DEFAULT.to_vec(), |l| l.0.clone())
+    }
 }
 
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]

@@ -13,8 +13,8 @@ const RUNTIME_BYTES: u64 = 48 << 20;
 /// Embree's BVH per triangle (the conference room: about 100 bytes per triangle in the process's
 /// peak memory after the build; rounded up).
 const BVH_BYTES_PER_TRIANGLE: u64 = 128;
-/// One pixel of a frame: four RGB float layers and the records plane.
-const FRAME_BYTES_PER_PIXEL: u64 = 4 * 12 + 4;
+/// One pixel of a frame: four RGB float layers, the records plane and the data layers.
+const FRAME_BYTES_PER_PIXEL: u64 = 4 * 12 + 4 + 4 * crate::image::data::DATA_VALUES as u64;
 /// One record in the cache with its place in the index.
 const RECORD_BYTES: u64 = 320;
 /// One queued L_a request on a PA.

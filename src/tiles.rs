@@ -35,6 +35,7 @@ pub fn store_tile(frame: &mut FrameBuffer, tile: &Tile, values: &[PixelValue]) {
             if let Some(v) = it.next() {
                 frame.set(x, y, &v.components);
                 frame.set_records(x, y, v.records);
+                frame.set_data(x, y, &v.data);
             }
         }
     }

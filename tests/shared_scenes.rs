@@ -28,7 +28,10 @@ fn render_shared(relative: &str, extra: &[&str]) -> ImageData {
             data.iter().all(|v| v.is_finite()),
             "{relative}: non-finite value in {name}"
         );
-        assert!(data.iter().all(|v| *v >= 0.0), "{relative}: negative value in {name}");
+        assert!(
+            data.iter().all(|v| *v >= 0.0 || may_be_negative(name)),
+            "{relative}: negative value in {name}"
+        );
     }
     image
 }

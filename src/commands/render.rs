@@ -5,13 +5,14 @@ use super::{CommandError, CommandResult, warn};
 use crate::checkpoint::{self, Checkpoint, Restored};
 use crate::cli::ModeArg;
 use crate::cli::RenderArgs;
+use crate::image::data::{Aov, FAR_DEPTH};
 use crate::image::framebuffer::{FrameBuffer, Layer};
-use crate::image::{metrics, output};
+use crate::image::{cryptomatte, metrics, output};
 use crate::job::{Job, validate};
 use crate::parallel::{JobHost, Mode, ParallelJob, under_mpirun};
 use crate::progress::Progress;
 use crate::render::render_resumable;
-use crate::scene::SceneNeeds;
+use crate::scene::{Scene, SceneNeeds};
 use crate::shading::{Integrator, ShadingOptions};
 use crate::stats::RenderStats;
 use crate::sys::image_io;
@@ -225,8 +226,19 @@ impl Outputs {
             ("icrender/render_time_s".to_string(), format!("{:.3}", stats.render_s)),
             ("icrender/statistics".to_string(), stats_json),
         ];
-        output::write_exr(&self.exr, frame, &layers, &attributes, args.half, args.ic_records)
-            .map_err(|e| CommandError(format!("{}: {e}", self.exr.display())))?;
+        let aovs = args.aovs();
+        let mut attributes = attributes;
+        attributes.extend(data_attributes(&aovs, &job.scene));
+        output::write_exr(
+            &self.exr,
+            frame,
+            &layers,
+            &aovs,
+            &attributes,
+            args.half,
+            args.ic_records,
+        )
+        .map_err(|e| CommandError(format!("{}: {e}", self.exr.display())))?;
         if let Some(png) = &self.png {
             output::write_preview(png, frame).map_err(|e| CommandError(format!("{}: {e}", png.display())))?;
         }
@@ -237,6 +249,45 @@ impl Outputs {
         }
         Ok(())
     }
+}
+
+/// The header's account of the data layers: which were written (`icrender/aovs`, with what a
+/// depth means where nothing is hit) and each Cryptomatte type's attributes and manifest.
+pub fn data_attributes(aovs: &[Aov], scene: &Scene) -> Vec<(String, String)> {
+    let names = &scene.names;
+    let list: Vec<&str> = aovs.iter().map(|a| a.name()).collect();
+    let mut out = vec![(
+        "icrender/aovs".to_string(),
+        if list.is_empty() {
+            "none".to_string()
+        } else {
+            list.join(",")
+        },
+    )];
+    if aovs.contains(&Aov::Depth) {
+        out.push(("icrender/depth_far".to_string(), format!("{FAR_DEPTH:e}")));
+    }
+    if aovs.contains(&Aov::CryptoObject) {
+        out.extend(cryptomatte::header_attributes(
+            output::CRYPTO_OBJECT,
+            names.objects.iter().map(String::as_str),
+        ));
+    }
+    if aovs.contains(&Aov::CryptoMaterial) {
+        // The materials some mesh uses (not glTF's default material when none does).
+        let mut used = vec![false; names.materials.len()];
+        scene.meshes.iter().for_each(|m| used[m.material as usize] = true);
+        out.extend(cryptomatte::header_attributes(
+            output::CRYPTO_MATERIAL,
+            names
+                .materials
+                .iter()
+                .zip(used)
+                .filter(|(_, u)| *u)
+                .map(|(n, _)| n.as_str()),
+        ));
+    }
+    out
 }
 
 /// With --checkpoint, the cache goes to the checkpoint directory (which `open_checkpoint` has

@@ -473,6 +473,7 @@ mod tests {
             bounds_max: hi,
             dropped_triangles: 0,
             warnings: Vec::new(),
+            names: Default::default(),
         }
     }
 

@@ -1,6 +1,7 @@
 //! One float RGB plane per component layer; the composite is their sum.
 
 use crate::image::components::Components;
+use crate::image::data::{DATA_VALUES, PixelData};
 use glam::Vec3;
 
 /// The component layers, in the order they are stored and written.
@@ -37,7 +38,12 @@ pub struct FrameBuffer {
     layers: [Vec<Vec3>; 4],
     /// Records of the irradiance cache made while rendering each pixel (debug layer).
     records: Vec<f32>,
+    /// The data layers and Cryptomatte ranks of each pixel (`image::data`).
+    data: Vec<PixelData>,
 }
+
+/// Floats of one pixel in `to_floats`: four RGB layers, then the data (IDs as their bits).
+const FRAME_FLOATS: usize = 12 + DATA_VALUES;
 
 impl FrameBuffer {
     pub fn new(width: u32, height: u32) -> FrameBuffer {
@@ -47,6 +53,7 @@ impl FrameBuffer {
             height,
             layers: std::array::from_fn(|_| vec![Vec3::ZERO; n]),
             records: vec![0.0; n],
+            data: vec![PixelData::default(); n],
         }
     }
 
@@ -70,6 +77,15 @@ impl FrameBuffer {
         &self.records
     }
 
+    pub fn set_data(&mut self, x: u32, y: u32, data: &PixelData) {
+        let i = y as usize * self.width as usize + x as usize;
+        self.data[i] = *data;
+    }
+
+    pub fn data(&self) -> &[PixelData] {
+        &self.data
+    }
+
     /// Adds light to one layer of one pixel (index y * width + x); out-of-range pixels are
     /// ignored (the caller validated them).
     pub fn add(&mut self, pixel: usize, layer: Layer, value: Vec3) {
@@ -78,14 +94,16 @@ impl FrameBuffer {
         }
     }
 
-    /// Every layer's values, pixel after pixel (12 floats a pixel), for sending between ranks.
+    /// Every layer's values and the data layers, pixel after pixel (`FRAME_FLOATS` a pixel;
+    /// Cryptomatte IDs as the floats they are), for sending between ranks.
     pub fn to_floats(&self) -> Vec<f32> {
         let n = self.layers[0].len();
-        let mut out = Vec::with_capacity(n * 12);
+        let mut out = Vec::with_capacity(n * FRAME_FLOATS);
         for i in 0..n {
             for layer in &self.layers {
                 out.extend_from_slice(&layer[i].to_array());
             }
+            out.extend(self.data[i].to_words().map(f32::from_bits));
         }
         out
     }
@@ -93,29 +111,37 @@ impl FrameBuffer {
     /// The inverse of `to_floats`; None when the count does not fit the size.
     pub fn from_floats(width: u32, height: u32, floats: &[f32]) -> Option<FrameBuffer> {
         let n = width as usize * height as usize;
-        if floats.len() != n * 12 {
+        if floats.len() != n * FRAME_FLOATS {
             return None;
         }
         let mut frame = FrameBuffer::new(width, height);
-        for (i, px) in floats.chunks_exact(12).enumerate() {
+        for (i, px) in floats.chunks_exact(FRAME_FLOATS).enumerate() {
             for (l, layer) in frame.layers.iter_mut().enumerate() {
                 layer[i] = Vec3::new(px[3 * l], px[3 * l + 1], px[3 * l + 2]);
+            }
+            let words: [u32; DATA_VALUES] = std::array::from_fn(|k| px[12 + k].to_bits());
+            frame.data[i] = PixelData::from_words(&words);
+            if !frame.data[i].healthy() {
+                return None;
             }
         }
         Some(frame)
     }
 
-    /// Adds another frame's layers (and record counts) to this one's, pixel by pixel.
+    /// Adds another frame's layers (and record counts) to this one's, pixel by pixel, and
+    /// merges its data layers (`PixelData::merge`: a frame that rendered no pixel changes none).
     pub fn accumulate(&mut self, other: &FrameBuffer) {
         for (mine, theirs) in self.layers.iter_mut().zip(&other.layers) {
             mine.iter_mut().zip(theirs).for_each(|(a, b)| *a += *b);
         }
         self.records.iter_mut().zip(&other.records).for_each(|(a, b)| *a += *b);
+        self.data.iter_mut().zip(&other.data).for_each(|(a, b)| *a = a.merge(b));
     }
 
-    /// Multiplies every layer by `factor`.
+    /// Multiplies every layer, and the averaged data layers, by `factor`.
     pub fn scale(&mut self, factor: f32) {
         self.layers.iter_mut().flatten().for_each(|v| *v *= factor);
+        self.data.iter_mut().for_each(|d| d.scale(factor));
     }
 
     /// Sum of all layers, pixel by pixel.
@@ -126,9 +152,11 @@ impl FrameBuffer {
     }
 }
 
-/// One rendered pixel: its components and the records of the cache it made at level 0.
+/// One rendered pixel: its components, the records of the cache it made at level 0, and its
+/// data layers.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct PixelValue {
     pub components: Components,
     pub records: f32,
+    pub data: PixelData,
 }

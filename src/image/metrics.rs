@@ -3,6 +3,7 @@
 //! relMSE = mean over pixels and channels of (x - r)^2 / (r^2 + 0.01), the usual relative
 //! error of rendering papers; the 0.01 keeps black reference pixels from dominating.
 
+use crate::image::data::is_data_layer;
 use crate::sys::image_io::ImageData;
 use serde::Serialize;
 
@@ -18,12 +19,13 @@ pub struct LayerError {
     pub reference_mean: f64,
 }
 
-/// Layers present in an image: "" (the plain R, G, B) and every `name` with name.R/G/B.
+/// Light layers present in an image: "" (the plain R, G, B) and every `name` with name.R/G/B
+/// that is not a data layer (an albedo is no light, and Cryptomatte's R and B are IDs).
 pub fn rgb_layers(image: &ImageData) -> Vec<String> {
     let mut layers = Vec::new();
     for (name, _) in &image.channels {
         let prefix = match name.rsplit_once('.') {
-            Some((p, "R")) => p.to_string(),
+            Some((p, "R")) if !is_data_layer(p) => p.to_string(),
             None if name == "R" => String::new(),
             _ => continue,
         };
@@ -131,6 +133,25 @@ mod tests {
         ]);
         let errors = compare(&a, &b).unwrap();
         assert_eq!(errors.len(), 2);
+        // Data layers are not light: not compared.
+        let with_data = |img: &ImageData| {
+            let mut channels = img.channels.clone();
+            for c in [
+                "albedo.R",
+                "albedo.G",
+                "albedo.B",
+                "CryptoObject00.R",
+                "CryptoObject00.G",
+                "CryptoObject00.B",
+            ] {
+                channels.push((c.to_string(), vec![0.5, 0.5]));
+            }
+            ImageData {
+                channels,
+                ..img.clone_for_test()
+            }
+        };
+        assert_eq!(compare(&with_data(&a), &with_data(&b)).unwrap().len(), 2);
         assert_eq!(errors[0].layer, "composite");
         assert!((errors[0].rmse - 0.5).abs() < 1e-12);
         assert!((errors[0].rel_mse - 0.25 / 1.01).abs() < 1e-12);

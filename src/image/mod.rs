@@ -2,6 +2,8 @@
 //! error metrics `compare` and `--reference` report.
 
 pub mod components;
+pub mod cryptomatte;
+pub mod data;
 pub mod framebuffer;
 pub mod metrics;
 pub mod output;

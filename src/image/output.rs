@@ -1,9 +1,12 @@
 //! Writing results so that a reader never sees a half-written file: everything goes to a
 //! temporary file beside the target, then is renamed over it in one step.
 
+use super::cryptomatte::{RANKS, Ranks};
+use super::data::{Aov, PixelData};
 use super::framebuffer::{FrameBuffer, Layer};
 use super::preview::tone_map;
 use crate::sys::image_io::{self, ChannelPlane};
+use glam::Vec3;
 use std::path::{Path, PathBuf};
 
 fn temporary_beside(path: &Path) -> PathBuf {
@@ -38,57 +41,100 @@ pub fn check_writable(path: &Path) -> Result<(), String> {
     Ok(())
 }
 
-/// Writes the composite as R G B A and each given layer as `layer.R/G/B`.
+/// The Cryptomatte types' layer names (channels `{name}00.R` ...) and what they rank.
+pub const CRYPTO_OBJECT: &str = "CryptoObject";
+pub const CRYPTO_MATERIAL: &str = "CryptoMaterial";
+
+/// A plane for the file: its channel name, values, and whether it must stay 32-bit float
+/// whatever `--half` says (data layers and Cryptomatte: a half float cannot hold an ID's bits,
+/// nor a far depth or a world position to the precision a compositor needs).
+struct Plane {
+    name: String,
+    data: Vec<f32>,
+    full_float: bool,
+}
+
+/// The planes of the data layers in `aovs`, in that order.
+fn data_planes(frame: &FrameBuffer, aovs: &[Aov]) -> Vec<Plane> {
+    let data = frame.data();
+    let plane = |name: String, value: &dyn Fn(&PixelData) -> f32| Plane {
+        name,
+        data: data.iter().map(value).collect(),
+        full_float: true,
+    };
+    let vector = |layer: &str, channels: [&str; 3], value: &dyn Fn(&PixelData) -> Vec3| -> Vec<Plane> {
+        (0..3)
+            .map(|c| plane(format!("{layer}.{}", channels[c]), &|d| value(d)[c]))
+            .collect()
+    };
+    let crypto = |layer: &str, ranks: &dyn Fn(&PixelData) -> &Ranks| -> Vec<Plane> {
+        let mut out = Vec::new();
+        for level in 0..RANKS / 2 {
+            for (c, channel) in ["R", "G", "B", "A"].iter().enumerate() {
+                let rank = 2 * level + c / 2;
+                let id = c % 2 == 0;
+                out.push(plane(format!("{layer}{level:02}.{channel}"), &|d| {
+                    let e = ranks(d)[rank];
+                    if id { f32::from_bits(e.id) } else { e.coverage }
+                }));
+            }
+        }
+        out
+    };
+    let mut planes = Vec::new();
+    for aov in aovs {
+        match aov {
+            Aov::Albedo => planes.extend(vector("albedo", ["R", "G", "B"], &|d| d.albedo)),
+            Aov::Normal => planes.extend(vector("normal", ["X", "Y", "Z"], &|d| d.normal)),
+            Aov::Depth => planes.push(plane("depth.Z".into(), &|d| d.depth)),
+            Aov::Position => planes.extend(vector("position", ["X", "Y", "Z"], &|d| d.position)),
+            Aov::CryptoObject => planes.extend(crypto(CRYPTO_OBJECT, &|d| &d.object)),
+            Aov::CryptoMaterial => planes.extend(crypto(CRYPTO_MATERIAL, &|d| &d.material)),
+        }
+    }
+    planes
+}
+
+/// Writes the composite as R G B A, each given layer as `layer.R/G/B`, and the data layers
+/// of `aovs` (always 32-bit float, see `Plane`).
 pub fn write_exr(
     path: &Path,
     frame: &FrameBuffer,
     layers: &[Layer],
+    aovs: &[Aov],
     attributes: &[(String, String)],
     half_float: bool,
     records_layer: bool,
 ) -> Result<(), String> {
     let composite = frame.composite();
-    let split =
-        |pixels: &[glam::Vec3]| -> [Vec<f32>; 3] { std::array::from_fn(|c| pixels.iter().map(|p| p[c]).collect()) };
-    let alpha = vec![1.0f32; composite.len()];
-    let composite_planes = split(&composite);
-    let layer_planes: Vec<(Layer, [Vec<f32>; 3])> = layers.iter().map(|&l| (l, split(frame.layer(l)))).collect();
-    let layer_names: Vec<[String; 3]> = layer_planes
-        .iter()
-        .map(|(l, _)| ["R", "G", "B"].map(|c| format!("{}.{c}", l.name())))
-        .collect();
-    let mut channels = vec![
-        ChannelPlane {
-            name: "R",
-            data: &composite_planes[0],
-        },
-        ChannelPlane {
-            name: "G",
-            data: &composite_planes[1],
-        },
-        ChannelPlane {
-            name: "B",
-            data: &composite_planes[2],
-        },
-        ChannelPlane {
-            name: "A",
-            data: &alpha,
-        },
-    ];
-    for ((_, planes), names) in layer_planes.iter().zip(&layer_names) {
-        for c in 0..3 {
-            channels.push(ChannelPlane {
-                name: &names[c],
-                data: &planes[c],
-            });
+    let split = |pixels: &[Vec3]| -> [Vec<f32>; 3] { std::array::from_fn(|c| pixels.iter().map(|p| p[c]).collect()) };
+    let light = |name: String, data: Vec<f32>| Plane {
+        name,
+        data,
+        full_float: false,
+    };
+    let mut planes: Vec<Plane> = Vec::new();
+    for (c, data) in ["R", "G", "B"].into_iter().zip(split(&composite)) {
+        planes.push(light(c.into(), data));
+    }
+    planes.push(light("A".into(), vec![1.0f32; composite.len()]));
+    for &l in layers {
+        for (c, data) in ["R", "G", "B"].into_iter().zip(split(frame.layer(l))) {
+            planes.push(light(format!("{}.{c}", l.name()), data));
         }
     }
     if records_layer {
-        channels.push(ChannelPlane {
-            name: "ic_records.Y",
-            data: frame.records(),
-        });
+        planes.push(light("ic_records.Y".into(), frame.records().to_vec()));
     }
+    planes.extend(data_planes(frame, aovs));
+    let channels: Vec<ChannelPlane<'_>> = planes
+        .iter()
+        .map(|p| ChannelPlane {
+            name: &p.name,
+            data: &p.data,
+            full_float: p.full_float,
+        })
+        .collect();
     write_atomically(path, |tmp| {
         image_io::write_exr(tmp, frame.width, frame.height, &channels, attributes, half_float)
     })

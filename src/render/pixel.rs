@@ -3,11 +3,12 @@
 //! every renderer shares, the one-process renderer, the prepass and the MPI workers alike.
 
 use crate::image::components::Components;
+use crate::image::data::{PixelData, PixelDataSum, SampleHit};
 use crate::image::framebuffer::PixelValue;
 use crate::sampling::Rng;
 use crate::scene::footprint::EmitterFootprint;
 use crate::scene::view::Camera;
-use crate::shading::{Integrator, RayCounts, SampleContext, Work};
+use crate::shading::{Integrator, RayCounts, SampleContext, SampleData, Work};
 use crate::tiles::Tile;
 use std::sync::Arc;
 use std::time::Instant;
@@ -102,8 +103,23 @@ pub fn pixel_offset(s: u32, samples: u32, jitter: bool, rng: &mut Rng) -> (f32, 
     )
 }
 
+/// What a sample's camera ray hit, as the data layers take it (world-space point, view-axis
+/// depth, Cryptomatte IDs).
+fn sample_hit(integrator: &Integrator<'_>, camera: &Camera, data: &SampleData) -> Option<SampleHit> {
+    let hit = data.first?;
+    let scene = integrator.scene;
+    Some(SampleHit {
+        position: scene.to_world(hit.position).as_vec3(),
+        depth: camera.view_depth(hit.position),
+        normal: hit.normal,
+        object: scene.names.object_id(hit.geom_id),
+        material: scene.names.material_id(hit.material),
+    })
+}
+
 /// The components of one pixel: the mean of its samples, each with its own primary ray, direct
-/// light and cache lookup (a box filter over the pixel's area).
+/// light and cache lookup (a box filter over the pixel's area); and its data layers, from the
+/// same samples' camera rays.
 pub fn render_pixel(
     integrator: &Integrator<'_>,
     camera: &Camera,
@@ -111,7 +127,7 @@ pub fn render_pixel(
     x: u32,
     y: u32,
     counts: &mut RayCounts,
-) -> Components {
+) -> (Components, PixelData) {
     let samples = settings.spp.max(1);
     let pixel_index = y as u64 * camera.width as u64 + x as u64;
     // Only worth it when the extra rays outnumber the pixel samples, which see emission anyway.
@@ -132,16 +148,19 @@ pub fn render_pixel(
         light_offset: pixel_rng.next_u32(),
         light_cell_offset: pixel_rng.next_u32(),
     };
+    let mut data = PixelDataSum::new(samples);
     for s in 0..samples {
         let mut rng = Rng::for_sample(settings.seed, pixel_index, s as u64);
         let (jx, jy) = pixel_offset(s, samples, settings.jitter, &mut rng);
         let (origin, dir) = camera.ray(x as f32 + jx, y as f32 + jy);
         work.sample.index = s;
+        work.data = SampleData::default();
         sum += if split_emission {
             integrator.primary_without_first_emission(origin, dir, &mut rng, &mut work)
         } else {
             integrator.primary(origin, dir, &mut rng, &mut work)
         };
+        data.add(work.data.albedo, sample_hit(integrator, camera, &work.data));
     }
     let mut pixel = sum * (1.0 / samples as f32);
     if split_emission {
@@ -157,7 +176,7 @@ pub fn render_pixel(
         }
         pixel.emission += emission / extra as f32;
     }
-    pixel
+    (pixel, data.finish())
 }
 
 /// Whether a pixel is on the overture's grid in the image's own coordinates: the centre of its
@@ -218,9 +237,10 @@ pub fn render_tile(
     }
     for (x, y) in pixel_order(tile, if grid_first { stride } else { 0 }) {
         let before = counts.records_level0;
-        let components = render_pixel(integrator, camera, settings, x, y, counts);
+        let (components, data) = render_pixel(integrator, camera, settings, x, y, counts);
         let value = &mut values[(y - tile.y0) as usize * width + (x - tile.x0) as usize];
         value.components = components;
+        value.data = data;
         value.records += (counts.records_level0 - before) as f32;
         after_pixel(counts);
     }

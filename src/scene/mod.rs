@@ -7,6 +7,7 @@ pub mod lambert;
 pub mod light;
 pub mod light_tree;
 pub mod material;
+pub mod names;
 pub mod placement;
 pub mod texture;
 pub mod view;
@@ -80,6 +81,8 @@ pub struct Scene {
     pub bounds_max: Vec3,
     pub dropped_triangles: usize,
     pub warnings: Vec<String>,
+    /// Names and Cryptomatte IDs of each mesh's node and of each material.
+    pub names: names::Names,
 }
 
 /// What the scene can produce, so no layer, pass or ray is spent on what it cannot.
@@ -116,6 +119,11 @@ impl Scene {
             .collect();
         let default_material = materials.len() as u32;
         materials.push(Material::gltf_default());
+        let mut material_names: Vec<String> = (gltf.materials.iter().enumerate())
+            .map(|(i, m)| names::material_name(&m.name, i))
+            .collect();
+        material_names.push(names::DEFAULT_MATERIAL.to_string());
+        let mut object_names = Vec::new();
         if options.lambertian {
             materials.iter_mut().for_each(Material::make_lambertian);
         }
@@ -138,6 +146,7 @@ impl Scene {
                 continue;
             }
             let geom_id = meshes.len() as u32;
+            object_names.push(names::node_name(&instance.node_name, instance.node));
             for tri in &mesh.indices {
                 for &i in tri {
                     let p = Vec3::from(mesh.positions[i as usize]);
@@ -185,6 +194,7 @@ impl Scene {
             bounds_max,
             dropped_triangles: dropped,
             warnings,
+            names: names::Names::new(object_names, material_names),
         })
     }
 

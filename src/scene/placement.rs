@@ -146,6 +146,8 @@ mod tests {
             instances: vec![GltfInstance {
                 mesh: 0,
                 world: DMat4::from_translation(DVec3::from(offset)).to_cols_array(),
+                node: 0,
+                node_name: String::new(),
             }],
             ..Default::default()
         };

@@ -132,6 +132,12 @@ impl Camera {
         if ratio.is_finite() && ratio > 0.0 { ratio } else { 1.0 }
     }
 
+    /// Distance of `point` from the camera along the view axis (its forward direction; for a
+    /// parallel view, from the view's plane), never negative.
+    pub fn view_depth(&self, point: Vec3) -> f32 {
+        (point - self.view.position).dot(self.forward).max(0.0)
+    }
+
     /// Where `point` appears in the image, in pixels as `ray` takes them; None behind a
     /// perspective camera (at or behind its position's plane).
     pub fn project(&self, point: Vec3) -> Option<(f32, f32)> {

@@ -107,11 +107,22 @@ pub struct SampleContext {
     pub light_cell_offset: u32,
 }
 
-/// A thread's work on one sample: the statistics it adds to, and the sample's context. It
-/// reads as the statistics (`Deref`), which every shading function adds to.
+/// What a camera sample's own rays found for the data layers (`image::data`), noted as the
+/// integrator traces them (no ray is traced for it): the first surface hit, and the
+/// reflectance seen along the eye path's mirror and transparency chain.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct SampleData {
+    pub first: Option<SurfaceHit>,
+    pub albedo: Vec3,
+}
+
+/// A thread's work on one sample: the statistics it adds to, the sample's context and what its
+/// rays found for the data layers. It reads as the statistics (`Deref`), which every shading
+/// function adds to.
 pub struct Work<'a> {
     pub counts: &'a mut RayCounts,
     pub sample: SampleContext,
+    pub data: SampleData,
 }
 
 impl<'a> Work<'a> {
@@ -119,6 +130,7 @@ impl<'a> Work<'a> {
         Work {
             counts,
             sample: SampleContext::default(),
+            data: SampleData::default(),
         }
     }
 }
@@ -172,6 +184,9 @@ pub struct PathState {
     /// What light leaving this point is multiplied by before it reaches the pixel: the
     /// rippled jT of the specular path and the opacities passed (RGB).
     throughput: Vec3,
+    /// This point is on the eye path's chain of mirrors and transparencies (no diffuse or
+    /// glossy bounce yet): its reflectance goes to the albedo layer (`SampleData`).
+    albedo_chain: bool,
 }
 
 impl PathState {
@@ -185,6 +200,7 @@ impl PathState {
             count_emission: true,
             first_emission_elsewhere,
             throughput: Vec3::ONE,
+            albedo_chain: true,
         }
     }
 }
@@ -416,6 +432,10 @@ impl<'a> Integrator<'a> {
         let Some((hit, surface)) = self.first_surface(origin, dir, coherence) else {
             return (Components::default(), f32::INFINITY);
         };
+        if state.level == 0 && state.specular_depth == 0 {
+            // The camera ray's own first hit.
+            counts.data.first = Some(hit);
+        }
         let mut c = self.shade(&hit, dir, &surface, state, rng, counts) * surface.opacity;
         if surface.opacity < 1.0 {
             c.specular += self.transmit(&hit, dir, 1.0 - surface.opacity, state, rng, counts);
@@ -464,6 +484,11 @@ impl<'a> Integrator<'a> {
         let material = &self.scene.materials[hit.material as usize];
         let wo = -dir;
         let mut c = Components::default();
+        if state.albedo_chain && state.level == 0 && !is_mirror(surface) {
+            // Seen through the chain's mirrors and transparencies, weighed as the light is.
+            let reflectance = (surface.diffuse + surface.specular).min(Vec3::ONE);
+            counts.data.albedo += state.throughput * surface.opacity * reflectance;
+        }
         // Emitters shine from their front side only.
         let seen_first = state.first_emission_elsewhere && state.level == 0 && state.specular_depth == 0;
         if state.count_emission && !seen_first && material.is_emissive() && hit.geometric_normal.dot(wo) > 0.0 {
@@ -547,6 +572,8 @@ impl<'a> Integrator<'a> {
             weight,
             count_emission: state.level == 0,
             throughput: state.throughput * surface.opacity * jt,
+            // The albedo layer follows perfect mirrors only (a glossy surface is its end).
+            albedo_chain: state.albedo_chain && is_mirror(surface),
             ..state
         };
         let origin = self.tracer.spawn_point(hit, wi);
@@ -619,6 +646,7 @@ impl<'a> Integrator<'a> {
             count_emission: false,
             first_emission_elsewhere: false,
             throughput: Vec3::ONE,
+            albedo_chain: false,
         };
         self.ambient_radiance(&hit, state, rng, counts)
     }
@@ -776,6 +804,12 @@ impl<'a> Integrator<'a> {
         }
         cache.make_record(&hemisphere, hit.position, state.level)
     }
+}
+
+/// A perfect mirror: no diffuse part, and a specular lobe (if any) of zero roughness. The
+/// albedo layer looks past such a surface to what it reflects.
+fn is_mirror(surface: &crate::scene::material::SurfacePoint) -> bool {
+    surface.diffuse.max_element() <= 0.0 && surface.specular.max_element() > 0.0 && surface.alpha <= 0.0
 }
 
 /// Runs indirect diffuse work, timing it as T_amb when it is the outermost (work nested in it,

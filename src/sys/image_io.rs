@@ -107,9 +107,12 @@ fn c_text(text: &str) -> CString {
 pub struct ChannelPlane<'a> {
     pub name: &'a str,
     pub data: &'a [f32],
+    /// Stored as 32-bit float even in a half-float file.
+    pub full_float: bool,
 }
 
-/// Writes an OpenEXR with the given channels (in order) and string attributes to exactly `path`.
+/// Writes an OpenEXR with the given channels (in order) and string attributes to exactly `path`;
+/// with `half_float`, every channel not marked `full_float` is stored as half.
 pub fn write_exr(
     path: &Path,
     width: u32,
@@ -134,6 +137,7 @@ pub fn write_exr(
         .map(|(c, n)| abi::icr_channel {
             name: n.as_ptr(),
             data: c.data.as_ptr(),
+            full_float: c.full_float as i32,
         })
         .collect();
     let attr_text: Vec<(CString, CString)> = attributes.iter().map(|(k, v)| (c_text(k), c_text(v))).collect();

@@ -21,6 +21,9 @@ pub struct GltfInstance {
     pub mesh: usize,
     /// Column-major 4x4 world matrix.
     pub world: [f64; 16],
+    /// The glTF node that places it, and its name ("" when unnamed).
+    pub node: usize,
+    pub node_name: String,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -178,6 +181,8 @@ unsafe fn copy_scene(view: abi::icr_scene_view) -> Result<GltfScene, String> {
             scene.instances.push(GltfInstance {
                 mesh: inst.mesh as usize,
                 world: inst.world,
+                node: inst.node as usize,
+                node_name: owned_string(inst.node_name),
             });
         }
         for t in slice_or_empty(view.textures, view.texture_count) {

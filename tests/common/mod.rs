@@ -329,3 +329,15 @@ pub fn mpirun_command<S: AsRef<std::ffi::OsStr>>(np: usize, args: &[S]) -> Comma
         .args(args);
     cmd
 }
+
+/// Channels whose values may be negative: directions and points (`normal`, `position`), and
+/// Cryptomatte IDs (floats with a hash's sign bit). Every other channel is light, an albedo,
+/// a depth or a coverage, none of which is ever negative.
+pub fn may_be_negative(channel: &str) -> bool {
+    match channel.rsplit_once('.') {
+        Some((layer, c)) => {
+            layer == "normal" || layer == "position" || (layer.starts_with("Crypto") && (c == "R" || c == "B"))
+        }
+        None => false,
+    }
+}

@@ -12,6 +12,7 @@ pub mod wire;
 pub use requests::Requests;
 
 use crate::image::components::Components;
+use crate::image::data::{DATA_VALUES, PixelData};
 use crate::image::framebuffer::{Layer, PixelValue};
 use crate::irradiance::codec::{self, RECORD_BYTES};
 use crate::irradiance::record::Record;
@@ -22,7 +23,7 @@ use std::sync::OnceLock;
 use wire::{Put, Reader};
 
 /// The first byte of every message; a rank of another build is refused, not misread.
-pub const PROTOCOL_VERSION: u8 = 2;
+pub const PROTOCOL_VERSION: u8 = 3;
 
 /// Replies to one rendering thread carry the thread in their tag: base + thread.
 const WORK_BASE: Tag = 1000;
@@ -428,10 +429,12 @@ fn take_records(r: &mut Reader<'_>) -> Result<Records, ProtocolError> {
     Ok(out)
 }
 
-/// Floats of one pixel on the wire (and in the checkpoint journal): four RGB layers, records.
-pub const PIXEL_FLOATS: usize = 13;
+/// 4-byte values of one pixel on the wire (and in the checkpoint journal): four RGB layers,
+/// records, the data layers (`PixelData::to_words`).
+pub const PIXEL_FLOATS: usize = 13 + DATA_VALUES;
 
-/// A pixel that is not finite and non-negative cannot come from a healthy renderer.
+/// A pixel that is not finite and non-negative (or whose data layers are not what a renderer
+/// makes) cannot come from a healthy renderer.
 fn healthy(p: &PixelValue) -> bool {
     p.components
         .as_array()
@@ -439,13 +442,15 @@ fn healthy(p: &PixelValue) -> bool {
         .flat_map(|v| v.to_array())
         .chain([p.records])
         .all(|v| v.is_finite() && v >= 0.0)
+        && p.data.healthy()
 }
 
-/// Appends pixels as little-endian floats, PIXEL_FLOATS each.
+/// Appends pixels as little-endian 4-byte values, PIXEL_FLOATS each.
 pub fn encode_pixels(pixels: &[PixelValue], out: &mut Vec<u8>) {
     for p in pixels {
         p.components.as_array().into_iter().for_each(|v| out.put_vec3(v));
         out.put_f32(p.records);
+        p.data.to_words().into_iter().for_each(|w| out.put_u32(w));
     }
 }
 
@@ -462,9 +467,12 @@ pub fn decode_pixels(body: &[u8]) -> Vec<PixelValue> {
                 specular: v(),
                 indirect: v(),
             };
+            let records = r.f32().expect("a whole pixel");
+            let words: [u32; DATA_VALUES] = std::array::from_fn(|_| r.u32().expect("a whole pixel"));
             PixelValue {
                 components,
-                records: r.f32().expect("a whole pixel"),
+                records,
+                data: PixelData::from_words(&words),
             }
         })
         .collect()

@@ -36,7 +36,24 @@ fn pixel(v: f32) -> PixelValue {
             indirect: Vec3::Z,
         },
         records: 2.0,
+        data: pixel_data(),
     }
+}
+
+/// Data layers with every field set, and two Cryptomatte IDs (their bits must survive).
+fn pixel_data() -> PixelData {
+    let mut sum = crate::image::data::PixelDataSum::new(2);
+    for (depth, name) in [(2.5, "floor"), (1.5, "wall")] {
+        let hit = crate::image::data::SampleHit {
+            position: Vec3::new(1.0, -2.0, depth),
+            depth,
+            normal: Vec3::Y,
+            object: crate::image::cryptomatte::id_of(name),
+            material: crate::image::cryptomatte::id_of("paint"),
+        };
+        sum.add(Vec3::new(0.5, 0.25, 0.125), Some(hit));
+    }
+    sum.finish()
 }
 
 /// One message of every kind, with content in every field.
@@ -220,6 +237,17 @@ fn unhealthy_pixels_and_images_are_refused() {
     };
     for bad in [f32::NAN, -1.0, f32::INFINITY] {
         assert!(Message::decode(Kind::WorkRequest.tag(), &request(bad).encode()).is_err());
+        // The same in a data layer: a depth, or a coverage.
+        let mut with_bad_data = request(1.0);
+        if let Message::WorkRequest { finished: Some(f), .. } = &mut with_bad_data {
+            f.pixels[0].data.depth = bad;
+        }
+        assert!(Message::decode(Kind::WorkRequest.tag(), &with_bad_data.encode()).is_err());
+        if let Message::WorkRequest { finished: Some(f), .. } = &mut with_bad_data {
+            f.pixels[0].data.depth = 1.0;
+            f.pixels[0].data.object[0].coverage = bad;
+        }
+        assert!(Message::decode(Kind::WorkRequest.tag(), &with_bad_data.encode()).is_err());
         assert!(
             Message::decode(
                 Kind::Image.tag(),
