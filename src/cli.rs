@@ -246,6 +246,10 @@ pub struct RenderArgs {
     /// No progress bar and no summary.
     #[arg(short = 'q', long = "quiet")]
     pub quiet: bool,
+    /// How progress is shown: `bar` on a terminal's stderr, or `json`, one line per step on
+    /// stdout for a farm manager (one-process renders; see README, "Render farms").
+    #[arg(long = "progress", value_enum, default_value_t = ProgressArg::Bar)]
+    pub progress: ProgressArg,
     #[command(flatten)]
     pub view: ViewArgs,
 }
@@ -265,6 +269,14 @@ impl RenderArgs {
             .as_ref()
             .map_or_else(|| Aov::DEFAULT.to_vec(), |l| l.0.clone())
     }
+}
+
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ProgressArg {
+    /// A bar on stderr when it is a terminal (nothing otherwise, nor with --quiet).
+    Bar,
+    /// One JSON object per line on stdout: phase, fraction, elapsed and remaining seconds.
+    Json,
 }
 
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]

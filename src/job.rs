@@ -161,7 +161,7 @@ fn check_memory(args: &RenderArgs, scene: &Scene, role: memory::Role, limit: u64
         },
     );
     if estimate.total() > limit {
-        return Err(CommandError(format!(
+        return Err(CommandError::input(format!(
             "{}: this render would need about {} per process, more than --max-memory {}",
             args.scene.display(),
             estimate.describe(),
@@ -192,18 +192,18 @@ impl Job {
         }
         let shading = shading_options(args);
         if !scene.has_lights() && shading.ambient_value.max_element() <= 0.0 {
-            return Err(CommandError(format!(
+            return Err(CommandError::input(format!(
                 "{}: the scene has no light sources (no emissive material, no KHR_lights_punctual light); \
                  it would render black (give -av for an ambient-only render)",
                 args.scene.display()
             )));
         }
         let build_start = Instant::now();
-        let tracer = Tracer::new(&scene).map_err(|e| CommandError(format!("{}: {e}", args.scene.display())))?;
+        let tracer = Tracer::new(&scene).map_err(|e| CommandError::input(format!("{}: {e}", args.scene.display())))?;
         let build_s = build_start.elapsed().as_secs_f64();
         let (view, view_note) =
             crate::commands::view::choose_view(&scene, &tracer, &args.view, args.width, args.height)
-                .map_err(|e| CommandError(format!("{}: view: {e}", args.scene.display())))?;
+                .map_err(|e| CommandError::input(format!("{}: view: {e}", args.scene.display())))?;
         if let Some(note) = view_note {
             warn(&format!("{}: {note}", args.scene.display()));
         }
@@ -251,7 +251,7 @@ impl Job {
                 Some(path) => {
                     let cache = cache
                         .with_file(path, &cache_settings_line(args, &scene))
-                        .map_err(|e| CommandError(format!("{}: {e}", path.display())))?;
+                        .map_err(|e| CommandError::input(format!("{}: {e}", path.display())))?;
                     let report = &cache.load_report;
                     if report.torn_bytes > 0 || report.corrupt > 0 {
                         warn(&format!(
@@ -266,7 +266,7 @@ impl Job {
                 None => cache,
             };
             Some(match &args.trace_cache {
-                Some(path) => cache.with_trace(path).map_err(CommandError)?,
+                Some(path) => cache.with_trace(path).map_err(CommandError::input)?,
                 None => cache,
             })
         } else {

@@ -25,7 +25,29 @@ fn main() -> ExitCode {
             };
         }
     };
-    let result = match &cli.command {
+    // A panic is a bug: it says so with its own message and ends with Exit::Internal's status
+    // instead of Rust's default 101.
+    let result = std::panic::catch_unwind(|| run(&cli)).unwrap_or_else(|_| {
+        Err(commands::CommandError {
+            message: "internal error (a bug): please report it with the command line".into(),
+            exit: commands::Exit::Internal,
+        })
+    });
+    icrender::sys::image_io::settle();
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(commands::CommandError { message, exit }) => {
+            // An empty message: another rank already said why.
+            if !message.is_empty() {
+                commands::error(&message);
+            }
+            ExitCode::from(exit.status())
+        }
+    }
+}
+
+fn run(cli: &cli::Cli) -> commands::CommandResult {
+    match &cli.command {
         cli::Command::Render(args) => commands::render::run(args),
         cli::Command::Info(args) => commands::info::run(args),
         cli::Command::Compare(args) => commands::compare::run(args),
@@ -33,16 +55,5 @@ fn main() -> ExitCode {
         cli::Command::Bench(args) => commands::bench::run(args),
         cli::Command::Reference(args) => commands::reference::run(args),
         cli::Command::Export(args) => commands::export::run(args),
-    };
-    icrender::sys::image_io::settle();
-    match result {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(commands::CommandError(message)) => {
-            // An empty message: another rank already said why.
-            if !message.is_empty() {
-                commands::error(&message);
-            }
-            ExitCode::FAILURE
-        }
     }
 }

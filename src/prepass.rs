@@ -349,8 +349,16 @@ fn site_records(
 }
 
 /// Runs the whole prepass in this process into `integrator`'s cache (nothing to do without one).
-pub fn run(integrator: &Integrator<'_>, camera: &Camera, settings: &RenderSettings) -> PrepassOutcome {
-    let Ok(outcome) = run_shared::<Infallible>(integrator, camera, settings, Share::All, &mut Ok);
+/// `watch` hears of each round as it ends, with the rounds done and the rounds in all, and
+/// answers whether to go on (a render stopped by a signal ends after the round it is in, every
+/// record so far in the cache).
+pub fn run(
+    integrator: &Integrator<'_>,
+    camera: &Camera,
+    settings: &RenderSettings,
+    watch: &dyn Fn(usize, usize) -> bool,
+) -> PrepassOutcome {
+    let Ok(outcome) = run_watched::<Infallible>(integrator, camera, settings, Share::All, &mut Ok, watch);
     outcome
 }
 
@@ -364,6 +372,17 @@ pub fn run_shared<E>(
     settings: &RenderSettings,
     share: Share,
     exchange: &mut dyn FnMut(RoundRecords) -> Result<RoundRecords, E>,
+) -> Result<PrepassOutcome, E> {
+    run_watched(integrator, camera, settings, share, exchange, &|_, _| true)
+}
+
+fn run_watched<E>(
+    integrator: &Integrator<'_>,
+    camera: &Camera,
+    settings: &RenderSettings,
+    share: Share,
+    exchange: &mut dyn FnMut(RoundRecords) -> Result<RoundRecords, E>,
+    watch: &dyn Fn(usize, usize) -> bool,
 ) -> Result<PrepassOutcome, E> {
     let start = Instant::now();
     let mut outcome = PrepassOutcome {
@@ -408,14 +427,26 @@ pub fn run_shared<E>(
         outcome.rounds += 1;
         Ok(())
     };
-    for sites in rounds(camera.width, camera.height) {
+    let lattice = rounds(camera.width, camera.height);
+    let mut total = lattice.len();
+    let mut go_on = true;
+    for sites in lattice {
         run(sites, &mut snapshot, &mut outcome)?;
+        go_on = watch(outcome.rounds, total);
+        if !go_on {
+            break;
+        }
     }
-    if settings.spp > 1 || settings.jitter {
+    if go_on && (settings.spp > 1 || settings.jitter) {
         let needs = pixels_needing_samples(pass, &snapshot, &mut outcome.threads);
         outcome.pixels_sampled = needs.iter().filter(|&&n| n).count() as u64;
-        for sites in sample_rounds(camera.width, camera.height, settings.spp, &needs) {
+        let more = sample_rounds(camera.width, camera.height, settings.spp, &needs);
+        total += more.len();
+        for sites in more {
             run(sites, &mut snapshot, &mut outcome)?;
+            if !watch(outcome.rounds, total) {
+                break;
+            }
         }
     }
     // The cache is complete: from now on lookups read its lock-free copy.

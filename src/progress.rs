@@ -1,54 +1,184 @@
-//! A progress bar on a terminal; nothing at all when stderr is a pipe or a file (CI logs, MPI).
+//! How far a render is: a bar on a terminal (nothing when stderr is a pipe or a file: CI logs,
+//! MPI), or JSON lines on stdout for a farm manager, which reads progress there and errors on
+//! stderr.
+//!
+//! A render is the prepass's rounds, then the tiles. Their costs differ from scene to scene
+//! (the prepass makes most records; the tiles mostly look them up), so the fraction gives each
+//! phase half of the whole when there is a prepass: a coarse estimate, and the remaining time
+//! (elapsed x (1 - fraction) / fraction) is only as good as it.
 
 use std::io::{IsTerminal, Write};
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicUsize, Ordering};
-use std::time::Instant;
+use std::time::{Duration, Instant};
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Style {
+    /// Nothing (--quiet, or a bar where stderr is no terminal).
+    Silent,
+    Bar,
+    Json,
+}
+
+/// The least time between two JSON lines, and the least change of the fraction, unless the
+/// phase ends: a long render's thousands of tiles would otherwise flood the farm's log.
+const JSON_EVERY: Duration = Duration::from_secs(1);
+const JSON_STEP: f64 = 0.01;
 
 pub struct Progress {
     total: usize,
     done: AtomicUsize,
-    enabled: bool,
+    rounds: AtomicUsize,
+    rounds_done: AtomicUsize,
+    style: Style,
     start: Instant,
-    last_drawn: Mutex<Option<Instant>>,
+    /// When the last line or bar was drawn, and the fraction it showed.
+    last: Mutex<Option<(Instant, f64)>>,
 }
 
 impl Progress {
+    /// A bar over `total` tiles (shown only on a terminal, and not when `quiet`).
     pub fn new(total: usize, quiet: bool) -> Progress {
+        let style = if !quiet && std::io::stderr().is_terminal() {
+            Style::Bar
+        } else {
+            Style::Silent
+        };
+        Progress::with_style(total, style)
+    }
+
+    pub fn with_style(total: usize, style: Style) -> Progress {
         Progress {
             total: total.max(1),
             done: AtomicUsize::new(0),
-            enabled: !quiet && std::io::stderr().is_terminal(),
+            rounds: AtomicUsize::new(0),
+            rounds_done: AtomicUsize::new(0),
+            style,
             start: Instant::now(),
-            last_drawn: Mutex::new(None),
+            last: Mutex::new(None),
         }
+    }
+
+    /// The prepass has `rounds` rounds in all (it learns of its sample rounds late: called
+    /// again then with the new total).
+    pub fn prepass_rounds(&self, rounds: usize) {
+        self.rounds.store(rounds, Ordering::Relaxed);
+    }
+
+    pub fn prepass_round_done(&self) {
+        self.rounds_done.fetch_add(1, Ordering::Relaxed);
+        self.show("prepass", false);
     }
 
     pub fn advance(&self, n: usize) {
-        let done = self.done.fetch_add(n, Ordering::Relaxed) + n;
-        if !self.enabled {
-            return;
-        }
-        let mut last = self.last_drawn.lock().unwrap_or_else(|e| e.into_inner());
-        if last.is_some_and(|t| t.elapsed().as_millis() < 100) && done < self.total {
-            return;
-        }
-        *last = Some(Instant::now());
-        let fraction = done as f64 / self.total as f64;
-        let filled = (fraction * 40.0) as usize;
-        eprint!(
-            "\r[{}{}] {:5.1}%  {:.1}s",
-            "#".repeat(filled),
-            " ".repeat(40 - filled.min(40)),
-            fraction * 100.0,
-            self.start.elapsed().as_secs_f64()
-        );
-        let _ = std::io::stderr().flush();
+        self.done.fetch_add(n, Ordering::Relaxed);
+        self.show("render", false);
     }
 
+    /// The whole render's fraction done, 0 to 1.
+    pub fn fraction(&self) -> f64 {
+        let tiles = (self.done.load(Ordering::Relaxed) as f64 / self.total as f64).min(1.0);
+        let rounds = self.rounds.load(Ordering::Relaxed);
+        if rounds == 0 {
+            return tiles;
+        }
+        let prepass = (self.rounds_done.load(Ordering::Relaxed) as f64 / rounds as f64).min(1.0);
+        0.5 * prepass + 0.5 * tiles
+    }
+
+    fn show(&self, phase: &str, force: bool) {
+        if self.style == Style::Silent {
+            return;
+        }
+        let fraction = self.fraction();
+        let mut last = self.last.lock().unwrap_or_else(|e| e.into_inner());
+        let due = match (*last, self.style) {
+            (None, _) => true,
+            (Some((at, _)), Style::Bar) => at.elapsed() >= Duration::from_millis(100),
+            (Some((at, shown)), _) => at.elapsed() >= JSON_EVERY || fraction - shown >= JSON_STEP,
+        };
+        if !(due || force || fraction >= 1.0) {
+            return;
+        }
+        *last = Some((Instant::now(), fraction));
+        let elapsed = self.start.elapsed().as_secs_f64();
+        match self.style {
+            Style::Bar => {
+                let filled = ((fraction * 40.0) as usize).min(40);
+                eprint!(
+                    "\r[{}{}] {:5.1}%  {:.1}s",
+                    "#".repeat(filled),
+                    " ".repeat(40 - filled),
+                    fraction * 100.0,
+                    elapsed
+                );
+                let _ = std::io::stderr().flush();
+            }
+            Style::Json => self.json_line(phase, fraction, elapsed),
+            Style::Silent => {}
+        }
+    }
+
+    fn json_line(&self, phase: &str, fraction: f64, elapsed: f64) {
+        let remaining = (fraction > 0.0).then(|| elapsed * (1.0 - fraction) / fraction);
+        let line = serde_json::json!({
+            "event": "progress",
+            "phase": phase,
+            "fraction": (fraction * 1e4).round() / 1e4,
+            "elapsed_s": (elapsed * 1e3).round() / 1e3,
+            "remaining_s": remaining.map(|r| (r * 1e3).round() / 1e3),
+        });
+        let mut out = std::io::stdout().lock();
+        let _ = writeln!(out, "{line}");
+        let _ = out.flush();
+    }
+
+    /// The tiles are done: the bar's line ends.
     pub fn finish(&self) {
-        if self.enabled {
+        if self.style == Style::Bar {
             eprintln!();
         }
+    }
+
+    /// The outputs are written: with JSON, a last line, event `done`, naming the EXR.
+    pub fn done(&self, output: &std::path::Path) {
+        if self.style != Style::Json {
+            return;
+        }
+        let line = serde_json::json!({
+            "event": "done",
+            "fraction": 1.0,
+            "elapsed_s": (self.start.elapsed().as_secs_f64() * 1e3).round() / 1e3,
+            "output": output.display().to_string(),
+        });
+        let mut out = std::io::stdout().lock();
+        let _ = writeln!(out, "{line}");
+        let _ = out.flush();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_prepass_and_the_tiles_each_make_half_of_the_fraction() {
+        let p = Progress::with_style(10, Style::Silent);
+        assert_eq!(p.fraction(), 0.0);
+        p.advance(5);
+        assert_eq!(p.fraction(), 0.5);
+        let p = Progress::with_style(10, Style::Silent);
+        p.prepass_rounds(4);
+        p.prepass_round_done();
+        assert_eq!(p.fraction(), 0.125);
+        for _ in 0..3 {
+            p.prepass_round_done();
+        }
+        assert_eq!(p.fraction(), 0.5);
+        p.advance(10);
+        assert_eq!(p.fraction(), 1.0);
+        // More steps than announced never pass 1.
+        p.advance(3);
+        assert_eq!(p.fraction(), 1.0);
     }
 }

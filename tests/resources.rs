@@ -28,7 +28,7 @@ fn a_render_larger_than_max_memory_is_refused_with_its_estimate() {
         out.to_str().unwrap(),
     ];
     let refused = run(&args);
-    assert_eq!(refused.status.code(), Some(1));
+    assert_eq!(refused.status.code(), Some(2));
     let err = stderr(&refused);
     let lines = error_lines(&err);
     assert_eq!(lines.len(), 1, "{err}");
@@ -72,7 +72,7 @@ fn a_scene_larger_than_max_memory_is_refused_while_loading() {
         "-o",
         out.to_str().unwrap(),
     ]);
-    assert_eq!(refused.status.code(), Some(1));
+    assert_eq!(refused.status.code(), Some(2));
     let err = stderr(&refused);
     let lines = error_lines(&err);
     assert_eq!(lines.len(), 1, "{err}");
@@ -136,7 +136,7 @@ fn memory_the_system_refuses_ends_the_render_with_one_clear_line() {
         .output()
         .expect("prlimit (util-linux) is installed");
     let err = stderr(&output);
-    assert_eq!(output.status.code(), Some(1), "exit status, not a signal:\n{err}");
+    assert_eq!(output.status.code(), Some(3), "exit status, not a signal:\n{err}");
     let lines = error_lines(&err);
     assert_eq!(lines.len(), 1, "{err}");
     assert!(lines[0].contains("out of memory"), "{err}");

@@ -7,12 +7,12 @@ use crate::sys::image_io;
 
 pub fn run(args: &CompareArgs) -> CommandResult {
     let read = |path: &std::path::Path| {
-        image_io::read_image(path, &[]).map_err(|e| CommandError(format!("{}: {e}", path.display())))
+        image_io::read_image(path, &[]).map_err(|e| CommandError::input(format!("{}: {e}", path.display())))
     };
     let image = read(&args.image)?;
     let reference = read(&args.reference)?;
     let errors = metrics::compare(&image, &reference).map_err(|e| {
-        CommandError(format!(
+        CommandError::input(format!(
             "{} against {}: {e}",
             args.image.display(),
             args.reference.display()

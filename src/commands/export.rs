@@ -8,7 +8,7 @@ use crate::scene::{LoadOptions, Scene};
 
 pub fn run(args: &ExportArgs) -> CommandResult {
     if args.output.exists() && !args.overwrite {
-        return Err(CommandError(format!(
+        return Err(CommandError::input(format!(
             "{}: already exists (give --overwrite to replace it)",
             args.output.display()
         )));
@@ -22,8 +22,8 @@ pub fn run(args: &ExportArgs) -> CommandResult {
     for w in &scene.warnings {
         warn(&format!("{}: {w}", args.scene.display()));
     }
-    let summary =
-        radiance::export(&scene, &args.output).map_err(|e| CommandError(format!("{}: {e}", args.output.display())))?;
+    let summary = radiance::export(&scene, &args.output)
+        .map_err(|e| CommandError::input(format!("{}: {e}", args.output.display())))?;
     for note in &summary.notes {
         warn(&format!("{}: {note}", args.scene.display()));
     }

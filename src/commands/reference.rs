@@ -41,7 +41,7 @@ pub fn run(args: &ReferenceArgs) -> CommandResult {
     render_args.direct = crate::cli::DirectArg::Sampled;
     validate(&render_args)?;
     if !(args.noise > 0.0 && args.max_seconds > 0.0) {
-        return Err(CommandError("--noise and --max-seconds must be positive".into()));
+        return Err(CommandError::input("--noise and --max-seconds must be positive".into()));
     }
     let outputs = Outputs::check(&render_args)?;
     let mut job = Job::prepare(&render_args, crate::memory::Role::Single)?;

@@ -3,14 +3,14 @@
 
 use super::{CommandError, CommandResult, warn};
 use crate::checkpoint::{self, Checkpoint, Restored};
-use crate::cli::ModeArg;
 use crate::cli::RenderArgs;
+use crate::cli::{ModeArg, ProgressArg};
 use crate::image::data::{Aov, FAR_DEPTH};
 use crate::image::framebuffer::{FrameBuffer, Layer};
 use crate::image::{cryptomatte, metrics, output};
 use crate::job::{Job, validate};
 use crate::parallel::{JobHost, Mode, ParallelJob, under_mpirun};
-use crate::progress::Progress;
+use crate::progress::{self, Progress};
 use crate::render::render_resumable;
 use crate::scene::{Scene, SceneNeeds};
 use crate::shading::{Integrator, ShadingOptions};
@@ -56,7 +56,7 @@ fn check_exr_name(exr: &Path) -> Result<(), CommandError> {
         Some(_) => "the render is written as a layered OpenEXR whatever the name says",
         None => "the render is a layered OpenEXR and its name must say so",
     };
-    Err(CommandError(format!(
+    Err(CommandError::input(format!(
         "-o {}: the output must end in .exr ({why}); give -o {} (the preview goes beside it as .png)",
         exr.display(),
         suggestion.display()
@@ -66,7 +66,7 @@ fn check_exr_name(exr: &Path) -> Result<(), CommandError> {
 /// A directory is never replaced, with or without --overwrite: said before anything else.
 fn not_a_directory(path: &Path) -> Result<(), CommandError> {
     if path.is_dir() {
-        return Err(CommandError(format!(
+        return Err(CommandError::input(format!(
             "{}: is a directory; give a file name (e.g. {})",
             path.display(),
             path.join("render.exr").display()
@@ -178,7 +178,7 @@ impl Outputs {
         if let Some(stats) = &outputs.stats
             && (same_file(stats, &outputs.exr) || outputs.png.as_deref().is_some_and(|png| same_file(stats, png)))
         {
-            return Err(CommandError(format!(
+            return Err(CommandError::input(format!(
                 "--stats {}: is also an image output of this render; give the statistics a name of their own (e.g. .json)",
                 stats.display()
             )));
@@ -189,12 +189,12 @@ impl Outputs {
         {
             not_a_directory(path)?;
             if path.exists() && !args.overwrite {
-                return Err(CommandError(format!(
+                return Err(CommandError::input(format!(
                     "{}: already exists (give --overwrite to replace it)",
                     path.display()
                 )));
             }
-            output::check_writable(path).map_err(|e| CommandError(format!("{}: {e}", path.display())))?;
+            output::check_writable(path).map_err(|e| CommandError::input(format!("{}: {e}", path.display())))?;
         }
         Ok(outputs)
     }
@@ -238,14 +238,14 @@ impl Outputs {
             args.half,
             args.ic_records,
         )
-        .map_err(|e| CommandError(format!("{}: {e}", self.exr.display())))?;
+        .map_err(|e| CommandError::failed(format!("{}: {e}", self.exr.display())))?;
         if let Some(png) = &self.png {
-            output::write_preview(png, frame).map_err(|e| CommandError(format!("{}: {e}", png.display())))?;
+            output::write_preview(png, frame).map_err(|e| CommandError::failed(format!("{}: {e}", png.display())))?;
         }
         if let Some(path) = &self.stats {
             let text = serde_json::to_string_pretty(stats)? + "\n";
             output::write_atomically(path, |tmp| std::fs::write(tmp, &text).map_err(|e| e.to_string()))
-                .map_err(|e| CommandError(format!("{}: {e}", path.display())))?;
+                .map_err(|e| CommandError::failed(format!("{}: {e}", path.display())))?;
         }
         Ok(())
     }
@@ -322,8 +322,8 @@ pub fn open_checkpoint(args: &RenderArgs, all_tiles: &[Tile]) -> Result<Option<(
     let Some(dir) = &args.checkpoint else {
         return Ok(None);
     };
-    let (journal, restored) =
-        Checkpoint::open(dir, &checkpoint_key(args), all_tiles, args.width, args.height).map_err(CommandError)?;
+    let (journal, restored) = Checkpoint::open(dir, &checkpoint_key(args), all_tiles, args.width, args.height)
+        .map_err(CommandError::input)?;
     if restored.torn_bytes > 0 {
         warn(&format!(
             "{}: dropped {} bytes of a torn last journal entry",
@@ -349,9 +349,9 @@ pub fn report_error(
     reference_path: &Path,
     seconds: f64,
 ) -> Result<(), CommandError> {
-    let written = image_io::read_image(exr, &[]).map_err(|e| CommandError(format!("{}: {e}", exr.display())))?;
+    let written = image_io::read_image(exr, &[]).map_err(|e| CommandError::input(format!("{}: {e}", exr.display())))?;
     let errors = metrics::compare(&written, reference)
-        .map_err(|e| CommandError(format!("{}: {e}", reference_path.display())))?;
+        .map_err(|e| CommandError::input(format!("{}: {e}", reference_path.display())))?;
     for e in &errors {
         println!(
             "error {:<10} rmse {:.6e}  relmse {:.6e}  time {:.3} s",
@@ -384,13 +384,13 @@ impl JobHost for RenderHost<'_> {
     }
 
     fn check_outputs(&self) -> Result<(), String> {
-        let outputs = Outputs::check(self.args).map_err(|e| e.0)?;
+        let outputs = Outputs::check(self.args).map_err(|e| e.message)?;
         let _ = self.outputs.set(outputs);
         Ok(())
     }
 
     fn open_checkpoint(&self, tiles: &[Tile]) -> Result<Option<(Checkpoint, Restored)>, String> {
-        open_checkpoint(self.args, tiles).map_err(|e| e.0)
+        open_checkpoint(self.args, tiles).map_err(|e| e.message)
     }
 
     fn prepare(&self, master: bool, threads: usize) -> Result<Job, String> {
@@ -404,7 +404,7 @@ impl JobHost for RenderHost<'_> {
         if !master {
             args.ambient_file = None;
         }
-        Job::prepare(&args, crate::memory::Role::AnyRank).map_err(|e| e.0)
+        Job::prepare(&args, crate::memory::Role::AnyRank).map_err(|e| e.message)
     }
 
     fn job_stats(&self, job: &Job, mode: &'static str, ranks: usize, render_s: f64) -> RenderStats {
@@ -413,16 +413,19 @@ impl JobHost for RenderHost<'_> {
 
     fn write(&self, job: &Job, frame: &FrameBuffer, stats: &RenderStats) -> Result<(), String> {
         let outputs = self.outputs.get().ok_or("the outputs were not checked")?;
-        outputs.write(self.args, job, frame, stats).map_err(|e| e.0)
+        outputs.write(self.args, job, frame, stats).map_err(|e| e.message)
     }
 }
 
 fn run_parallel(args: &RenderArgs, mode: Mode) -> CommandResult {
+    if args.progress == ProgressArg::Json {
+        warn("--progress json reports one-process renders only: under mpirun the master prints its table at the end");
+    }
     let host = RenderHost {
         args,
         outputs: std::sync::OnceLock::new(),
     };
-    let tile = crate::cli::parse_tile(&args.tile).map_err(CommandError)?;
+    let tile = crate::cli::parse_tile(&args.tile).map_err(CommandError::input)?;
     crate::parallel::run(&ParallelJob {
         mode,
         width: args.width,
@@ -442,6 +445,25 @@ fn run_parallel(args: &RenderArgs, mode: Mode) -> CommandResult {
     })
 }
 
+/// What a render stopped by `signal` says: nothing was written, and what a rerun resumes.
+fn interrupted(args: &RenderArgs, signal: i32) -> CommandError {
+    let kept = match (&args.checkpoint, &args.ambient_file) {
+        (Some(dir), _) => format!(
+            "the finished tiles and the cache are kept in {}: the same command resumes",
+            dir.display()
+        ),
+        (None, Some(file)) => format!("the cache's records are kept in {}", file.display()),
+        (None, None) => "nothing is kept (--checkpoint DIR would keep the finished tiles)".into(),
+    };
+    CommandError {
+        message: format!(
+            "stopped by {}: no image written; {kept}",
+            crate::sys::signals::name(signal)
+        ),
+        exit: super::Exit::Interrupted(signal),
+    }
+}
+
 pub fn run(args: &RenderArgs) -> CommandResult {
     let mode = match args.mode {
         Some(m) => mode_of(m),
@@ -450,7 +472,7 @@ pub fn run(args: &RenderArgs) -> CommandResult {
     };
     if mode != Mode::Serial {
         if args.trace_cache.is_some() {
-            return Err(CommandError("--trace-cache traces the serial mode only".into()));
+            return Err(CommandError::input("--trace-cache traces the serial mode only".into()));
         }
         return run_parallel(args, mode);
     }
@@ -460,18 +482,23 @@ pub fn run(args: &RenderArgs) -> CommandResult {
     image_io::open_in_background();
     let reference = match &args.reference {
         Some(path) => {
-            Some(image_io::read_image(path, &[]).map_err(|e| CommandError(format!("{}: {e}", path.display())))?)
+            Some(image_io::read_image(path, &[]).map_err(|e| CommandError::input(format!("{}: {e}", path.display())))?)
         }
         None => None,
     };
-    let (tile_width, tile_height) = crate::cli::parse_tile(&args.tile).map_err(CommandError)?;
+    let (tile_width, tile_height) = crate::cli::parse_tile(&args.tile).map_err(CommandError::input)?;
     let all_tiles = tiles(args.width, args.height, tile_width, tile_height);
     let (journal, restored) = open_checkpoint(args, &all_tiles)?.map_or((None, None), |(j, r)| (Some(j), Some(r)));
     let job = Job::prepare(&with_checkpoint_cache(args), crate::memory::Role::Single)?;
     let integrator = Integrator::new(&job.scene, &job.tracer, &job.shading, job.cache.as_ref());
     let s = &job.settings;
     let tiles_restored = restored.as_ref().map_or(0, Restored::count);
-    let progress = Progress::new(all_tiles.len(), args.quiet);
+    let progress = match args.progress {
+        ProgressArg::Json => Progress::with_style(all_tiles.len(), progress::Style::Json),
+        ProgressArg::Bar => Progress::new(all_tiles.len(), args.quiet),
+    };
+    // From here a SIGTERM or SIGINT stops the render cleanly (see sys::signals).
+    crate::sys::signals::catch_termination().map_err(CommandError::failed)?;
     let render_start = Instant::now();
     let rendered = render_resumable(&integrator, &job.camera, s, &progress, journal.as_ref().zip(restored));
     let (frame, thread_stats) = (rendered.frame, rendered.threads);
@@ -483,6 +510,9 @@ pub fn run(args: &RenderArgs) -> CommandResult {
             "{}: cache file not fully written: {e}",
             args.ambient_file.as_deref().unwrap_or(Path::new("")).display()
         ));
+    }
+    if let Some(signal) = crate::sys::signals::received() {
+        return Err(interrupted(args, signal));
     }
 
     let mut stats = job_stats(args, &job, "serial", 1, render_s);
@@ -500,6 +530,7 @@ pub fn run(args: &RenderArgs) -> CommandResult {
     stats.wall_s = wall.elapsed().as_secs_f64();
     stats.single_rank();
     outputs.write(args, &job, &frame, &stats)?;
+    progress.done(&outputs.exr);
     if !args.quiet {
         eprintln!(
             "icrender: {}x{} in {:.2} s ({:.1} Mrays/s, {} threads, {} records, {:.0}% of lookups hit) -> {}",

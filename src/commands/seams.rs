@@ -9,14 +9,14 @@ use glam::Vec3;
 
 pub fn run(args: &SeamsArgs) -> CommandResult {
     let path = args.image.display();
-    let tile = parse_tile(&args.tile).map_err(CommandError)?;
+    let tile = parse_tile(&args.tile).map_err(CommandError::input)?;
     let region = args
         .region
         .as_deref()
         .map(parse_region)
         .transpose()
-        .map_err(CommandError)?;
-    let image = image_io::read_image(&args.image, &[]).map_err(|e| CommandError(format!("{path}: {e}")))?;
+        .map_err(CommandError::input)?;
+    let image = image_io::read_image(&args.image, &[]).map_err(|e| CommandError::input(format!("{path}: {e}")))?;
     let prefix = if args.layer == "composite" {
         String::new()
     } else {
@@ -25,12 +25,12 @@ pub fn run(args: &SeamsArgs) -> CommandResult {
     let channel = |c: &str| {
         image
             .channel(&format!("{prefix}{c}"))
-            .ok_or_else(|| CommandError(format!("{path}: no layer '{}' (no channel {prefix}{c})", args.layer)))
+            .ok_or_else(|| CommandError::input(format!("{path}: no layer '{}' (no channel {prefix}{c})", args.layer)))
     };
     let (r, g, b) = (channel("R")?, channel("G")?, channel("B")?);
     let pixels: Vec<Vec3> = (0..r.len()).map(|i| Vec3::new(r[i], g[i], b[i])).collect();
     let report = tile_seams(&pixels, image.width, tile, region).ok_or_else(|| {
-        CommandError(format!(
+        CommandError::input(format!(
             "{path}: no lit pixel pairs on both sides of a {} tile border in that region",
             args.tile
         ))

@@ -320,7 +320,7 @@ fn stop_together(comm: &Comm<'_>, line: Option<&str>) -> CommandResult {
         crate::commands::error(line);
     }
     comm.barrier();
-    Err(CommandError(String::new()))
+    Err(CommandError::input(String::new()))
 }
 
 /// What the worker ranks are, chosen alike on every rank.
@@ -360,9 +360,9 @@ pub fn run(job_in: &ParallelJob<'_>) -> CommandResult {
     let wall = Instant::now();
     let host = job_in.host;
     // A rank never outlives its launcher (see sys::process).
-    crate::sys::process::die_with_parent(launcher_pid()).map_err(CommandError)?;
+    crate::sys::process::die_with_parent(launcher_pid()).map_err(CommandError::input)?;
     let Some((universe, granted)) = mpi::initialize_with_threading(Threading::Multiple) else {
-        return Err(CommandError("MPI could not be initialised".into()));
+        return Err(CommandError::failed("MPI could not be initialised".into()));
     };
     let counters = Counters::default();
     let comm = Comm::new(&counters);
@@ -524,7 +524,7 @@ impl Ready<'_, '_> {
             crate::render::add_prepass_records(&mut frame, prepass);
         }
         stats.wall_s = wall.elapsed().as_secs_f64();
-        job_in.host.write(job, &frame, &stats).map_err(CommandError)?;
+        job_in.host.write(job, &frame, &stats).map_err(CommandError::failed)?;
         if !job_in.quiet {
             print_table(&stats);
         }

@@ -42,7 +42,17 @@ pub fn render_resumable(
     progress: &Progress,
     checkpoint: Option<(&Checkpoint, Restored)>,
 ) -> Rendered {
-    let prepass = (settings.prepass && integrator.cache.is_some()).then(|| prepass::run(integrator, camera, settings));
+    // A render stopped by SIGTERM or SIGINT (caught only in one-process renders, see
+    // sys::signals) ends after the round or the tiles in progress.
+    let stopped = || crate::sys::signals::received().is_some();
+    let watch = |done: usize, total: usize| {
+        progress.prepass_rounds(total);
+        progress.prepass_round_done();
+        debug_assert!(done <= total);
+        !stopped()
+    };
+    let prepass =
+        (settings.prepass && integrator.cache.is_some()).then(|| prepass::run(integrator, camera, settings, &watch));
     // After the prepass the pixels only read the cache (see `Integrator::frozen`).
     let reading = Integrator {
         frozen: prepass.is_some(),
@@ -59,7 +69,7 @@ pub fn render_resumable(
         ),
     };
     progress.advance(all.len() - todo.len());
-    let queue = TileQueue::new(todo);
+    let queue = TileQueue::new(if stopped() { Vec::new() } else { todo });
     let frame = Mutex::new(start);
     let threads = settings.threads.max(1).min(queue.len().max(1));
     let stats: Vec<ThreadStats> = std::thread::scope(|scope| {
@@ -68,7 +78,9 @@ pub fn render_resumable(
                 scope.spawn(|| {
                     let mut stats = ThreadStats::default();
                     let clock = ThreadClock::start();
-                    while let Some(index) = queue.next() {
+                    while !stopped()
+                        && let Some(index) = queue.next()
+                    {
                         let tile = &all[index];
                         let values = render_tile(integrator, camera, settings, tile, &mut stats.rays, |_| {});
                         if let Some(journal) = journal {

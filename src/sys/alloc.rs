@@ -1,9 +1,12 @@
 //! The process's allocator: the system's, but a request it cannot meet ends the process with
-//! one clear line (naming the MPI rank and the size) and exit status 1, instead of Rust's
+//! one clear line (naming the MPI rank and the size) and exit status 3 (`OUT_OF_MEMORY_STATUS`), instead of Rust's
 //! default abort. What the kernel's OOM killer does (SIGKILL) no process can report; this covers
 //! what can be reported: a limit (ulimit -v/-d, a cgroup without overcommit) refusing memory.
 
 use std::alloc::{GlobalAlloc, Layout, System};
+
+/// The exit status of a process the system refused memory (README, "Exit status").
+pub const OUT_OF_MEMORY_STATUS: u8 = 3;
 
 pub struct ReportingAllocator;
 
@@ -83,7 +86,7 @@ fn out_of_memory(size: usize) -> ! {
     // running destructors (which could allocate).
     unsafe {
         libc::write(2, line.as_ptr().cast(), len);
-        libc::_exit(1)
+        libc::_exit(OUT_OF_MEMORY_STATUS as i32)
     }
 }
 

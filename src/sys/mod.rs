@@ -29,6 +29,7 @@ pub mod embree;
 pub mod image_io;
 pub mod process;
 pub mod scene_io;
+pub mod signals;
 
 use std::ffi::CStr;
 use std::os::raw::c_char;

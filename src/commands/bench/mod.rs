@@ -66,9 +66,9 @@ fn messages(sizes: &str) -> CommandResult {
         .split(',')
         .map(|s| s.trim().parse::<usize>())
         .collect::<Result<Vec<_>, _>>()
-        .map_err(|e| CommandError(format!("--sizes {sizes:?}: {e} (bytes, comma-separated)")))?;
+        .map_err(|e| CommandError::input(format!("--sizes {sizes:?}: {e} (bytes, comma-separated)")))?;
     // 4 MiB in 32 KiB messages: past a capped link's burst allowance, under the eager limit.
-    let Some(measured) = link::measure(&sizes, 32 << 10, 128).map_err(CommandError)? else {
+    let Some(measured) = link::measure(&sizes, 32 << 10, 128).map_err(CommandError::input)? else {
         return Ok(());
     };
     let fitted = link::fit(&measured);
