@@ -2,6 +2,7 @@
 //! error metrics `compare` and `--reference` report.
 
 pub mod components;
+pub mod denoise;
 pub mod framebuffer;
 pub mod metrics;
 pub mod output;

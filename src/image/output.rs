@@ -4,6 +4,7 @@
 use super::framebuffer::{FrameBuffer, Layer};
 use super::preview::tone_map;
 use crate::sys::image_io::{self, ChannelPlane};
+use glam::Vec3;
 use std::path::{Path, PathBuf};
 
 fn temporary_beside(path: &Path) -> PathBuf {
@@ -38,24 +39,30 @@ pub fn check_writable(path: &Path) -> Result<(), String> {
     Ok(())
 }
 
-/// Writes the composite as R G B A and each given layer as `layer.R/G/B`.
+/// Writes the composite as R G B A, each given layer as `layer.R/G/B`, then each of
+/// `extra_layers` (a name and a plane: the denoised layers) the same way.
+#[allow(clippy::too_many_arguments)]
 pub fn write_exr(
     path: &Path,
     frame: &FrameBuffer,
     layers: &[Layer],
+    extra_layers: &[(&str, &[Vec3])],
     attributes: &[(String, String)],
     half_float: bool,
     records_layer: bool,
 ) -> Result<(), String> {
     let composite = frame.composite();
-    let split =
-        |pixels: &[glam::Vec3]| -> [Vec<f32>; 3] { std::array::from_fn(|c| pixels.iter().map(|p| p[c]).collect()) };
+    let split = |pixels: &[Vec3]| -> [Vec<f32>; 3] { std::array::from_fn(|c| pixels.iter().map(|p| p[c]).collect()) };
     let alpha = vec![1.0f32; composite.len()];
     let composite_planes = split(&composite);
-    let layer_planes: Vec<(Layer, [Vec<f32>; 3])> = layers.iter().map(|&l| (l, split(frame.layer(l)))).collect();
+    let layer_planes: Vec<(&str, [Vec<f32>; 3])> = layers
+        .iter()
+        .map(|&l| (l.name(), split(frame.layer(l))))
+        .chain(extra_layers.iter().map(|&(name, plane)| (name, split(plane))))
+        .collect();
     let layer_names: Vec<[String; 3]> = layer_planes
         .iter()
-        .map(|(l, _)| ["R", "G", "B"].map(|c| format!("{}.{c}", l.name())))
+        .map(|(name, _)| ["R", "G", "B"].map(|c| format!("{name}.{c}")))
         .collect();
     let mut channels = vec![
         ChannelPlane {
@@ -94,10 +101,10 @@ pub fn write_exr(
     })
 }
 
-/// Writes the tone-mapped composite as an 8-bit PNG.
-pub fn write_preview(path: &Path, frame: &FrameBuffer) -> Result<(), String> {
-    let rgb = tone_map(&frame.composite());
-    write_atomically(path, |tmp| image_io::write_png(tmp, frame.width, frame.height, &rgb))
+/// Writes a composite, tone-mapped, as an 8-bit PNG.
+pub fn write_preview(path: &Path, width: u32, height: u32, composite: &[Vec3]) -> Result<(), String> {
+    let rgb = tone_map(composite);
+    write_atomically(path, |tmp| image_io::write_png(tmp, width, height, &rgb))
 }
 
 #[cfg(test)]
