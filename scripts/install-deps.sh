@@ -76,9 +76,11 @@ oidn_present() {
 wheel_url() {
   # The simple index lists each file as <a href="URL#sha256=HASH">NAME</a>; the pinned hash is
   # checked again on the downloaded bytes.
-  curl -fsSL --retry 3 "https://pypi.org/simple/pyoidn/" |
-    grep -o "href=\"[^\"]*/$wheel#sha256=$wheel_sha256\"" |
-    head -n 1 | sed -e 's/^href="//' -e 's/#.*//'
+  local index
+  index="$(curl -fsSL --retry 3 "https://pypi.org/simple/pyoidn/")" ||
+    { echo "install-deps: cannot read PyPI's index of pyoidn (https://pypi.org/simple/pyoidn/)" >&2; exit 1; }
+  printf '%s\n' "$index" | grep -o "href=\"[^\"]*/$wheel#sha256=$wheel_sha256\"" |
+    head -n 1 | sed -e 's/^href="//' -e 's/#.*//' || true
 }
 
 install_oidn() {
@@ -95,7 +97,8 @@ install_oidn() {
   local url
   url="$(wheel_url)"
   [ -n "$url" ] || { echo "install-deps: $wheel with sha256 $wheel_sha256 is not listed on PyPI" >&2; exit 1; }
-  curl -fsSL --retry 3 -o "$work/$wheel" "$url"
+  curl -fsSL --retry 3 -o "$work/$wheel" "$url" ||
+    { echo "install-deps: downloading $url failed" >&2; exit 1; }
   echo "$wheel_sha256  $work/$wheel" | sha256sum --check --quiet - ||
     { echo "install-deps: $wheel does not have the pinned sha256 $wheel_sha256; not installed" >&2; exit 1; }
   local inside=()
