@@ -18,6 +18,17 @@ fn main() {
     generate_embree_bindings(&embree, &out);
     generate_abi_bindings(&out);
     compile_cpp(&out);
+    bake_denoiser_folder();
+}
+
+/// The folder scripts/install-deps.sh unpacks Open Image Denoise into. The binary opens the
+/// denoiser at run time, only for `--denoise` (src/sys/oidn.rs), so it is not linked: the
+/// build only records where the library is, as an absolute path, the way an rpath would, and
+/// a build on a machine without it still succeeds (everything but `--denoise` works).
+fn bake_denoiser_folder() {
+    let manifest = PathBuf::from(env::var("CARGO_MANIFEST_DIR").expect("cargo sets CARGO_MANIFEST_DIR"));
+    let folder = manifest.join("third_party").join("oidn").join("lib");
+    println!("cargo:rustc-env=ICRENDER_OIDN_DIR={}", folder.display());
 }
 
 struct Embree {

@@ -243,6 +243,15 @@ pub struct RenderArgs {
     /// position, crypto_object, crypto_material; or none, or all (default: all but position).
     #[arg(long = "aovs", value_name = "LIST", value_parser = parse_aovs)]
     pub aovs: Option<AovList>,
+    /// Denoise with Intel Open Image Denoise: each noisy lighting layer (direct, specular,
+    /// indirect) is written again as `<layer>.denoised` beside the raw one, and their sum with
+    /// the emission as the layer `denoised` (the PNG preview shows it). Needs the library
+    /// scripts/install-deps.sh unpacks; without it the render stops before it starts.
+    #[arg(long = "denoise")]
+    pub denoise: bool,
+    /// The denoiser's quality: fast, balanced or high (OIDN's trade of time against error).
+    #[arg(long = "denoise-quality", value_enum, default_value_t = DenoiseQualityArg::High, requires = "denoise")]
+    pub denoise_quality: DenoiseQualityArg,
     /// No progress bar and no summary.
     #[arg(short = 'q', long = "quiet")]
     pub quiet: bool,
@@ -277,6 +286,13 @@ pub enum ProgressArg {
     Bar,
     /// One JSON object per line on stdout: phase, fraction, elapsed and remaining seconds.
     Json,
+}
+
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum DenoiseQualityArg {
+    Fast,
+    Balanced,
+    High,
 }
 
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]

@@ -211,6 +211,12 @@ pub struct RenderStats {
     pub reference_noise: Option<f64>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub reference_passes: Option<u64>,
+    /// With `--denoise`: the EXR layers the denoiser wrote, and its own time (its device, the
+    /// guides' prefiltering and every filter; not in `render_s` or `wall_s`).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub denoised_layers: Vec<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub denoise_s: Option<f64>,
     pub per_thread: Vec<ThreadReport>,
     pub per_rank: Vec<RankReport>,
 }

@@ -23,12 +23,12 @@ pub fn run(args: &CompareArgs) -> CommandResult {
         return Ok(());
     }
     println!(
-        "{:<12} {:>14} {:>14} {:>12} {:>12}",
+        "{:<18} {:>14} {:>14} {:>12} {:>12}",
         "layer", "rmse", "relmse", "mean", "ref mean"
     );
     for e in &errors {
         println!(
-            "{:<12} {:>14.6e} {:>14.6e} {:>12.6} {:>12.6}",
+            "{:<18} {:>14.6e} {:>14.6e} {:>12.6} {:>12.6}",
             e.layer, e.rmse, e.rel_mse, e.mean, e.reference_mean
         );
     }

@@ -40,6 +40,13 @@ pub fn run(args: &ReferenceArgs) -> CommandResult {
     // samples plainly.
     render_args.direct = crate::cli::DirectArg::Sampled;
     validate(&render_args)?;
+    if render_args.denoise {
+        return Err(CommandError::input(
+            "--denoise: a reference is converged brute force, to measure renders (and denoised ones) against; \
+             denoising it would make it something else"
+                .into(),
+        ));
+    }
     if !(args.noise > 0.0 && args.max_seconds > 0.0) {
         return Err(CommandError::input("--noise and --max-seconds must be positive".into()));
     }

@@ -4,8 +4,10 @@
 use super::{CommandError, CommandResult, warn};
 use crate::checkpoint::{self, Checkpoint, Restored};
 use crate::cli::RenderArgs;
-use crate::cli::{ModeArg, ProgressArg};
+use crate::cli::{DenoiseQualityArg, ModeArg, ProgressArg};
 use crate::image::data::{Aov, FAR_DEPTH};
+use crate::image::denoise;
+use crate::image::denoise::Quality;
 use crate::image::framebuffer::{FrameBuffer, Layer};
 use crate::image::{cryptomatte, metrics, output};
 use crate::job::{Job, validate};
@@ -166,6 +168,9 @@ pub struct Outputs {
 
 impl Outputs {
     pub fn check(args: &RenderArgs) -> Result<Outputs, CommandError> {
+        if args.denoise {
+            check_denoiser(args)?;
+        }
         let exr = args.output.clone().unwrap_or_else(|| default_output(&args.scene));
         not_a_directory(&exr)?;
         check_exr_name(&exr)?;
@@ -199,7 +204,8 @@ impl Outputs {
         Ok(outputs)
     }
 
-    /// Writes the EXR (with header), the preview and the statistics.
+    /// Writes the EXR (with header), the preview and the statistics; with --denoise, denoises
+    /// first and writes the denoised layers too.
     pub fn write(
         &self,
         args: &RenderArgs,
@@ -208,7 +214,18 @@ impl Outputs {
         stats: &RenderStats,
     ) -> Result<(), CommandError> {
         let layers = producible_layers(job.scene.needs(), &job.shading);
-        let stats_json = serde_json::to_string(stats)?;
+        let denoised = if args.denoise {
+            let quality = denoise_quality(args);
+            Some(denoise::denoise_frame(frame, &layers, quality, args.threads).map_err(CommandError::failed)?)
+        } else {
+            None
+        };
+        let mut stats = stats.clone();
+        if let Some(d) = &denoised {
+            stats.denoised_layers = d.names();
+            stats.denoise_s = Some(d.seconds);
+        }
+        let stats_json = serde_json::to_string(&stats)?;
         let command_line: Vec<String> = std::env::args().collect();
         let attributes = vec![
             (
@@ -229,23 +246,56 @@ impl Outputs {
         let aovs = args.aovs();
         let mut attributes = attributes;
         attributes.extend(data_attributes(&aovs, &job.scene));
+        if let Some(d) = &denoised {
+            attributes.extend(denoise_attributes(d, args));
+        }
+        let extra: Vec<(String, &[glam::Vec3])> = denoised.as_ref().map_or_else(Vec::new, |d| {
+            d.layers
+                .iter()
+                .map(|(l, plane)| (denoise::denoised_name(*l), plane.as_slice()))
+                .chain(std::iter::once((
+                    denoise::DENOISED_COMPOSITE.to_string(),
+                    d.composite.as_slice(),
+                )))
+                .collect()
+        });
+        let extra: Vec<(&str, &[glam::Vec3])> = extra.iter().map(|(n, p)| (n.as_str(), *p)).collect();
         output::write_exr(
             &self.exr,
             frame,
             &layers,
             &aovs,
+            &extra,
             &attributes,
             args.half,
             args.ic_records,
         )
         .map_err(|e| CommandError::failed(format!("{}: {e}", self.exr.display())))?;
         if let Some(png) = &self.png {
-            output::write_preview(png, frame).map_err(|e| CommandError::failed(format!("{}: {e}", png.display())))?;
+            // The preview is for looking at: the denoised composite when there is one.
+            let composite = denoised
+                .as_ref()
+                .map_or_else(|| frame.composite(), |d| d.composite.clone());
+            output::write_preview(png, frame.width, frame.height, &composite)
+                .map_err(|e| CommandError::failed(format!("{}: {e}", png.display())))?;
         }
         if let Some(path) = &self.stats {
-            let text = serde_json::to_string_pretty(stats)? + "\n";
+            let text = serde_json::to_string_pretty(&stats)? + "\n";
             output::write_atomically(path, |tmp| std::fs::write(tmp, &text).map_err(|e| e.to_string()))
                 .map_err(|e| CommandError::failed(format!("{}: {e}", path.display())))?;
+        }
+        if let Some(d) = &denoised
+            && !args.quiet
+        {
+            let what: Vec<&str> = d.layers.iter().map(|(l, _)| l.name()).collect();
+            eprintln!(
+                "icrender: denoised {} (and their sum with the emission, layer `denoised`) in {:.3} s ({}, quality {}, {})",
+                what.join(", "),
+                d.seconds,
+                d.denoiser,
+                quality_name(args),
+                guides_text(d)
+            );
         }
         Ok(())
     }
@@ -288,6 +338,63 @@ pub fn data_attributes(aovs: &[Aov], scene: &Scene) -> Vec<(String, String)> {
         ));
     }
     out
+}
+
+fn denoise_quality(args: &RenderArgs) -> Quality {
+    match args.denoise_quality {
+        DenoiseQualityArg::Fast => Quality::Fast,
+        DenoiseQualityArg::Balanced => Quality::Balanced,
+        DenoiseQualityArg::High => Quality::High,
+    }
+}
+
+fn quality_name(args: &RenderArgs) -> &'static str {
+    match args.denoise_quality {
+        DenoiseQualityArg::Fast => "fast",
+        DenoiseQualityArg::Balanced => "balanced",
+        DenoiseQualityArg::High => "high",
+    }
+}
+
+fn guides_text(d: &denoise::DenoisedFrame) -> &'static str {
+    if d.guided {
+        "guided by the albedo and normal layers, prefiltered"
+    } else {
+        "no guides"
+    }
+}
+
+/// `--denoise` needs the library and a working device: checked before anything is rendered
+/// or written, so a render never runs for minutes only to fail at the end.
+fn check_denoiser(args: &RenderArgs) -> Result<(), CommandError> {
+    denoise::Denoiser::new(denoise_quality(args), args.threads)
+        .map(|_| ())
+        .map_err(|e| CommandError::input(format!("--denoise: {e}")))
+}
+
+/// The header's record of what was denoised, how, and the denoiser's time.
+fn denoise_attributes(d: &denoise::DenoisedFrame, args: &RenderArgs) -> Vec<(String, String)> {
+    let raw: Vec<&str> = d.layers.iter().map(|(l, _)| l.name()).collect();
+    vec![
+        ("icrender/denoised".to_string(), d.names().join(" ")),
+        (
+            "icrender/denoise".to_string(),
+            format!(
+                "{}, RT filter, quality {}, {}; layers {} each denoised into <layer>.denoised \
+                 (emission is not noisy and not denoised); the composite R G B is raw, and `denoised` \
+                 is the raw emission plus the denoised layers (not the composite denoised itself)",
+                d.denoiser,
+                quality_name(args),
+                guides_text(d),
+                if raw.is_empty() {
+                    "(none)".to_string()
+                } else {
+                    raw.join(", ")
+                }
+            ),
+        ),
+        ("icrender/denoise_time_s".to_string(), format!("{:.3}", d.seconds)),
+    ]
 }
 
 /// With --checkpoint, the cache goes to the checkpoint directory (which `open_checkpoint` has
@@ -354,7 +461,7 @@ pub fn report_error(
         .map_err(|e| CommandError::input(format!("{}: {e}", reference_path.display())))?;
     for e in &errors {
         println!(
-            "error {:<10} rmse {:.6e}  relmse {:.6e}  time {:.3} s",
+            "error {:<17} rmse {:.6e}  relmse {:.6e}  time {:.3} s",
             e.layer, e.rmse, e.rel_mse, seconds
         );
     }

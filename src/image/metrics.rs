@@ -44,6 +44,17 @@ pub fn rgb_layers(image: &ImageData) -> Vec<String> {
     layers
 }
 
+/// The reference layer a layer of the image is measured against: a denoised layer
+/// (`<layer>.denoised`, or `denoised` for the composite; see image/denoise.rs) against the
+/// reference's own layer, every other layer against the layer of the same name.
+pub fn reference_layer(layer: &str) -> &str {
+    match layer.strip_suffix("denoised") {
+        Some("") => "",
+        Some(base) => base.strip_suffix('.').unwrap_or(layer),
+        None => layer,
+    }
+}
+
 fn planes<'a>(image: &'a ImageData, layer: &str) -> [&'a [f32]; 3] {
     ["R", "G", "B"].map(|c| {
         let name = if layer.is_empty() {
@@ -57,7 +68,7 @@ fn planes<'a>(image: &'a ImageData, layer: &str) -> [&'a [f32]; 3] {
 
 /// Error of one layer of `image` against the same layer of `reference`.
 pub fn layer_error(image: &ImageData, reference: &ImageData, layer: &str) -> LayerError {
-    let (a, b) = (planes(image, layer), planes(reference, layer));
+    let (a, b) = (planes(image, layer), planes(reference, reference_layer(layer)));
     let (mut se, mut rel, mut sum_a, mut sum_b, mut n) = (0.0f64, 0.0f64, 0.0f64, 0.0f64, 0usize);
     for c in 0..3 {
         for (&x, &r) in a[c].iter().zip(b[c]) {
@@ -84,7 +95,8 @@ pub fn layer_error(image: &ImageData, reference: &ImageData, layer: &str) -> Lay
     }
 }
 
-/// Errors of every RGB layer the two images share, composite first.
+/// Errors of every RGB layer the two images share, composite first; a denoised layer counts
+/// as shared when the reference has the layer it denoises.
 pub fn compare(image: &ImageData, reference: &ImageData) -> Result<Vec<LayerError>, String> {
     if (image.width, image.height) != (reference.width, reference.height) {
         return Err(format!(
@@ -93,7 +105,10 @@ pub fn compare(image: &ImageData, reference: &ImageData) -> Result<Vec<LayerErro
         ));
     }
     let theirs = rgb_layers(reference);
-    let shared: Vec<String> = rgb_layers(image).into_iter().filter(|l| theirs.contains(l)).collect();
+    let shared: Vec<String> = rgb_layers(image)
+        .into_iter()
+        .filter(|l| theirs.iter().any(|t| t == reference_layer(l)))
+        .collect();
     if shared.is_empty() {
         return Err("the images share no R/G/B layer".into());
     }
@@ -156,6 +171,42 @@ mod tests {
         assert!((errors[0].rmse - 0.5).abs() < 1e-12);
         assert!((errors[0].rel_mse - 0.25 / 1.01).abs() < 1e-12);
         assert_eq!(errors[1].rmse, 0.0);
+    }
+
+    #[test]
+    fn denoised_layers_are_measured_against_the_references_raw_layers() {
+        assert_eq!(reference_layer("direct.denoised"), "direct");
+        assert_eq!(reference_layer("denoised"), "");
+        assert_eq!(reference_layer("direct"), "direct");
+        assert_eq!(reference_layer("notdenoised"), "notdenoised");
+        let a = image(&[
+            ("R", 1.0),
+            ("G", 1.0),
+            ("B", 1.0),
+            ("denoised.R", 1.25),
+            ("denoised.G", 1.25),
+            ("denoised.B", 1.25),
+            ("direct.denoised.R", 0.5),
+            ("direct.denoised.G", 0.5),
+            ("direct.denoised.B", 0.5),
+            ("specular.denoised.R", 0.5),
+            ("specular.denoised.G", 0.5),
+            ("specular.denoised.B", 0.5),
+        ]);
+        let b = image(&[
+            ("R", 1.0),
+            ("G", 1.0),
+            ("B", 1.0),
+            ("direct.R", 0.0),
+            ("direct.G", 0.0),
+            ("direct.B", 0.0),
+        ]);
+        let errors = compare(&a, &b).unwrap();
+        let names: Vec<&str> = errors.iter().map(|e| e.layer.as_str()).collect();
+        assert_eq!(names, ["composite", "denoised", "direct.denoised"]);
+        assert!((errors[1].rmse - 0.25).abs() < 1e-12);
+        assert!((errors[2].rmse - 0.5).abs() < 1e-12);
+        assert_eq!(errors[2].reference_mean, 0.0);
     }
 
     #[test]

@@ -4,6 +4,7 @@
 pub mod components;
 pub mod cryptomatte;
 pub mod data;
+pub mod denoise;
 pub mod framebuffer;
 pub mod metrics;
 pub mod output;

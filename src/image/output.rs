@@ -95,13 +95,16 @@ fn data_planes(frame: &FrameBuffer, aovs: &[Aov]) -> Vec<Plane> {
     planes
 }
 
-/// Writes the composite as R G B A, each given layer as `layer.R/G/B`, and the data layers
+/// Writes the composite as R G B A, each given layer as `layer.R/G/B`, then each of
+/// `extra_layers` (a name and a plane: the denoised layers) the same way, and the data layers
 /// of `aovs` (always 32-bit float, see `Plane`).
+#[allow(clippy::too_many_arguments)]
 pub fn write_exr(
     path: &Path,
     frame: &FrameBuffer,
     layers: &[Layer],
     aovs: &[Aov],
+    extra_layers: &[(&str, &[Vec3])],
     attributes: &[(String, String)],
     half_float: bool,
     records_layer: bool,
@@ -123,6 +126,11 @@ pub fn write_exr(
             planes.push(light(format!("{}.{c}", l.name()), data));
         }
     }
+    for &(name, plane) in extra_layers {
+        for (c, data) in ["R", "G", "B"].into_iter().zip(split(plane)) {
+            planes.push(light(format!("{name}.{c}"), data));
+        }
+    }
     if records_layer {
         planes.push(light("ic_records.Y".into(), frame.records().to_vec()));
     }
@@ -140,10 +148,10 @@ pub fn write_exr(
     })
 }
 
-/// Writes the tone-mapped composite as an 8-bit PNG.
-pub fn write_preview(path: &Path, frame: &FrameBuffer) -> Result<(), String> {
-    let rgb = tone_map(&frame.composite());
-    write_atomically(path, |tmp| image_io::write_png(tmp, frame.width, frame.height, &rgb))
+/// Writes a composite, tone-mapped, as an 8-bit PNG.
+pub fn write_preview(path: &Path, width: u32, height: u32, composite: &[Vec3]) -> Result<(), String> {
+    let rgb = tone_map(composite);
+    write_atomically(path, |tmp| image_io::write_png(tmp, width, height, &rgb))
 }
 
 #[cfg(test)]

@@ -27,6 +27,7 @@ use generated::{abi as abi_bindings, embree as embree_bindings, image as image_b
 pub mod alloc;
 pub mod embree;
 pub mod image_io;
+pub mod oidn;
 pub mod process;
 pub mod scene_io;
 pub mod signals;
