@@ -315,7 +315,10 @@ mod tests {
         let written = [Layer::Emission, Layer::Direct];
         let denoised = denoise_frame(&frame, &written, Quality::Fast, Some(2)).unwrap();
         assert_eq!(denoised.names(), ["direct.denoised", "denoised"]);
-        assert!(!denoised.guided);
+        assert!(
+            denoised.guided,
+            "every frame carries the albedo and normal planes that guide it"
+        );
         assert!(
             denoised.denoiser.starts_with("Intel Open Image Denoise 2."),
             "{}",
