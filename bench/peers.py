@@ -17,12 +17,15 @@ For each scene and view, under bench/out/peers/SCENE/ (SCENE-VIEW/ for a second 
      far apart they are and stops if their means differ by more than 1% (one of them has a
      bug); errors are measured against the mean of the two;
   3. Mitsuba 3 (`path`, max_depth = -ab + 2) and Cycles (max bounces = -ab, raw and with
-     OpenImageDenoise) render at --peer-spp, icrender at its sweep of -aa / -ad / --spp;
+     OpenImageDenoise) render at --peer-spp, icrender at its sweep of -aa / -ad / --spp, each
+     run with --denoise, so that its raw composite is the curve `icrender` (at render_s) and
+     its `denoised` layer the curve `icrender+oidn` (at render_s plus the denoiser's denoise_s);
      each pass over all renderers is repeated --repeats times back to back, and the fastest
      time of each run is kept (the machine is shared; errors do not change between repeats);
   4. writes docs/peers/peers-SCENE[-VIEW].csv and .png (relMSE, relMSE of 4x4-averaged pixels as in
      DESIGN.md, and RMSE, against wall time and against CPU time over the cores), and prints the
-     targets of issue 18 on each measure.
+     targets of issue 18 on each measure, and issue 21's: icrender+oidn against icrender raw and
+     against Cycles + OIDN.
 
 Times: icrender's render_s, Mitsuba's mi.render, Cycles' render after a warm-up render that
 built its BVH (persistent data): rendering alone, without loading or BVH building, for all.
@@ -128,14 +131,14 @@ def log(message):
     print(f"peers: {message}", flush=True)
 
 
-def read_rgb(path, scratch=None):
-    """An EXR's R, G, B (the composite) as an (height, width, 3) float64 array."""
+def read_rgb(path, scratch=None, layer=None):
+    """An EXR's R, G, B (the composite, or `layer`'s) as an (height, width, 3) float64 array."""
     exr = common.ensure_module("OpenEXR")
     channels = exr.File(path).channels()
-    for name in ("RGBA", "RGB"):
+    for name in ((layer,) if layer else ("RGBA", "RGB")):
         if name in channels:
             return channels[name].pixels[..., :3].astype(np.float64)
-    raise RuntimeError(f"{path}: no RGB channels (has {', '.join(channels)})")
+    raise RuntimeError(f"{path}: no {layer or 'RGB'} channels (has {', '.join(channels)})")
 
 
 def errors(image, reference):
@@ -244,6 +247,7 @@ def measure(name, view_name, cfg, args):
     job = dict(scene=cfg["file"], view=view, width=width, height=height, ab=cfg["ab"], spp=peer_spp, out=folder,
                prefix="run", denoised_spp=[s for s in peer_spp if s <= args.max_denoised_spp])
     times, images = {}, {}
+    denoise = [] if args.no_denoise else ["--denoise", "--denoise-quality", args.denoise_quality]
     for repeat in range(args.repeats):
         log(f"{name}: pass {repeat + 1} of {args.repeats}")
         for k, options in enumerate(cfg["icrender"]):
@@ -251,22 +255,32 @@ def measure(name, view_name, cfg, args):
             spp = int(words[words.index("--spp") + 1])
             key = ("icrender", options, spp)
             out = os.path.join(folder, f"run-icrender-{k}.exr")
-            stats, _ = common.render(cfg["file"], out, base + words + ["--seed", str(repeat + 1)])
-            times.setdefault(key, []).append((stats["render_s"], stats["t_amb_s"] + stats["t_notamb_s"]))
-            images.setdefault(key, out)
+            stats, _ = common.render(cfg["file"], out, base + words + denoise + ["--seed", str(repeat + 1)])
+            cpu = stats["t_amb_s"] + stats["t_notamb_s"]
+            times.setdefault(key, []).append((stats["render_s"], cpu))
+            images.setdefault(key, (out, None))
+            if denoise:
+                # The same render, its `denoised` layer (the raw emission plus the denoised light
+                # layers), at the render's time plus the denoiser's; the denoiser runs on every
+                # core, so its CPU time is its wall time times the cores.
+                extra = stats["denoise_s"]
+                times.setdefault(("icrender+oidn",) + key[1:], []).append(
+                    (stats["render_s"] + extra, cpu + extra * os.cpu_count()))
+                images.setdefault(("icrender+oidn",) + key[1:], (out, "denoised"))
         if not args.no_mitsuba:
             for row in run_peer("peer_mitsuba.py", job, folder):
                 key = ("mitsuba", "path, independent sampler", row["spp"])
                 times.setdefault(key, []).append((row["seconds"], row["cpu_seconds"]))
-                images.setdefault(key, row["exr"])
+                images.setdefault(key, (row["exr"], None))
         if not args.no_cycles:
             for row in run_peer("peer_cycles.py", job, folder):
                 key = ("cycles+oidn" if row["denoised"] else "cycles", "CPU", row["spp"])
                 times.setdefault(key, []).append((row["seconds"], row["cpu_seconds"]))
-                images.setdefault(key, row["exr"])
+                images.setdefault(key, (row["exr"], None))
     rows = []
     for key, ts in times.items():
-        e = errors(read_rgb(images[key], scratch), reference)
+        path, layer = images[key]
+        e = errors(read_rgb(path, scratch, layer), reference)
         # The fastest wall time of the repeats, and CPU time over the cores (what the wall time
         # would be on idle cores with perfect scaling: the measure a loaded machine cannot spoil).
         rows.append(dict(scene=name, renderer=key[0], settings=key[1], spp=key[2], seconds=min(t for t, _ in ts),
@@ -312,18 +326,19 @@ def error_at(rows, t, metric, clock):
     return pts[0][1] if len(pts) == 1 and pts[0][0] == t else None
 
 
-def targets(name, rows, metric, clock, peer_names=("mitsuba", "cycles", "cycles+oidn"), horizon=30.0):
+def targets(name, rows, metric, clock, peer_names=("mitsuba", "cycles", "cycles+oidn"), horizon=30.0,
+            ours_name="icrender"):
     """Prints the target for one scene, error measure and clock against the best of
     `peer_names`: icrender's curve below the best peer's at every time from icrender's fastest
     run to `horizon` seconds (aim: 2x below). At each time where icrender's curve and some
     peer's were both measured, the best peer's error over icrender's (log-log interpolated);
     a time before a peer's fastest run leaves that peer out."""
-    ours = [r for r in rows if r["renderer"] == "icrender"]
+    ours = [r for r in rows if r["renderer"] == ours_name]
     peers = {p: [r for r in rows if r["renderer"] == p] for p in peer_names}
     peers = {p: rs for p, rs in peers.items() if rs}
     if not ours or not peers:
         return
-    tag = f"{name} [{metric}, {clock}, vs {'/'.join(peers)}]"
+    tag = f"{name} [{ours_name}, {metric}, {clock}, vs {'/'.join(peers)}]"
     first = min(r[clock] for r in ours)
     compared = []
     for t in sorted({r[clock] for r in rows if first <= r[clock] <= horizon}):
@@ -339,9 +354,9 @@ def targets(name, rows, metric, clock, peer_names=("mitsuba", "cycles", "cycles+
     aim = "and 2x below" if ratio >= 2 else "not 2x below"
     losses = [c[0] for c in compared if c[1] <= 1]
     span = f"{compared[0][0]:.2f} .. {compared[-1][0]:.2f} s"
-    log(f"{tag}: 'below the best peer at every time' ({span}): {verdict} ({aim}); worst at {t:.2f} s: icrender "
+    log(f"{tag}: 'below the best peer at every time' ({span}): {verdict} ({aim}); worst at {t:.2f} s: {ours_name} "
         f"{e_ours:.2e}, best peer {e_peer:.2e} (peer error / ours {ratio:.2f})"
-        + (f"; icrender at or above it from {losses[0]:.2f} s" if losses else ""))
+        + (f"; {ours_name} at or above it from {losses[0]:.2f} s" if losses else ""))
 
 
 def report_targets(name, rows):
@@ -351,12 +366,17 @@ def report_targets(name, rows):
         for clock in CLOCKS:
             for metric in ("relmse", "relmse_4x4", "rmse"):
                 targets(name, rows, metric, clock, peer_names)
+    # Issue 21: icrender with its denoiser against its own raw curve and against Cycles + OIDN.
+    for peer_names in (("icrender",), ("cycles+oidn",), ("mitsuba", "cycles", "cycles+oidn")):
+        for clock in CLOCKS:
+            for metric in ("relmse", "relmse_4x4", "rmse"):
+                targets(name, rows, metric, clock, peer_names, ours_name="icrender+oidn")
 
 
 def plot(name, cfg, rows, path):
     plt = common.ensure_module("matplotlib.pyplot", "matplotlib")
     fig, axes = plt.subplots(2, 3, figsize=(17, 10))
-    styles = {"icrender": "o-", "mitsuba": "s--", "cycles": "^--", "cycles+oidn": "v:"}
+    styles = {"icrender": "o-", "icrender+oidn": "D-", "mitsuba": "s--", "cycles": "^--", "cycles+oidn": "v:"}
     for row, (clock, clock_label) in enumerate(CLOCKS.items()):
         for ax, metric, label in ((axes[row][0], "relmse", "relMSE"),
                                   (axes[row][1], "relmse_4x4", "relMSE of 4x4-averaged pixels"),
@@ -400,6 +420,9 @@ def main():
                              "not timed, so they can be made ahead, on a busy machine")
     parser.add_argument("--report-only", action="store_true",
                         help="re-read docs/peers/peers-SCENE.csv, print the targets and redraw the plot")
+    parser.add_argument("--no-denoise", action="store_true", help="no icrender+oidn curve (icrender --denoise)")
+    parser.add_argument("--denoise-quality", default="high", choices=("fast", "balanced", "high"),
+                        help="icrender --denoise-quality for the icrender+oidn curve")
     parser.add_argument("--no-mitsuba", action="store_true")
     parser.add_argument("--no-cycles", action="store_true")
     parser.add_argument("--out", default=os.path.join(common.ROOT, "bench", "out", "peers"))

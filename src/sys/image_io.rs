@@ -22,15 +22,7 @@ fn library_candidates() -> Vec<PathBuf> {
     if let Some(path) = std::env::var_os("ICRENDER_IMAGE_LIB") {
         paths.push(PathBuf::from(path));
     }
-    if let Some(dir) = std::env::current_exe()
-        .ok()
-        .and_then(|e| e.parent().map(Path::to_path_buf))
-    {
-        paths.push(dir.join(LIBRARY_NAME));
-        if let Some(up) = dir.parent() {
-            paths.push(up.join(LIBRARY_NAME));
-        }
-    }
+    paths.extend(super::beside_executable(LIBRARY_NAME));
     paths.push(Path::new(env!("OUT_DIR")).join(LIBRARY_NAME));
     paths
 }

@@ -74,3 +74,19 @@ unsafe fn slice_or_empty<'a, T>(ptr: *const T, len: usize) -> &'a [T] {
         unsafe { std::slice::from_raw_parts(ptr, len) }
     }
 }
+
+/// Where a library shipped beside the binary may be: the executable's folder, and the one above
+/// it (test binaries run from target/<profile>/deps).
+fn beside_executable(name: &str) -> Vec<std::path::PathBuf> {
+    let mut paths = Vec::new();
+    if let Some(dir) = std::env::current_exe()
+        .ok()
+        .and_then(|e| e.parent().map(std::path::Path::to_path_buf))
+    {
+        paths.push(dir.join(name));
+        if let Some(up) = dir.parent() {
+            paths.push(up.join(name));
+        }
+    }
+    paths
+}

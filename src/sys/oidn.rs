@@ -66,16 +66,7 @@ fn library_candidates() -> Vec<PathBuf> {
     if let Some(path) = std::env::var_os("ICRENDER_OIDN_LIB") {
         return vec![PathBuf::from(path)];
     }
-    let mut paths = Vec::new();
-    if let Some(dir) = std::env::current_exe()
-        .ok()
-        .and_then(|e| e.parent().map(Path::to_path_buf))
-    {
-        paths.push(dir.join(LIBRARY_NAME));
-        if let Some(up) = dir.parent() {
-            paths.push(up.join(LIBRARY_NAME));
-        }
-    }
+    let mut paths = super::beside_executable(LIBRARY_NAME);
     paths.push(Path::new(env!("ICRENDER_OIDN_DIR")).join(LIBRARY_NAME));
     paths
 }
