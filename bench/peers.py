@@ -421,7 +421,7 @@ def main():
     parser.add_argument("--report-only", action="store_true",
                         help="re-read docs/peers/peers-SCENE.csv, print the targets and redraw the plot")
     parser.add_argument("--no-denoise", action="store_true", help="no icrender+oidn curve (icrender --denoise)")
-    parser.add_argument("--denoise-quality", default="high", choices=("fast", "balanced", "high"),
+    parser.add_argument("--denoise-quality", default="fast", choices=("fast", "balanced", "high"),
                         help="icrender --denoise-quality for the icrender+oidn curve")
     parser.add_argument("--no-mitsuba", action="store_true")
     parser.add_argument("--no-cycles", action="store_true")

@@ -250,8 +250,14 @@ pub struct RenderArgs {
     #[arg(long = "denoise")]
     pub denoise: bool,
     /// The denoiser's quality: fast, balanced or high (OIDN's trade of time against error).
-    #[arg(long = "denoise-quality", value_enum, default_value_t = DenoiseQualityArg::High, requires = "denoise")]
+    /// `fast` by default: in the peers bench its curve lies lowest (README, "Denoising").
+    #[arg(long = "denoise-quality", value_enum, default_value_t = DenoiseQualityArg::Fast, requires = "denoise")]
     pub denoise_quality: DenoiseQualityArg,
+    /// Prefilter the albedo and normal guides before they guide the filter (OIDN's way for
+    /// noisy guides; icrender's come from the camera samples' first hits and are noise-free, and
+    /// prefiltering them was worse, see README "Denoising").
+    #[arg(long = "denoise-prefilter", requires = "denoise")]
+    pub denoise_prefilter: bool,
     /// No progress bar and no summary.
     #[arg(short = 'q', long = "quiet")]
     pub quiet: bool,

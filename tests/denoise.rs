@@ -105,7 +105,10 @@ fn the_denoised_direct_layer_is_closer_to_a_converged_reference_than_the_raw_one
     );
     let how = read.attribute("icrender/denoise").unwrap();
     assert!(
-        how.contains("Open Image Denoise 2.") && how.contains("quality high") && how.contains("raw emission plus"),
+        how.contains("Open Image Denoise 2.")
+            && how.contains("quality fast")
+            && how.contains("as rendered")
+            && how.contains("raw emission plus"),
         "{how}"
     );
     let seconds: f64 = read.attribute("icrender/denoise_time_s").unwrap().parse().unwrap();

@@ -216,7 +216,10 @@ impl Outputs {
         let layers = producible_layers(job.scene.needs(), &job.shading);
         let denoised = if args.denoise {
             let quality = denoise_quality(args);
-            Some(denoise::denoise_frame(frame, &layers, quality, args.threads).map_err(CommandError::failed)?)
+            Some(
+                denoise::denoise_frame(frame, &layers, quality, args.threads, args.denoise_prefilter)
+                    .map_err(CommandError::failed)?,
+            )
         } else {
             None
         };
@@ -357,8 +360,10 @@ fn quality_name(args: &RenderArgs) -> &'static str {
 }
 
 fn guides_text(d: &denoise::DenoisedFrame) -> &'static str {
-    if d.guided {
+    if d.prefiltered {
         "guided by the albedo and normal layers, prefiltered"
+    } else if d.guided {
+        "guided by the albedo and normal layers as rendered (noise-free)"
     } else {
         "no guides"
     }

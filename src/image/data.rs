@@ -35,6 +35,18 @@ pub struct PixelData {
     pub material: Ranks,
 }
 
+impl PixelData {
+    /// The share of the pixel's samples that hit a surface: 0 where none did (its depth is
+    /// `FAR_DEPTH`), else the object ranks' coverage (at most 1; a pixel seeing more objects
+    /// than the ranks hold reads a little less).
+    pub fn covered(&self) -> f32 {
+        if self.depth >= FAR_DEPTH {
+            return 0.0;
+        }
+        self.object.iter().map(|e| e.coverage).sum::<f32>().min(1.0)
+    }
+}
+
 impl Default for PixelData {
     fn default() -> Self {
         PixelData {

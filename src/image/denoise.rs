@@ -119,6 +119,24 @@ impl Denoiser {
         })
     }
 
+    /// The guides as the filter takes them: prefiltered when asked (`--denoise-prefilter`), else
+    /// as rendered. A frame's guides come from the first hits of the camera samples (perfect
+    /// mirrors followed exactly), so they carry no Monte Carlo noise for a prefilter to remove,
+    /// and prefiltering cost more than it gave: OIDN 2.5.1 at 320x240, the peers bench's fastest
+    /// settings, relMSE of the denoised composite against the converged reference, prefiltered
+    /// / as rendered: Sibenik 2.96e-2 / 1.98e-2 (raw 2.03e-2: the prefilter blurred thin dark
+    /// tracery into its bright surround, and the filter lit it), the conference room 1.96e-2 /
+    /// 2.02e-2, the Cornell box (256x256) 7.4e-4 / 8.8e-4, for twice the denoiser's time.
+    pub fn guides(&self, guides: Guides<'_>, width: u32, height: u32, prefilter: bool) -> Result<CleanGuides, String> {
+        if prefilter {
+            return self.prefilter(guides, width, height);
+        }
+        Ok(CleanGuides {
+            albedo: floats(guides.albedo),
+            normal: floats(guides.normal),
+        })
+    }
+
     /// One colour plane (linear HDR) denoised, guided by `guides` when given.
     pub fn denoise(
         &self,
@@ -166,6 +184,8 @@ pub struct DenoisedFrame {
     pub composite: Vec<Vec3>,
     /// Whether albedo and normal guides were used.
     pub guided: bool,
+    /// Whether the guides were prefiltered (`--denoise-prefilter`).
+    pub prefiltered: bool,
     /// "Intel Open Image Denoise 2.5.1".
     pub denoiser: String,
     /// The denoiser's own time: its device, the guides' prefiltering and every filter.
@@ -183,6 +203,22 @@ impl DenoisedFrame {
     }
 }
 
+/// Where a pixel's samples hit nothing its noisy layers hold no light at all, but the filter,
+/// seeing black guides there, spreads the neighbours' light into it (Sibenik's nave, 320x240:
+/// the denoised composite's relMSE 2.0e-2 -> 3.0e-2, nearly all of it from the 371 pixels of
+/// sky through the windows). So the raw value is kept in proportion to the share of the
+/// pixel's samples that missed: exact where nothing was hit, the filter's where all hit.
+fn keep_where_nothing_was_hit(denoised: &mut [Vec3], raw: &[Vec3], frame: &FrameBuffer) {
+    let data = frame.data();
+    if data.len() != denoised.len() {
+        return;
+    }
+    for ((d, r), pixel) in denoised.iter_mut().zip(raw).zip(data) {
+        let covered = pixel.covered();
+        *d = *d * covered + *r * (1.0 - covered);
+    }
+}
+
 /// Denoises the noisy ones of `written` (the layers the EXR will hold), and adds them and the
 /// raw emission up into the denoised composite.
 pub fn denoise_frame(
@@ -190,16 +226,19 @@ pub fn denoise_frame(
     written: &[Layer],
     quality: Quality,
     threads: Option<usize>,
+    prefilter: bool,
 ) -> Result<DenoisedFrame, String> {
     let start = Instant::now();
     let (w, h) = (frame.width, frame.height);
     let denoiser = Denoiser::new(quality, threads)?;
     let planes = guide_planes(frame);
     let guides = planes.as_ref().map(|(albedo, normal)| Guides { albedo, normal });
-    let clean = guides.map(|g| denoiser.prefilter(g, w, h)).transpose()?;
+    let clean = guides.map(|g| denoiser.guides(g, w, h, prefilter)).transpose()?;
     let mut layers = Vec::new();
     for layer in NOISY_LAYERS.into_iter().filter(|l| written.contains(l)) {
-        layers.push((layer, denoiser.denoise(frame.layer(layer), clean.as_ref(), w, h)?));
+        let mut plane = denoiser.denoise(frame.layer(layer), clean.as_ref(), w, h)?;
+        keep_where_nothing_was_hit(&mut plane, frame.layer(layer), frame);
+        layers.push((layer, plane));
     }
     let mut composite = frame.layer(Layer::Emission).to_vec();
     for noisy in NOISY_LAYERS {
@@ -213,6 +252,7 @@ pub fn denoise_frame(
         layers,
         composite,
         guided: clean.is_some(),
+        prefiltered: clean.is_some() && prefilter,
         denoiser: denoiser.describe(),
         seconds: start.elapsed().as_secs_f64(),
     })
@@ -222,6 +262,7 @@ pub fn denoise_frame(
 mod tests {
     use super::*;
     use crate::image::components::Components;
+    use crate::image::data::PixelData;
     use crate::sampling::Rng;
 
     const W: u32 = 96;
@@ -289,17 +330,75 @@ mod tests {
     }
 
     #[test]
+    fn guides_pass_as_rendered_unless_prefiltering_is_asked_for() {
+        // A noisy albedo: as rendered it passes unchanged; prefiltered it comes back smoother.
+        let albedo: Vec<Vec3> = noisy(&vec![Vec3::splat(0.5); (W * H) as usize], 5)
+            .into_iter()
+            .map(|v| v.clamp(Vec3::ZERO, Vec3::ONE))
+            .collect();
+        let normal = vec![Vec3::Z; (W * H) as usize];
+        let guides = Guides {
+            albedo: &albedo,
+            normal: &normal,
+        };
+        let denoiser = Denoiser::new(Quality::Fast, Some(2)).unwrap();
+        let as_rendered = denoiser.guides(guides, W, H, false).unwrap();
+        assert_eq!(as_rendered.albedo, floats(&albedo));
+        let prefiltered = denoiser.guides(guides, W, H, true).unwrap();
+        let flat = vec![Vec3::splat(0.5); (W * H) as usize];
+        assert!(rmse(&vectors(&prefiltered.albedo), &flat) < rmse(&albedo, &flat) / 2.0);
+    }
+
+    #[test]
     fn a_plane_of_the_wrong_size_is_refused() {
         let plane = vec![Vec3::ONE; 10];
         let err = denoise_plane(&plane, None, 4, 4, Quality::Fast, Some(1)).unwrap_err();
         assert!(err.contains("30 values for 4x4"), "{err}");
     }
 
+    /// The light the filter alone (without `keep_where_nothing_was_hit`) puts where the frame's
+    /// last columns see nothing.
+    fn denoiser_spill(frame: &FrameBuffer, written: &[Layer]) -> f32 {
+        assert!(written.contains(&Layer::Direct));
+        let denoiser = Denoiser::new(Quality::Fast, Some(2)).unwrap();
+        let (albedo, normal) = guide_planes(frame).unwrap();
+        let guides = Guides {
+            albedo: &albedo,
+            normal: &normal,
+        };
+        let clean = denoiser.prefilter(guides, W, H).unwrap();
+        let plane = denoiser
+            .denoise(frame.layer(Layer::Direct), Some(&clean), W, H)
+            .unwrap();
+        (0..plane.len())
+            .filter(|i| i % W as usize >= W as usize - 4)
+            .map(|i| plane[i].max_element())
+            .sum()
+    }
+
     #[test]
     fn a_frame_gets_its_noisy_layers_denoised_not_its_emission_and_they_add_up_to_the_composite() {
-        let clean = clean();
-        let direct = noisy(&clean, 3);
+        // The last columns see nothing (sky): no light in the noisy layers, and no surface.
+        let sky = |i: usize| i % W as usize >= W as usize - 4;
+        let mut clean = clean();
+        for (i, c) in clean.iter_mut().enumerate() {
+            if sky(i) {
+                *c = Vec3::ZERO;
+            }
+        }
+        let direct = noisy(&clean, 3)
+            .into_iter()
+            .enumerate()
+            .map(|(i, d)| if sky(i) { Vec3::ZERO } else { d })
+            .collect::<Vec<_>>();
         let mut frame = FrameBuffer::new(W, H);
+        let mut surface = PixelData {
+            albedo: Vec3::splat(0.5),
+            normal: Vec3::Z,
+            depth: 1.0,
+            ..Default::default()
+        };
+        surface.object[0] = crate::image::cryptomatte::Entry { id: 1, coverage: 1.0 };
         for (i, d) in direct.iter().enumerate() {
             let components = Components {
                 emission: if i % W as usize == 5 {
@@ -310,10 +409,14 @@ mod tests {
                 direct: *d,
                 ..Default::default()
             };
-            frame.set(i as u32 % W, i as u32 / W, &components);
+            let (x, y) = (i as u32 % W, i as u32 / W);
+            frame.set(x, y, &components);
+            if !sky(i) {
+                frame.set_data(x, y, &surface);
+            }
         }
         let written = [Layer::Emission, Layer::Direct];
-        let denoised = denoise_frame(&frame, &written, Quality::Fast, Some(2)).unwrap();
+        let denoised = denoise_frame(&frame, &written, Quality::Fast, Some(2), false).unwrap();
         assert_eq!(denoised.names(), ["direct.denoised", "denoised"]);
         assert!(
             denoised.guided,
@@ -327,6 +430,10 @@ mod tests {
         let (layer, plane) = &denoised.layers[0];
         assert_eq!(*layer, Layer::Direct);
         assert!(rmse(plane, &clean) < rmse(&direct, &clean) / 4.0);
+        // Where nothing was hit the filter's spill is not kept: no light there, exactly.
+        let spill = denoiser_spill(&frame, &written);
+        assert!(spill > 0.0, "the filter alone spreads light into the sky ({spill})");
+        assert!((0..plane.len()).filter(|&i| sky(i)).all(|i| plane[i] == Vec3::ZERO));
         // The composite is the raw emission plus the denoised layer, exactly.
         for (i, c) in denoised.composite.iter().enumerate() {
             assert_eq!(*c, frame.layer(Layer::Emission)[i] + plane[i]);
