@@ -27,6 +27,11 @@ def channels(path):
     return {name: c.pixels for name, c in exr.File(path).channels().items()}
 
 
+def composite(layers):
+    """The R, G, B of an EXR (OpenEXR groups them as RGBA or RGB)."""
+    return next(layers[k][..., :3].astype(np.float64) for k in ("RGBA", "RGB") if k in layers)
+
+
 def tone_map(rgb):
     """Reinhard on luminance, then sRGB's gamma: a picture, not a measurement."""
     lum = 0.2126 * rgb[..., 0] + 0.7152 * rgb[..., 1] + 0.0722 * rgb[..., 2]
@@ -49,9 +54,9 @@ def main():
     reference = None
     refs = [os.path.join(REFERENCES, f) for f in ("reference-icrender.exr", "reference-mitsuba-4096spp.exr")]
     if all(os.path.exists(r) for r in refs):
-        reference = 0.5 * sum(channels(r)["RGBA"][..., :3].astype(np.float64) for r in refs)
+        reference = 0.5 * sum(composite(channels(r)) for r in refs)
     panels = [
-        ("raw composite", layers["RGBA"][..., :3], reference),
+        ("raw composite", composite(layers), reference),
         ("denoised (layer `denoised`)", layers["denoised"], reference),
         ("direct, raw", layers["direct"], None),
         ("direct.denoised", layers["direct.denoised"], None),
@@ -65,9 +70,9 @@ def main():
         ax.set_title(title, fontsize=10)
         ax.axis("off")
     fig.suptitle(f"Cornell box 256x256, -ab 1, 2 samples a pixel: render {stats['render_s']:.2f} s, "
-                 f"denoiser {stats['denoise_s']:.2f} s (OIDN, quality high, guided by albedo and normal)",
+                 f"denoiser {stats['denoise_s']:.2f} s (OIDN, --denoise-quality fast, guided by albedo and normal)",
                  fontsize=11)
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0, 1, 0.93))
     path = os.path.join(common.ROOT, "docs", "denoise.png")
     fig.savefig(path, dpi=80)
     print(f"denoise_figure: wrote {path}")
