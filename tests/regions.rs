@@ -229,6 +229,24 @@ fn a_part_s_preview_is_the_part_and_the_region_is_checked() {
     ));
     assert_eq!(out.status.code(), Some(2));
     assert!(stderr(&out).contains("one process"), "{}", stderr(&out));
+    // A reference is a whole image: the merged image is what to compare.
+    let out = run(&with(
+        &base,
+        &[
+            "-o",
+            s(&d.join("bad.exr")),
+            "--region",
+            "0",
+            "0",
+            "8",
+            "8",
+            "--reference",
+            s(&exr),
+        ],
+    ));
+    assert_eq!(out.status.code(), Some(2));
+    assert!(stderr(&out).contains("merge them"), "{}", stderr(&out));
+    assert!(!d.join("bad.exr").exists());
 }
 
 #[test]

@@ -682,6 +682,12 @@ pub fn run(args: &RenderArgs) -> CommandResult {
     }
     let wall = Instant::now();
     validate(args)?;
+    if args.region.is_some() && args.reference.is_some() {
+        return Err(CommandError::input(
+            "--reference compares whole images: render the regions, merge them, and `icrender compare` the merged image"
+                .into(),
+        ));
+    }
     let outputs = Outputs::check(args)?;
     image_io::open_in_background();
     let reference = match &args.reference {
