@@ -76,7 +76,8 @@ constexpr uint32_t kStripRows = 64;
 
 }  // namespace
 
-extern "C" int icr_exr_write(const char *path, uint32_t width, uint32_t height, const icr_channel *channels,
+extern "C" int icr_exr_write(const char *path, uint32_t width, uint32_t height, icr_window window,
+                             const icr_channel *channels,
                              size_t channel_count, const icr_attribute *attributes, size_t attribute_count,
                              int half_float, char *err, size_t err_len) {
     clear_error(err, err_len);
@@ -89,9 +90,20 @@ extern "C" int icr_exr_write(const char *path, uint32_t width, uint32_t height, 
         size_t total;
         if (!pixel_count(width, height, channel_count, &total)) return write_error(err, err_len, "image too large");
         if (attribute_count && !attributes) return write_error(err, err_len, "attributes missing");
+        if (window.x < 0 || window.y < 0 || window.full_width > uint32_t(INT_MAX) ||
+            window.full_height > uint32_t(INT_MAX) || uint64_t(window.x) + width > window.full_width ||
+            uint64_t(window.y) + height > window.full_height)
+            return write_error(err, err_len, "the data window does not lie inside the display window");
 
         OIIO::ImageSpec spec(int(width), int(height), int(channel_count),
                              half_float ? OIIO::TypeDesc::HALF : OIIO::TypeDesc::FLOAT);
+        // A part of a larger image: its pixels sit at (x, y) of the full display window.
+        spec.x = window.x;
+        spec.y = window.y;
+        spec.full_x = 0;
+        spec.full_y = 0;
+        spec.full_width = int(window.full_width);
+        spec.full_height = int(window.full_height);
         spec.channelnames.clear();
         spec.alpha_channel = -1;
         spec.z_channel = -1;
@@ -152,7 +164,9 @@ extern "C" int icr_exr_write(const char *path, uint32_t width, uint32_t height, 
                     for (size_t x = 0; x < w; ++x) row[x * nch + c] = plane[x];
                 }
             }
-            if (!out->write_scanlines(int(y0), int(y1), 0, OIIO::TypeDesc::FLOAT, strip.data())) {
+            // Scanlines are numbered in the display window's coordinates.
+            if (!out->write_scanlines(window.y + int(y0), window.y + int(y1), 0, OIIO::TypeDesc::FLOAT,
+                                      strip.data())) {
                 std::string e = oiio_error("write failed", out->geterror());
                 out->close();
                 return write_error(err, err_len, e);
@@ -203,6 +217,8 @@ extern "C" int icr_png_write(const char *path, uint32_t width, uint32_t height, 
 
 struct icr_image {
     uint32_t width = 0, height = 0;
+    icr_window window{0, 0, 0, 0};
+    std::vector<std::string> attribute_names;
     std::vector<std::string> names;
     std::vector<std::vector<float>> planes;
     // Rendered to text once at read time, so lookups never mutate the image and can run from
@@ -245,6 +261,8 @@ extern "C" icr_image *icr_image_read(const char *path, char *err, size_t err_len
         std::unique_ptr<icr_image> img(new icr_image());
         img->width = uint32_t(w);
         img->height = uint32_t(h);
+        img->window = icr_window{spec.x - spec.full_x, spec.y - spec.full_y, uint32_t(std::max(spec.full_width, 0)),
+                                 uint32_t(std::max(spec.full_height, 0))};
         std::vector<float> interleaved(total);
         if (!in->read_image(0, 0, 0, int(nch), OIIO::TypeDesc::FLOAT, interleaved.data())) {
             write_error(err, err_len, oiio_error("read failed", in->geterror()));
@@ -264,6 +282,7 @@ extern "C" icr_image *icr_image_read(const char *path, char *err, size_t err_len
             // Large arrays would otherwise be elided with "..." after 64 values.
             img->attributes[p.name().string()] = p.get_string(1 << 16);
         }
+        for (const auto &kv : img->attributes) img->attribute_names.push_back(kv.first);
         return img.release();
     } catch (const std::bad_alloc &) {
         write_error(err, err_len, "out of memory");
@@ -278,6 +297,19 @@ extern "C" icr_image *icr_image_read(const char *path, char *err, size_t err_len
 extern "C" uint32_t icr_image_width(const icr_image *image) { return image ? image->width : 0; }
 
 extern "C" uint32_t icr_image_height(const icr_image *image) { return image ? image->height : 0; }
+
+extern "C" icr_window icr_image_window(const icr_image *image) {
+    return image ? image->window : icr_window{0, 0, 0, 0};
+}
+
+extern "C" size_t icr_image_attribute_count(const icr_image *image) {
+    return image ? image->attribute_names.size() : 0;
+}
+
+extern "C" const char *icr_image_attribute_name(const icr_image *image, size_t i) {
+    if (!image || i >= image->attribute_names.size()) return nullptr;
+    return image->attribute_names[i].c_str();
+}
 
 extern "C" size_t icr_image_channel_count(const icr_image *image) { return image ? image->names.size() : 0; }
 

@@ -27,12 +27,24 @@ typedef struct icr_attribute {
 } icr_attribute;
 
 /*
+ * Where the pixels lie in the whole image: a data window of width x height pixels whose top
+ * left pixel is (x, y) inside a display window full_width x full_height from (0, 0).
+ * A whole image is {0, 0, width, height}.
+ */
+typedef struct icr_window {
+    int32_t x;
+    int32_t y;
+    uint32_t full_width;
+    uint32_t full_height;
+} icr_window;
+
+/*
  * Writes an OpenEXR (half or float, chosen by `half_float`, except channels marked full_float,
  * which stay float: OpenImageIO's per-channel formats) with the channels in the order given,
  * to exactly `path` (which need not end in .exr: the caller writes to a temporary name and
- * renames). Compression ZIP.
+ * renames). The channels hold the data window's width x height pixels. Compression ZIP.
  */
-int icr_exr_write(const char *path, uint32_t width, uint32_t height,
+int icr_exr_write(const char *path, uint32_t width, uint32_t height, icr_window window,
                   const icr_channel *channels, size_t channel_count,
                   const icr_attribute *attributes, size_t attribute_count,
                   int half_float, char *err, size_t err_len);
@@ -47,6 +59,11 @@ typedef struct icr_image icr_image;
 icr_image *icr_image_read(const char *path, char *err, size_t err_len);
 uint32_t icr_image_width(const icr_image *image);
 uint32_t icr_image_height(const icr_image *image);
+/* The data window's place in the display window (a whole image: {0, 0, width, height}). */
+icr_window icr_image_window(const icr_image *image);
+/* Header attributes: how many, and the name of attribute i (valid until icr_image_free). */
+size_t icr_image_attribute_count(const icr_image *image);
+const char *icr_image_attribute_name(const icr_image *image, size_t i);
 size_t icr_image_channel_count(const icr_image *image);
 /* Name of channel i (valid until icr_image_free). */
 const char *icr_image_channel_name(const icr_image *image, size_t i);

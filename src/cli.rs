@@ -51,6 +51,27 @@ pub enum Command {
     Reference(Box<ReferenceArgs>),
     /// Write the scene as Radiance input (geometry, materials, light sources) for rpict.
     Export(ExportArgs),
+    /// Run only the irradiance cache prepass for the image the same render options (or a
+    /// --region) would make, and write its records to the -af file (no image): the shared
+    /// cache of a farm's region or frame tasks (see README, "Render farms").
+    #[command(override_usage = "icrender cache <SCENE> -af FILE [RENDER OPTIONS]")]
+    Cache(Box<RenderArgs>),
+    /// Assemble parts rendered with --region into the whole image: every layer and the header;
+    /// parts made with other settings, overlapping parts and holes are refused.
+    #[command(override_usage = "icrender merge OUT.exr PART.exr... [--overwrite]")]
+    Merge(MergeArgs),
+}
+
+#[derive(Args, Debug)]
+pub struct MergeArgs {
+    /// The whole image to write (.exr).
+    pub output: PathBuf,
+    /// The parts (EXRs written by `render --region`), in any order.
+    #[arg(required = true, num_args = 1..)]
+    pub parts: Vec<PathBuf>,
+    /// Replace the output if it exists.
+    #[arg(long = "overwrite")]
+    pub overwrite: bool,
 }
 
 #[derive(Args, Debug, Clone)]
@@ -120,6 +141,18 @@ pub struct RenderArgs {
     /// -af FILE: persistent irradiance cache, loaded at start and appended to while rendering.
     #[arg(long = "af")]
     pub ambient_file: Option<PathBuf>,
+    /// Only read the -af file: records this render makes stay in memory and the file is never
+    /// opened for writing (the file must exist). For tasks that share one file made by
+    /// `icrender cache`, which must not append to it side by side.
+    #[arg(long = "af-read-only", requires = "ambient_file")]
+    pub af_read_only: bool,
+    /// Render only the pixels X0 <= x < X1, Y0 <= y < Y1 of the -x by -y image (pixel bounds
+    /// in the full image, origin at the top left, X1 and Y1 exclusive). Same camera, pixel
+    /// positions and seeds as the whole render; the EXR's data window is the region inside the
+    /// full display window, and the PNG preview shows the region only. `icrender merge`
+    /// assembles the parts. One-process renders only.
+    #[arg(long = "region", num_args = 4, value_names = ["X0", "Y0", "X1", "Y1"], allow_negative_numbers = true)]
+    pub region: Option<Vec<u32>>,
     /// Record weighting: Radiance's Hessian-based error control, or Ward's 1988 split sphere.
     #[arg(long = "ic-metric", value_enum, default_value_t = MetricArg::Hessian)]
     pub ic_metric: MetricArg,

@@ -87,6 +87,12 @@ pub fn validate(args: &RenderArgs) -> Result<(), String> {
         );
     }
     parse_tile(&args.tile)?;
+    if let Some(values) = &args.region {
+        crate::image::region::Region::from_option(values, args.width, args.height)?;
+    }
+    if args.af_read_only && args.ambient_file.is_none() {
+        return Err("--af-read-only needs a cache file to read: give -af FILE".into());
+    }
     Ok(())
 }
 
@@ -230,6 +236,11 @@ impl Job {
                 args.overture.unwrap_or(DEFAULT_OVERTURE)
             },
             prepass,
+            region: args
+                .region
+                .as_deref()
+                .map(|v| crate::image::region::Region::from_option(v, args.width, args.height))
+                .transpose()?,
             emission_footprint: (args.emission_samples > 0 && !scene.emitters.is_empty())
                 .then(|| std::sync::Arc::new(EmitterFootprint::new(&scene.emitters, &camera))),
         };
@@ -249,9 +260,13 @@ impl Job {
             let cache = IrradianceCache::new(settings);
             let cache = match &args.ambient_file {
                 Some(path) => {
-                    let cache = cache
-                        .with_file(path, &cache_settings_line(args, &scene))
-                        .map_err(|e| CommandError::input(format!("{}: {e}", path.display())))?;
+                    let line = cache_settings_line(args, &scene);
+                    let cache = if args.af_read_only {
+                        cache.with_records_from(path, &line)
+                    } else {
+                        cache.with_file(path, &line)
+                    }
+                    .map_err(|e| CommandError::input(format!("{}: {e}", path.display())))?;
                     let report = &cache.load_report;
                     if report.torn_bytes > 0 || report.corrupt > 0 {
                         warn(&format!(

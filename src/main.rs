@@ -55,5 +55,7 @@ fn run(cli: &cli::Cli) -> commands::CommandResult {
         cli::Command::Bench(args) => commands::bench::run(args),
         cli::Command::Reference(args) => commands::reference::run(args),
         cli::Command::Export(args) => commands::export::run(args),
+        cli::Command::Cache(args) => commands::cache::run(args),
+        cli::Command::Merge(args) => commands::merge::run(args),
     }
 }

@@ -15,6 +15,7 @@
 //! parallel, and they join the cache in site order. The record set, and so the image, is the
 //! same whatever the number of threads and the tile size.
 
+use crate::image::region::Region;
 use crate::irradiance::IrradianceCache;
 use crate::irradiance::index::FrozenIndex;
 use crate::irradiance::record::Record;
@@ -128,6 +129,17 @@ pub fn rounds(width: u32, height: u32) -> Vec<Vec<Site>> {
     out
 }
 
+/// The rounds of `rounds` for the pixels of `region` only (a `render --region` part or an
+/// `icrender cache --region`): its own lattice, placed at the region's corner.
+pub fn rounds_in(region: Region) -> Vec<Vec<Site>> {
+    let mut out = rounds(region.width(), region.height());
+    for site in out.iter_mut().flatten() {
+        site.x += region.x0;
+        site.y += region.y0;
+    }
+    out
+}
+
 /// Rounds of the sample positions of the pixels `needs` marks (row-major), after the centres:
 /// one round per sample number and pixel parity. Neighbouring samples (of one pixel, or of
 /// adjacent pixels along an edge) would otherwise all lack a record at once and each make one
@@ -190,7 +202,8 @@ fn pixels_needing_samples(pass: Pass<'_, '_>, snapshot: &FrozenIndex, stats: &mu
         camera,
         ..
     } = pass;
-    let (width, height) = (camera.width, camera.height);
+    let width = camera.width;
+    let area = pass.settings.area(camera);
     let sites_at = |x: f32, y: f32, counts: &mut RayCounts| {
         let (origin, dir) = camera.ray(x, y);
         // Glossy directions from a fixed stream: the same rays on every process.
@@ -198,17 +211,17 @@ fn pixels_needing_samples(pass: Pass<'_, '_>, snapshot: &FrozenIndex, stats: &mu
         integrator.record_sites(origin, dir, &mut rng, &mut Work::new(counts))
     };
     let covered = |hits: &[SurfaceHit]| hits.iter().all(|h| cache.covered_in(snapshot, h.position, h.normal, 0));
-    let rows = AtomicUsize::new(0);
-    let needs = Mutex::new(vec![false; (width * height) as usize]);
+    let rows = AtomicUsize::new(area.y0 as usize);
+    let needs = Mutex::new(vec![false; (width * camera.height) as usize]);
     on_threads(stats, |counts| {
         loop {
             let y = rows.fetch_add(1, Ordering::Relaxed) as u32;
-            if y >= height {
+            if y >= area.y1 {
                 break;
             }
             // Each corner's hits, and whether records cover them all.
             let corners = |y: u32, counts: &mut RayCounts| -> Vec<(Vec<SurfaceHit>, bool)> {
-                (0..=width)
+                (area.x0..=area.x1)
                     .map(|x| {
                         let hits = sites_at(x as f32, y as f32, counts);
                         let ok = covered(&hits);
@@ -217,18 +230,19 @@ fn pixels_needing_samples(pass: Pass<'_, '_>, snapshot: &FrozenIndex, stats: &mu
                     .collect()
             };
             let (top, bottom) = (corners(y, counts), corners(y + 1, counts));
-            let row: Vec<bool> = (0..width)
+            let row: Vec<bool> = (area.x0..area.x1)
                 .map(|x| {
                     let centre = sites_at(x as f32 + 0.5, y as f32 + 0.5, counts);
-                    let (x, i) = (x as usize, x as usize + 1);
+                    // The corners of the area's pixel x, counted from the area's left edge.
+                    let (x, i) = ((x - area.x0) as usize, (x - area.x0) as usize + 1);
                     [&top[x], &top[i], &bottom[x], &bottom[i]].iter().any(|(corner, ok)| {
                         !ok || corner.len() != centre.len()
                             || corner.iter().zip(&centre).any(|(a, b)| !same_plane(b, a))
                     })
                 })
                 .collect();
-            let start = (y * width) as usize;
-            needs.lock().unwrap_or_else(|e| e.into_inner())[start..start + width as usize].copy_from_slice(&row);
+            let start = (y * width + area.x0) as usize;
+            needs.lock().unwrap_or_else(|e| e.into_inner())[start..start + row.len()].copy_from_slice(&row);
         }
     });
     needs.into_inner().unwrap_or_else(|e| e.into_inner())
@@ -427,7 +441,8 @@ fn run_watched<E>(
         outcome.rounds += 1;
         Ok(())
     };
-    let lattice = rounds(camera.width, camera.height);
+    // Only the region's pixels (the whole image without --region) will be shaded.
+    let lattice = rounds_in(settings.area(camera));
     let mut total = lattice.len();
     let mut go_on = true;
     for sites in lattice {

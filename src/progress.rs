@@ -31,6 +31,8 @@ pub struct Progress {
     rounds: AtomicUsize,
     rounds_done: AtomicUsize,
     style: Style,
+    /// Only a prepass (`icrender cache`): its rounds are the whole fraction.
+    prepass_only: bool,
     start: Instant,
     /// When the last line or bar was drawn, and the fraction it showed.
     last: Mutex<Option<(Instant, f64)>>,
@@ -54,8 +56,17 @@ impl Progress {
             rounds: AtomicUsize::new(0),
             rounds_done: AtomicUsize::new(0),
             style,
+            prepass_only: false,
             start: Instant::now(),
             last: Mutex::new(None),
+        }
+    }
+
+    /// Progress of a prepass alone (`icrender cache`): no tiles follow it.
+    pub fn prepass_only(style: Style) -> Progress {
+        Progress {
+            prepass_only: true,
+            ..Progress::with_style(1, style)
         }
     }
 
@@ -83,6 +94,9 @@ impl Progress {
             return tiles;
         }
         let prepass = (self.rounds_done.load(Ordering::Relaxed) as f64 / rounds as f64).min(1.0);
+        if self.prepass_only {
+            return prepass;
+        }
         0.5 * prepass + 0.5 * tiles
     }
 
@@ -180,5 +194,10 @@ mod tests {
         // More steps than announced never pass 1.
         p.advance(3);
         assert_eq!(p.fraction(), 1.0);
+        // A prepass alone is the whole of its fraction.
+        let p = Progress::prepass_only(Style::Silent);
+        p.prepass_rounds(4);
+        p.prepass_round_done();
+        assert_eq!(p.fraction(), 0.25);
     }
 }

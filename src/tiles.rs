@@ -27,6 +27,32 @@ pub fn tiles(width: u32, height: u32, tile_width: u32, tile_height: u32) -> Vec<
     out
 }
 
+/// The tiles of the whole image's grid cut to `region` (those outside it dropped), so that a
+/// region's tile borders fall where the whole image's do.
+pub fn tiles_in(
+    width: u32,
+    height: u32,
+    tile_width: u32,
+    tile_height: u32,
+    region: Option<crate::image::region::Region>,
+) -> Vec<Tile> {
+    let all = tiles(width, height, tile_width, tile_height);
+    let Some(r) = region else {
+        return all;
+    };
+    all.into_iter()
+        .filter_map(|t| {
+            let cut = Tile {
+                x0: t.x0.max(r.x0),
+                y0: t.y0.max(r.y0),
+                x1: t.x1.min(r.x1),
+                y1: t.y1.min(r.y1),
+            };
+            (cut.x0 < cut.x1 && cut.y0 < cut.y1).then_some(cut)
+        })
+        .collect()
+}
+
 /// Stores a rendered tile's pixels in the frame.
 pub fn store_tile(frame: &mut FrameBuffer, tile: &Tile, values: &[PixelValue]) {
     let mut it = values.iter();
@@ -57,6 +83,34 @@ mod tests {
             }
         }
         assert!(seen.iter().all(|&c| c == 1));
+    }
+
+    #[test]
+    fn a_region_s_tiles_cover_it_once_on_the_image_s_grid() {
+        let (w, h) = (67, 45);
+        let region = crate::image::region::Region {
+            x0: 10,
+            y0: 7,
+            x1: 40,
+            y1: 45,
+        };
+        let mut seen = vec![0u8; (w * h) as usize];
+        for t in tiles_in(w, h, 16, 8, Some(region)) {
+            // Borders inside the region are the whole grid's.
+            assert!(t.x0 == region.x0 || t.x0 % 16 == 0);
+            assert!(t.y0 == region.y0 || t.y0 % 8 == 0);
+            for y in t.y0..t.y1 {
+                for x in t.x0..t.x1 {
+                    seen[(y * w + x) as usize] += 1;
+                }
+            }
+        }
+        for y in 0..h {
+            for x in 0..w {
+                let inside = (10..40).contains(&x) && (7..45).contains(&y);
+                assert_eq!(seen[(y * w + x) as usize], inside as u8, "({x}, {y})");
+            }
+        }
     }
 }
 

@@ -1,9 +1,11 @@
 //! One module per subcommand.
 
 pub mod bench;
+pub mod cache;
 pub mod compare;
 pub mod export;
 pub mod info;
+pub mod merge;
 pub mod reference;
 pub mod render;
 pub mod seams;

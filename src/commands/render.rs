@@ -9,6 +9,7 @@ use crate::image::data::{Aov, FAR_DEPTH};
 use crate::image::denoise;
 use crate::image::denoise::Quality;
 use crate::image::framebuffer::{FrameBuffer, Layer};
+use crate::image::region::{REGION_ATTRIBUTE, Region, SETTINGS_ATTRIBUTE};
 use crate::image::{cryptomatte, metrics, output};
 use crate::job::{Job, validate};
 use crate::parallel::{JobHost, Mode, ParallelJob, under_mpirun};
@@ -18,7 +19,8 @@ use crate::scene::{Scene, SceneNeeds};
 use crate::shading::{Integrator, ShadingOptions};
 use crate::stats::RenderStats;
 use crate::sys::image_io;
-use crate::tiles::{Tile, tiles};
+use crate::sys::image_io::Window;
+use crate::tiles::{Tile, tiles_in};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -128,6 +130,54 @@ pub fn options_line(args: &RenderArgs) -> String {
     )
 }
 
+/// The items of an options line (`-x 64 -ab 1 -av 0 0 0 ...`), one per option with its
+/// values: a new item starts at every token that is an option name (a dash and a letter, or
+/// two dashes), not at a negative number.
+fn option_items(line: &str) -> Vec<String> {
+    let mut items: Vec<String> = Vec::new();
+    for token in line.split_whitespace() {
+        let name = token.starts_with("--")
+            || (token.starts_with('-') && token[1..].starts_with(|c: char| c.is_ascii_alphabetic()));
+        match items.last_mut() {
+            Some(item) if !name => {
+                item.push(' ');
+                item.push_str(token);
+            }
+            _ => items.push(token.to_string()),
+        }
+    }
+    items
+}
+
+/// What every part of one image must share (`icrender merge` refuses parts that differ),
+/// `; `-separated so that merge can name the first setting that differs: the checkpoint's
+/// key (scene, options, tiles, view) and what changes the file's layers. Not in it: --region,
+/// the outputs, -af (its own settings check applies), --progress, --quiet, --stats,
+/// --threads, --checkpoint.
+pub fn part_settings(args: &RenderArgs) -> String {
+    let scene = std::fs::canonicalize(&args.scene).unwrap_or_else(|_| args.scene.clone());
+    let mut items = vec![format!("scene {}", scene.display())];
+    items.extend(option_items(&options_line(args)));
+    let aovs: Vec<&str> = args.aovs().iter().map(|a| a.name()).collect();
+    items.extend([
+        format!("--emission-samples {}", args.emission_samples),
+        format!("--tile {}", args.tile),
+        format!("view {:?}", args.view),
+        format!(
+            "--aovs {}",
+            if aovs.is_empty() {
+                "none".to_string()
+            } else {
+                aovs.join(",")
+            }
+        ),
+        format!("--half {}", args.half),
+        format!("--ic-records {}", args.ic_records),
+        format!("--denoise {}", if args.denoise { quality_name(args) } else { "off" }),
+    ]);
+    items.join("; ")
+}
+
 /// The statistics every way of rendering reports about the job itself; the caller adds what
 /// its threads or ranks did.
 pub fn job_stats(args: &RenderArgs, job: &Job, mode: &'static str, ranks: usize, render_s: f64) -> RenderStats {
@@ -214,6 +264,24 @@ impl Outputs {
         stats: &RenderStats,
     ) -> Result<(), CommandError> {
         let layers = producible_layers(job.scene.needs(), &job.shading);
+        // A part (--region) keeps only its pixels, placed in the whole image's window.
+        let region = job.settings.region;
+        let part;
+        let (frame, window) = match region {
+            Some(r) => {
+                part = frame.crop(r);
+                (
+                    &part,
+                    Window {
+                        x: r.x0,
+                        y: r.y0,
+                        full_width: args.width,
+                        full_height: args.height,
+                    },
+                )
+            }
+            None => (frame, Window::whole(frame.width, frame.height)),
+        };
         let denoised = if args.denoise {
             let quality = denoise_quality(args);
             Some(
@@ -248,6 +316,10 @@ impl Outputs {
         ];
         let aovs = args.aovs();
         let mut attributes = attributes;
+        attributes.push((SETTINGS_ATTRIBUTE.to_string(), part_settings(args)));
+        if let Some(r) = region {
+            attributes.push((REGION_ATTRIBUTE.to_string(), r.text()));
+        }
         attributes.extend(data_attributes(&aovs, &job.scene));
         if let Some(d) = &denoised {
             attributes.extend(denoise_attributes(d, args));
@@ -266,6 +338,7 @@ impl Outputs {
         output::write_exr(
             &self.exr,
             frame,
+            window,
             &layers,
             &aovs,
             &extra,
@@ -419,13 +492,30 @@ pub fn with_checkpoint_cache(args: &RenderArgs) -> RenderArgs {
 /// (The mode, ranks, threads and output names do not: a render may resume in another mode.)
 pub fn checkpoint_key(args: &RenderArgs) -> String {
     let scene = std::fs::canonicalize(&args.scene).unwrap_or_else(|_| args.scene.clone());
-    format!(
+    let key = format!(
         "scene {}; {}; tile {}; view {:?}",
         scene.display(),
         options_line(args),
         args.tile,
         args.view
-    )
+    );
+    // A part journals its own tiles (keys of whole renders stay as they were).
+    match &args.region {
+        Some(r) => format!("{key}; region {r:?}"),
+        None => key,
+    }
+}
+
+/// The tiles this render makes: the whole image's, or those of its --region.
+pub fn render_tiles(args: &RenderArgs) -> Result<Vec<Tile>, CommandError> {
+    let (tile_width, tile_height) = crate::cli::parse_tile(&args.tile).map_err(CommandError::input)?;
+    let region = args
+        .region
+        .as_deref()
+        .map(|v| Region::from_option(v, args.width, args.height))
+        .transpose()
+        .map_err(CommandError::input)?;
+    Ok(tiles_in(args.width, args.height, tile_width, tile_height, region))
 }
 
 /// Opens the --checkpoint journal (if asked for) and says what an earlier run left.
@@ -583,6 +673,13 @@ pub fn run(args: &RenderArgs) -> CommandResult {
         None => Mode::Serial,
     };
     if mode != Mode::Serial {
+        if args.region.is_some() {
+            return Err(CommandError::input(
+                "--region renders in one process (no mpirun, no --mode): run one task per region and \
+                 `icrender merge` the parts"
+                    .into(),
+            ));
+        }
         if args.trace_cache.is_some() {
             return Err(CommandError::input("--trace-cache traces the serial mode only".into()));
         }
@@ -590,6 +687,12 @@ pub fn run(args: &RenderArgs) -> CommandResult {
     }
     let wall = Instant::now();
     validate(args)?;
+    if args.region.is_some() && args.reference.is_some() {
+        return Err(CommandError::input(
+            "--reference compares whole images: render the regions, merge them, and `icrender compare` the merged image"
+                .into(),
+        ));
+    }
     let outputs = Outputs::check(args)?;
     image_io::open_in_background();
     let reference = match &args.reference {
@@ -598,8 +701,7 @@ pub fn run(args: &RenderArgs) -> CommandResult {
         }
         None => None,
     };
-    let (tile_width, tile_height) = crate::cli::parse_tile(&args.tile).map_err(CommandError::input)?;
-    let all_tiles = tiles(args.width, args.height, tile_width, tile_height);
+    let all_tiles = render_tiles(args)?;
     let (journal, restored) = open_checkpoint(args, &all_tiles)?.map_or((None, None), |(j, r)| (Some(j), Some(r)));
     let job = Job::prepare(&with_checkpoint_cache(args), crate::memory::Role::Single)?;
     let integrator = Integrator::new(&job.scene, &job.tracer, &job.shading, job.cache.as_ref());
@@ -645,7 +747,10 @@ pub fn run(args: &RenderArgs) -> CommandResult {
     progress.done(&outputs.exr);
     if !args.quiet {
         eprintln!(
-            "icrender: {}x{} in {:.2} s ({:.1} Mrays/s, {} threads, {} records, {:.0}% of lookups hit) -> {}",
+            "icrender: {}{}x{} in {:.2} s ({:.1} Mrays/s, {} threads, {} records, {:.0}% of lookups hit) -> {}",
+            job.settings
+                .region
+                .map_or_else(String::new, |r| format!("region {} of ", r.text())),
             args.width,
             args.height,
             render_s,

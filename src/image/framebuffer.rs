@@ -144,6 +144,17 @@ impl FrameBuffer {
         self.data.iter_mut().for_each(|d| d.scale(factor));
     }
 
+    /// The pixels of `region` as a frame of their own (every layer, the records and the data).
+    pub fn crop(&self, region: crate::image::region::Region) -> FrameBuffer {
+        FrameBuffer {
+            width: region.width(),
+            height: region.height(),
+            layers: std::array::from_fn(|l| region.crop(&self.layers[l], self.width)),
+            records: region.crop(&self.records, self.width),
+            data: region.crop(&self.data, self.width),
+        }
+    }
+
     /// Sum of all layers, pixel by pixel.
     pub fn composite(&self) -> Vec<Vec3> {
         (0..self.layers[0].len())

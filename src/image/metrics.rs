@@ -123,6 +123,7 @@ mod tests {
         ImageData {
             width: 2,
             height: 1,
+            window: crate::sys::image_io::Window::whole(2, 1),
             channels: values.iter().map(|(n, v)| (n.to_string(), vec![*v, *v])).collect(),
             attributes: vec![],
         }
@@ -222,6 +223,7 @@ mod tests {
             ImageData {
                 width: self.width,
                 height: self.height,
+                window: self.window,
                 channels: self.channels.clone(),
                 attributes: vec![],
             }

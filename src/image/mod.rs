@@ -9,4 +9,5 @@ pub mod framebuffer;
 pub mod metrics;
 pub mod output;
 pub mod preview;
+pub mod region;
 pub mod seams;

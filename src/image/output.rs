@@ -5,7 +5,7 @@ use super::cryptomatte::{RANKS, Ranks};
 use super::data::{Aov, PixelData};
 use super::framebuffer::{FrameBuffer, Layer};
 use super::preview::tone_map;
-use crate::sys::image_io::{self, ChannelPlane};
+use crate::sys::image_io::{self, ChannelPlane, Window};
 use glam::Vec3;
 use std::path::{Path, PathBuf};
 
@@ -97,11 +97,13 @@ fn data_planes(frame: &FrameBuffer, aovs: &[Aov]) -> Vec<Plane> {
 
 /// Writes the composite as R G B A, each given layer as `layer.R/G/B`, then each of
 /// `extra_layers` (a name and a plane: the denoised layers) the same way, and the data layers
-/// of `aovs` (always 32-bit float, see `Plane`).
+/// of `aovs` (always 32-bit float, see `Plane`). The frame's pixels lie at `window` in the
+/// whole image (a part of a --region render).
 #[allow(clippy::too_many_arguments)]
 pub fn write_exr(
     path: &Path,
     frame: &FrameBuffer,
+    window: Window,
     layers: &[Layer],
     aovs: &[Aov],
     extra_layers: &[(&str, &[Vec3])],
@@ -144,8 +146,31 @@ pub fn write_exr(
         })
         .collect();
     write_atomically(path, |tmp| {
-        image_io::write_exr(tmp, frame.width, frame.height, &channels, attributes, half_float)
+        image_io::write_exr(
+            tmp,
+            frame.width,
+            frame.height,
+            window,
+            &channels,
+            attributes,
+            half_float,
+        )
     })
+}
+
+/// Whether a channel written by `write_exr` is a data layer or Cryptomatte (always 32-bit
+/// float) rather than light (half with --half).
+pub fn is_data_channel(name: &str) -> bool {
+    [
+        "albedo.",
+        "normal.",
+        "depth.",
+        "position.",
+        CRYPTO_OBJECT,
+        CRYPTO_MATERIAL,
+    ]
+    .iter()
+    .any(|prefix| name.starts_with(prefix))
 }
 
 /// Writes a composite, tone-mapped, as an 8-bit PNG.

@@ -148,6 +148,16 @@ impl IrradianceCache {
         Ok(self)
     }
 
+    /// Loads a persistent file's records without attaching it: nothing is ever written to it.
+    pub fn with_records_from(mut self, path: &std::path::Path, settings_line: &str) -> Result<IrradianceCache, String> {
+        let (records, report) = persist::read_only(path, settings_line)?;
+        for r in records {
+            self.index.insert(r);
+        }
+        self.load_report = report;
+        Ok(self)
+    }
+
     /// Writes every lookup and new record to a text file (see `trace`).
     pub fn with_trace(mut self, path: &std::path::Path) -> Result<IrradianceCache, String> {
         self.trace = Some(trace::CacheTrace::create(path)?);

@@ -67,6 +67,55 @@ fn parse_header(bytes: &[u8]) -> Result<(String, usize), String> {
     Ok((settings, end))
 }
 
+/// The records of a whole file's bytes made with `settings` (refused otherwise), and how many
+/// bytes at its end are a torn write (to cut when appending; `report` counts them).
+fn decode_file(bytes: &[u8], settings: &str, report: &mut LoadReport) -> Result<(Vec<Record>, usize), String> {
+    let (theirs, start) = parse_header(bytes)?;
+    if theirs != settings {
+        return Err(format!(
+            "was made with other settings ({theirs}); this render uses ({settings}); \
+             use the same settings or another file"
+        ));
+    }
+    let body = &bytes[start..];
+    let whole = body.len() / RECORD_BYTES;
+    let record = |i: usize| codec::decode(&body[i * RECORD_BYTES..]);
+    // A run of bad records at the end is a torn write (a batch is flushed as one write,
+    // so a crash can tear several records); a bad record inside the file is damage.
+    // Cutting the whole run at once means a second open finds nothing more to cut.
+    let mut intact = whole;
+    while intact > 0 && matches!(record(intact - 1), Err(DecodeError::Checksum)) {
+        intact -= 1;
+    }
+    let torn = (whole - intact) * RECORD_BYTES;
+    let mut records = Vec::with_capacity(intact);
+    for i in 0..intact {
+        match record(i) {
+            Ok(r) => records.push(r),
+            Err(_) => report.corrupt += 1,
+        }
+    }
+    let cut = torn + body.len() % RECORD_BYTES;
+    report.torn_bytes += cut;
+    Ok((records, cut))
+}
+
+/// Reads a file's records without opening it for writing (`--af-read-only`): the file must
+/// exist and was made with `settings`; a torn tail is skipped, not cut, and the file is left
+/// exactly as it is (several tasks may read it at once).
+pub fn read_only(path: &Path, settings: &str) -> Result<(Vec<Record>, LoadReport), String> {
+    let bytes = std::fs::read(path).map_err(|e| match e.kind() {
+        std::io::ErrorKind::NotFound => "no such cache file (--af-read-only reads a file made before, \
+             e.g. by `icrender cache`)"
+            .to_string(),
+        _ => format!("cannot read: {e}"),
+    })?;
+    let mut report = LoadReport::default();
+    let (records, _) = decode_file(&bytes, settings, &mut report)?;
+    report.loaded = records.len();
+    Ok((records, report))
+}
+
 impl CacheFile {
     /// Opens (or creates) the file; returns it with the records it already holds.
     pub fn open(path: &Path, settings: &str) -> Result<(CacheFile, Vec<Record>, LoadReport), String> {
@@ -82,35 +131,9 @@ impl CacheFile {
         if bytes.is_empty() {
             std::fs::write(path, header(settings)).map_err(|e| format!("cannot write: {e}"))?;
         } else {
-            let (theirs, start) = parse_header(&bytes)?;
-            if theirs != settings {
-                return Err(format!(
-                    "was made with other settings ({theirs}); this render uses ({settings}); \
-                     use the same settings or another file"
-                ));
-            }
-            let body = &bytes[start..];
-            let whole = body.len() / RECORD_BYTES;
-            let record = |i: usize| codec::decode(&body[i * RECORD_BYTES..]);
-            // A run of bad records at the end is a torn write (a batch is flushed as one write,
-            // so a crash can tear several records); a bad record inside the file is damage.
-            // Cutting the whole run at once means a second open finds nothing more to cut.
-            let mut intact = whole;
-            while intact > 0 && matches!(record(intact - 1), Err(DecodeError::Checksum)) {
-                intact -= 1;
-            }
-            let torn = (whole - intact) * RECORD_BYTES;
-            report.torn_bytes += torn;
-            keep -= torn;
-            for i in 0..intact {
-                match record(i) {
-                    Ok(r) => records.push(r),
-                    Err(_) => report.corrupt += 1,
-                }
-            }
-            let partial = body.len() % RECORD_BYTES;
-            report.torn_bytes += partial;
-            keep -= partial;
+            let (found, cut) = decode_file(&bytes, settings, &mut report)?;
+            records = found;
+            keep -= cut;
         }
         report.loaded = records.len();
         let file = OpenOptions::new()
@@ -254,6 +277,29 @@ mod tests {
         let (_, again, report) = CacheFile::open(&path, "s").unwrap();
         assert_eq!(again, records);
         assert_eq!((report.corrupt, report.torn_bytes), (1, 0));
+    }
+
+    #[test]
+    fn read_only_loads_without_touching_the_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("c.icc");
+        assert!(read_only(&path, "s").unwrap_err().contains("no such cache file"));
+        let (file, _, _) = CacheFile::open(&path, "s").unwrap();
+        for i in 0..3 {
+            file.append(&flat_record(i as f32 + 1.0, 1.0));
+        }
+        file.finish().unwrap();
+        drop(file);
+        // A torn tail is skipped but stays in the file.
+        let mut bytes = std::fs::read(&path).unwrap();
+        bytes.truncate(bytes.len() - 10);
+        std::fs::write(&path, &bytes).unwrap();
+        let (records, report) = read_only(&path, "s").unwrap();
+        assert_eq!(records.len(), 2);
+        assert_eq!(report.loaded, 2);
+        assert_eq!(report.torn_bytes, RECORD_BYTES - 10);
+        assert_eq!(std::fs::read(&path).unwrap(), bytes);
+        assert!(read_only(&path, "t").unwrap_err().contains("other settings"));
     }
 
     #[test]

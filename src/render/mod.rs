@@ -12,7 +12,7 @@ use crate::prepass::{self, PrepassOutcome};
 use crate::progress::Progress;
 use crate::scene::view::Camera;
 use crate::shading::Integrator;
-use crate::tiles::{TileQueue, store_tile, tiles};
+use crate::tiles::{TileQueue, store_tile, tiles_in};
 use std::sync::Mutex;
 
 /// What a one-process render made: the image, each thread's work (the prepass's included)
@@ -59,7 +59,13 @@ pub fn render_resumable(
         ..*integrator
     };
     let integrator = &reading;
-    let all = tiles(camera.width, camera.height, settings.tile_width, settings.tile_height);
+    let all = tiles_in(
+        camera.width,
+        camera.height,
+        settings.tile_width,
+        settings.tile_height,
+        settings.region,
+    );
     let (journal, todo, start) = match checkpoint {
         Some((journal, restored)) => (Some(journal), restored.unfinished(), restored.frame),
         None => (

@@ -33,6 +33,17 @@ pub struct RenderSettings {
     /// Place every cache record before shading (`prepass`); the pixels then only read the
     /// cache. False: records are made as pixels render (with the overture, if any).
     pub prepass: bool,
+    /// Render only these pixels of the image (`--region`); None: every pixel. The camera,
+    /// pixel indices and seeds stay those of the whole image.
+    pub region: Option<crate::image::region::Region>,
+}
+
+impl RenderSettings {
+    /// The pixels to render: the region, or the whole image.
+    pub fn area(&self, camera: &Camera) -> crate::image::region::Region {
+        self.region
+            .unwrap_or_else(|| crate::image::region::Region::whole(camera.width, camera.height))
+    }
 }
 
 /// What one thread did.

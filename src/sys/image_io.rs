@@ -103,17 +103,52 @@ pub struct ChannelPlane<'a> {
     pub full_float: bool,
 }
 
+/// Where an image's pixels (its data window) lie in the whole image (its display window, from
+/// (0, 0)): OpenEXR's two windows, for a part of a larger image.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Window {
+    pub x: u32,
+    pub y: u32,
+    pub full_width: u32,
+    pub full_height: u32,
+}
+
+impl Window {
+    /// A whole image: the data window is the display window.
+    pub fn whole(width: u32, height: u32) -> Window {
+        Window {
+            x: 0,
+            y: 0,
+            full_width: width,
+            full_height: height,
+        }
+    }
+}
+
 /// Writes an OpenEXR with the given channels (in order) and string attributes to exactly `path`;
-/// with `half_float`, every channel not marked `full_float` is stored as half.
+/// with `half_float`, every channel not marked `full_float` is stored as half. The channels
+/// hold `width` x `height` pixels placed at `window` in the display window.
+#[allow(clippy::too_many_arguments)]
 pub fn write_exr(
     path: &Path,
     width: u32,
     height: u32,
+    window: Window,
     channels: &[ChannelPlane<'_>],
     attributes: &[(String, String)],
     half_float: bool,
 ) -> Result<(), String> {
     let pixels = width as usize * height as usize;
+    if u64::from(window.x) + u64::from(width) > u64::from(window.full_width)
+        || u64::from(window.y) + u64::from(height) > u64::from(window.full_height)
+        || window.x > i32::MAX as u32
+        || window.y > i32::MAX as u32
+    {
+        return Err(format!(
+            "the pixels {width}x{height} at ({}, {}) do not lie inside the image {}x{}",
+            window.x, window.y, window.full_width, window.full_height
+        ));
+    }
     if let Some(bad) = channels.iter().find(|c| c.data.len() != pixels) {
         return Err(format!(
             "channel {} has {} values for {} pixels",
@@ -149,6 +184,12 @@ pub fn write_exr(
             path.as_ptr(),
             width,
             height,
+            abi::icr_window {
+                x: window.x as i32,
+                y: window.y as i32,
+                full_width: window.full_width,
+                full_height: window.full_height,
+            },
             planes.as_ptr(),
             planes.len(),
             attrs.as_ptr(),
@@ -176,8 +217,11 @@ pub fn write_png(path: &Path, width: u32, height: u32, rgb: &[u8]) -> Result<(),
 
 /// An image read back: named float planes and the header's string attributes we asked for.
 pub struct ImageData {
+    /// The data window's size: the planes hold width * height values.
     pub width: u32,
     pub height: u32,
+    /// Where the data window lies in the display window.
+    pub window: Window,
     pub channels: Vec<(String, Vec<f32>)>,
     pub attributes: Vec<(String, String)>,
 }
@@ -200,8 +244,23 @@ impl Drop for ImageHandle {
     }
 }
 
+/// Which header attributes `read` returns.
+enum Wanted<'a> {
+    Named(&'a [&'a str]),
+    All,
+}
+
 /// Reads every channel of an image file, plus the named header attributes where present.
 pub fn read_image(path: &Path, attribute_names: &[&str]) -> Result<ImageData, String> {
+    read(path, Wanted::Named(attribute_names))
+}
+
+/// Reads every channel of an image file and every attribute of its header (as text).
+pub fn read_image_with_header(path: &Path) -> Result<ImageData, String> {
+    read(path, Wanted::All)
+}
+
+fn read(path: &Path, wanted: Wanted<'_>) -> Result<ImageData, String> {
     let cpath = c_path(path)?;
     let lib = library()?;
     let mut err = vec![0 as c_char; ERR_LEN];
@@ -216,6 +275,23 @@ pub fn read_image(path: &Path, attribute_names: &[&str]) -> Result<ImageData, St
     unsafe {
         let width = lib.icr_image_width(handle.1);
         let height = lib.icr_image_height(handle.1);
+        let w = lib.icr_image_window(handle.1);
+        // A display window that does not hold the data window (not one icrender writes) is
+        // taken as the data window itself.
+        let window = if w.x >= 0
+            && w.y >= 0
+            && u64::from(w.x as u32) + u64::from(width) <= u64::from(w.full_width)
+            && u64::from(w.y as u32) + u64::from(height) <= u64::from(w.full_height)
+        {
+            Window {
+                x: w.x as u32,
+                y: w.y as u32,
+                full_width: w.full_width,
+                full_height: w.full_height,
+            }
+        } else {
+            Window::whole(width, height)
+        };
         let pixels = width as usize * height as usize;
         let count = lib.icr_image_channel_count(handle.1);
         let mut channels = Vec::with_capacity(count);
@@ -225,6 +301,16 @@ pub fn read_image(path: &Path, attribute_names: &[&str]) -> Result<ImageData, St
             channels.push((name, data));
         }
         let mut attributes = Vec::new();
+        let all: Vec<String>;
+        let attribute_names: Vec<&str> = match wanted {
+            Wanted::Named(names) => names.to_vec(),
+            Wanted::All => {
+                all = (0..lib.icr_image_attribute_count(handle.1))
+                    .map(|i| owned_string(lib.icr_image_attribute_name(handle.1, i)))
+                    .collect();
+                all.iter().map(String::as_str).collect()
+            }
+        };
         for name in attribute_names {
             let cname = c_text(name);
             let value = lib.icr_image_attribute(handle.1, cname.as_ptr());
@@ -235,6 +321,7 @@ pub fn read_image(path: &Path, attribute_names: &[&str]) -> Result<ImageData, St
         Ok(ImageData {
             width,
             height,
+            window,
             channels,
             attributes,
         })
