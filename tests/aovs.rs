@@ -21,19 +21,7 @@ fn attributes(object: bool) -> Vec<String> {
 }
 
 fn render(dir: &Path, scene: &Path, name: &str, extra: &[&str]) -> ImageData {
-    let out = dir.join(format!("{name}.exr"));
-    let mut args = vec![
-        "render",
-        scene.to_str().unwrap(),
-        "-o",
-        out.to_str().unwrap(),
-        "-q",
-        "--no-preview",
-        "--overwrite",
-    ];
-    args.extend_from_slice(extra);
-    run_ok(&args);
-    read_with_crypto(&out)
+    read_with_crypto(&render_file(dir, scene, name, extra))
 }
 
 fn read_with_crypto(path: &Path) -> ImageData {

@@ -42,11 +42,10 @@ pub fn run_ok(args: &[&str]) -> Output {
     out
 }
 
-/// Renders `scene` to `dir/name.exr` with `extra` options (quiet, no preview) and returns the
-/// image and the statistics JSON.
-pub fn render_to(dir: &Path, scene: &Path, name: &str, extra: &[&str]) -> (ImageData, Value) {
+/// Renders `scene` to `dir/name.exr` with `extra` options (quiet, no preview, overwriting) and
+/// returns the EXR's path.
+pub fn render_file(dir: &Path, scene: &Path, name: &str, extra: &[&str]) -> PathBuf {
     let out = dir.join(format!("{name}.exr"));
-    let stats = dir.join(format!("{name}.json"));
     let mut args = vec![
         "render",
         scene.to_str().unwrap(),
@@ -55,11 +54,19 @@ pub fn render_to(dir: &Path, scene: &Path, name: &str, extra: &[&str]) -> (Image
         "-q",
         "--no-preview",
         "--overwrite",
-        "--stats",
-        stats.to_str().unwrap(),
     ];
     args.extend_from_slice(extra);
     run_ok(&args);
+    out
+}
+
+/// Renders `scene` to `dir/name.exr` with `extra` options (quiet, no preview) and returns the
+/// image and the statistics JSON.
+pub fn render_to(dir: &Path, scene: &Path, name: &str, extra: &[&str]) -> (ImageData, Value) {
+    let stats = dir.join(format!("{name}.json"));
+    let mut args = vec!["--stats", stats.to_str().unwrap()];
+    args.extend_from_slice(extra);
+    let out = render_file(dir, scene, name, &args);
     let stats = serde_json::from_str(&std::fs::read_to_string(&stats).unwrap()).unwrap();
     (read_exr(&out), stats)
 }
