@@ -20,6 +20,20 @@ pub enum Style {
     Json,
 }
 
+impl Style {
+    /// JSON lines when asked for (`--progress json`, whatever --quiet says); else a bar on a
+    /// terminal's stderr, unless `quiet`; else nothing.
+    pub fn chosen(json: bool, quiet: bool) -> Style {
+        if json {
+            Style::Json
+        } else if !quiet && std::io::stderr().is_terminal() {
+            Style::Bar
+        } else {
+            Style::Silent
+        }
+    }
+}
+
 /// The least time between two JSON lines, and the least change of the fraction, unless the
 /// phase ends: a long render's thousands of tiles would otherwise flood the farm's log.
 const JSON_EVERY: Duration = Duration::from_secs(1);
@@ -41,12 +55,7 @@ pub struct Progress {
 impl Progress {
     /// A bar over `total` tiles (shown only on a terminal, and not when `quiet`).
     pub fn new(total: usize, quiet: bool) -> Progress {
-        let style = if !quiet && std::io::stderr().is_terminal() {
-            Style::Bar
-        } else {
-            Style::Silent
-        };
-        Progress::with_style(total, style)
+        Progress::with_style(total, Style::chosen(false, quiet))
     }
 
     pub fn with_style(total: usize, style: Style) -> Progress {

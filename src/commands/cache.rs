@@ -49,18 +49,10 @@ pub fn run(args: &RenderArgs) -> CommandResult {
     };
     let loaded = cache.load_report.loaded;
     let integrator = Integrator::new(&job.scene, &job.tracer, &job.shading, Some(cache));
-    let progress = Progress::prepass_only(match args.progress {
-        ProgressArg::Json => Style::Json,
-        ProgressArg::Bar if args.quiet || !std::io::IsTerminal::is_terminal(&std::io::stderr()) => Style::Silent,
-        ProgressArg::Bar => Style::Bar,
-    });
+    let progress = Progress::prepass_only(Style::chosen(args.progress == ProgressArg::Json, args.quiet));
     crate::sys::signals::catch_termination().map_err(CommandError::failed)?;
     let start = Instant::now();
-    let watch = |_done: usize, total: usize| {
-        progress.prepass_rounds(total);
-        progress.prepass_round_done();
-        crate::sys::signals::received().is_none()
-    };
+    let watch = crate::render::watch_prepass(&progress);
     let outcome = crate::prepass::run(&integrator, &job.camera, &job.settings, &watch);
     progress.finish();
     let seconds = start.elapsed().as_secs_f64();
@@ -94,8 +86,7 @@ pub fn run(args: &RenderArgs) -> CommandResult {
             "sites": outcome.sites,
             "seconds": seconds,
         });
-        let text = serde_json::to_string_pretty(&stats)? + "\n";
-        crate::image::output::write_atomically(path, |tmp| std::fs::write(tmp, &text).map_err(|e| e.to_string()))
+        crate::image::output::write_json(path, &stats)
             .map_err(|e| CommandError::failed(format!("{}: {e}", path.display())))?;
     }
     progress.done(file);

@@ -356,9 +356,7 @@ impl Outputs {
                 .map_err(|e| CommandError::failed(format!("{}: {e}", png.display())))?;
         }
         if let Some(path) = &self.stats {
-            let text = serde_json::to_string_pretty(&stats)? + "\n";
-            output::write_atomically(path, |tmp| std::fs::write(tmp, &text).map_err(|e| e.to_string()))
-                .map_err(|e| CommandError::failed(format!("{}: {e}", path.display())))?;
+            output::write_json(path, &stats).map_err(|e| CommandError::failed(format!("{}: {e}", path.display())))?;
         }
         if let Some(d) = &denoised
             && !args.quiet
@@ -707,10 +705,10 @@ pub fn run(args: &RenderArgs) -> CommandResult {
     let integrator = Integrator::new(&job.scene, &job.tracer, &job.shading, job.cache.as_ref());
     let s = &job.settings;
     let tiles_restored = restored.as_ref().map_or(0, Restored::count);
-    let progress = match args.progress {
-        ProgressArg::Json => Progress::with_style(all_tiles.len(), progress::Style::Json),
-        ProgressArg::Bar => Progress::new(all_tiles.len(), args.quiet),
-    };
+    let progress = Progress::with_style(
+        all_tiles.len(),
+        progress::Style::chosen(args.progress == ProgressArg::Json, args.quiet),
+    );
     // From here a SIGTERM or SIGINT stops the render cleanly (see sys::signals).
     crate::sys::signals::catch_termination().map_err(CommandError::failed)?;
     let render_start = Instant::now();

@@ -173,6 +173,12 @@ pub fn is_data_channel(name: &str) -> bool {
     .any(|prefix| name.starts_with(prefix))
 }
 
+/// Writes `value` as pretty JSON (statistics), atomically.
+pub fn write_json(path: &Path, value: &impl serde::Serialize) -> Result<(), String> {
+    let text = serde_json::to_string_pretty(value).map_err(|e| e.to_string())? + "\n";
+    write_atomically(path, |tmp| std::fs::write(tmp, &text).map_err(|e| e.to_string()))
+}
+
 /// Writes a composite, tone-mapped, as an 8-bit PNG.
 pub fn write_preview(path: &Path, width: u32, height: u32, composite: &[Vec3]) -> Result<(), String> {
     let rgb = tone_map(composite);

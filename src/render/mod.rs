@@ -45,12 +45,7 @@ pub fn render_resumable(
     // A render stopped by SIGTERM or SIGINT (caught only in one-process renders, see
     // sys::signals) ends after the round or the tiles in progress.
     let stopped = || crate::sys::signals::received().is_some();
-    let watch = |done: usize, total: usize| {
-        progress.prepass_rounds(total);
-        progress.prepass_round_done();
-        debug_assert!(done <= total);
-        !stopped()
-    };
+    let watch = watch_prepass(progress);
     let prepass =
         (settings.prepass && integrator.cache.is_some()).then(|| prepass::run(integrator, camera, settings, &watch));
     // After the prepass the pixels only read the cache (see `Integrator::frozen`).
@@ -113,6 +108,17 @@ pub fn render_resumable(
         frame,
         threads: stats,
         prepass,
+    }
+}
+
+/// What the prepass hears after each of its rounds (`prepass::run`'s `watch`): the progress
+/// is told, and the prepass goes on unless a SIGTERM or SIGINT asked to stop (sys::signals).
+pub fn watch_prepass(progress: &Progress) -> impl Fn(usize, usize) -> bool + '_ {
+    move |done, total| {
+        debug_assert!(done <= total);
+        progress.prepass_rounds(total);
+        progress.prepass_round_done();
+        crate::sys::signals::received().is_none()
     }
 }
 
