@@ -170,22 +170,10 @@ pub fn run(args: &MergeArgs) -> CommandResult {
             out.display()
         )));
     }
-    if out.is_dir() {
-        return Err(CommandError::input(format!(
-            "{}: is a directory; give a file name",
-            out.display()
-        )));
-    }
-    if out.exists() && !args.overwrite {
-        return Err(CommandError::input(format!(
-            "{}: already exists (give --overwrite to replace it)",
-            out.display()
-        )));
-    }
+    super::render::check_new_output(out, args.overwrite)?;
     if let Some(part) = args.parts.iter().find(|p| !p.is_file()) {
         return Err(CommandError::input(format!("{}: no such part", part.display())));
     }
-    output::check_writable(out).map_err(|e| CommandError::input(format!("{}: {e}", out.display())))?;
     let parts = args.parts.iter().map(|p| read_part(p)).collect::<Result<Vec<_>, _>>()?;
     check_parts(&parts)?;
     let window = parts[0].image.window;

@@ -67,6 +67,19 @@ fn check_exr_name(exr: &Path) -> Result<(), CommandError> {
     )))
 }
 
+/// A file this command is about to write: not a directory, not an existing file unless
+/// `overwrite`, and writable here (checked before any work, so nothing fails at the end).
+pub fn check_new_output(path: &Path, overwrite: bool) -> Result<(), CommandError> {
+    not_a_directory(path)?;
+    if path.exists() && !overwrite {
+        return Err(CommandError::input(format!(
+            "{}: already exists (give --overwrite to replace it)",
+            path.display()
+        )));
+    }
+    output::check_writable(path).map_err(|e| CommandError::input(format!("{}: {e}", path.display())))
+}
+
 /// A directory is never replaced, with or without --overwrite: said before anything else.
 fn not_a_directory(path: &Path) -> Result<(), CommandError> {
     if path.is_dir() {
@@ -242,14 +255,7 @@ impl Outputs {
             .chain(outputs.png.iter())
             .chain(outputs.stats.iter())
         {
-            not_a_directory(path)?;
-            if path.exists() && !args.overwrite {
-                return Err(CommandError::input(format!(
-                    "{}: already exists (give --overwrite to replace it)",
-                    path.display()
-                )));
-            }
-            output::check_writable(path).map_err(|e| CommandError::input(format!("{}: {e}", path.display())))?;
+            check_new_output(path, args.overwrite)?;
         }
         Ok(outputs)
     }
