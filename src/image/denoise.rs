@@ -160,22 +160,6 @@ impl Denoiser {
     }
 }
 
-/// One plane denoised (guides prefiltered first), and the seconds it took, device included.
-pub fn denoise_plane(
-    color: &[Vec3],
-    guides: Option<Guides<'_>>,
-    width: u32,
-    height: u32,
-    quality: Quality,
-    threads: Option<usize>,
-) -> Result<(Vec<Vec3>, f64), String> {
-    let start = Instant::now();
-    let denoiser = Denoiser::new(quality, threads)?;
-    let clean = guides.map(|g| denoiser.prefilter(g, width, height)).transpose()?;
-    let plane = denoiser.denoise(color, clean.as_ref(), width, height)?;
-    Ok((plane, start.elapsed().as_secs_f64()))
-}
-
 /// What `--denoise` made of a frame.
 pub struct DenoisedFrame {
     /// The noisy layers among those written, each denoised.
@@ -264,6 +248,23 @@ mod tests {
     use crate::image::components::Components;
     use crate::image::data::PixelData;
     use crate::sampling::Rng;
+
+    /// One plane denoised (guides prefiltered first), and the seconds it took, device included:
+    /// the filter alone, for the tests below.
+    fn denoise_plane(
+        color: &[Vec3],
+        guides: Option<Guides<'_>>,
+        width: u32,
+        height: u32,
+        quality: Quality,
+        threads: Option<usize>,
+    ) -> Result<(Vec<Vec3>, f64), String> {
+        let start = Instant::now();
+        let denoiser = Denoiser::new(quality, threads)?;
+        let clean = guides.map(|g| denoiser.prefilter(g, width, height)).transpose()?;
+        let plane = denoiser.denoise(color, clean.as_ref(), width, height)?;
+        Ok((plane, start.elapsed().as_secs_f64()))
+    }
 
     const W: u32 = 96;
     const H: u32 = 80;
