@@ -227,16 +227,20 @@ mod tests {
         assert!(err.contains("other settings"), "{err}");
     }
 
+    /// A file of settings "s" holding `n` records of values 1, 2, ...
+    fn write_records(path: &Path, n: usize) {
+        let (file, _, _) = CacheFile::open(path, "s").unwrap();
+        for i in 0..n {
+            file.append(&flat_record(i as f32 + 1.0, 1.0));
+        }
+        file.finish().unwrap();
+    }
+
     #[test]
     fn torn_tail_is_dropped_and_cut_then_appending_works() {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("c.icc");
-        let (file, _, _) = CacheFile::open(&path, "s").unwrap();
-        for i in 0..3 {
-            file.append(&flat_record(i as f32 + 1.0, 1.0));
-        }
-        file.finish().unwrap();
-        drop(file);
+        write_records(&path, 3);
         // A killed writer leaves half a record.
         let mut bytes = std::fs::read(&path).unwrap();
         bytes.truncate(bytes.len() - 50);
@@ -256,12 +260,7 @@ mod tests {
     fn damage_inside_is_counted_and_a_torn_run_at_the_end_is_cut_in_one_open() {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("c.icc");
-        let (file, _, _) = CacheFile::open(&path, "s").unwrap();
-        for i in 0..5 {
-            file.append(&flat_record(i as f32 + 1.0, 1.0));
-        }
-        file.finish().unwrap();
-        drop(file);
+        write_records(&path, 5);
         let mut bytes = std::fs::read(&path).unwrap();
         let body = bytes.len() - 5 * RECORD_BYTES;
         // Record 1 damaged inside the file; records 3 and 4 torn (a batch cut mid-write).
@@ -284,12 +283,7 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("c.icc");
         assert!(read_only(&path, "s").unwrap_err().contains("no such cache file"));
-        let (file, _, _) = CacheFile::open(&path, "s").unwrap();
-        for i in 0..3 {
-            file.append(&flat_record(i as f32 + 1.0, 1.0));
-        }
-        file.finish().unwrap();
-        drop(file);
+        write_records(&path, 3);
         // A torn tail is skipped but stays in the file.
         let mut bytes = std::fs::read(&path).unwrap();
         bytes.truncate(bytes.len() - 10);
