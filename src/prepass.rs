@@ -14,11 +14,15 @@
 //! the round began (records of the round are held back), the records it needs are computed in
 //! parallel, and they join the cache in site order. The record set, and so the image, is the
 //! same whatever the number of threads and the tile size.
+//!
+//! Between rounds and at the end the records are checked against their neighbours
+//! (`irradiance::validation`): shrunk where their extrapolation misses a neighbour, and their
+//! overshoot fitted once the set is complete; both depend on the record set alone.
 
 use crate::image::region::Region;
 use crate::irradiance::IrradianceCache;
 use crate::irradiance::index::FrozenIndex;
-use crate::irradiance::record::Record;
+use crate::irradiance::record::{Record, RecordIdentity};
 use crate::render::pixel::{RenderSettings, ThreadClock, ThreadStats, pixel_offset};
 use crate::sampling::Rng;
 use crate::scene::view::Camera;
@@ -138,6 +142,20 @@ pub fn rounds_in(region: Region) -> Vec<Vec<Site>> {
         site.y += region.y0;
     }
     out
+}
+
+/// How many of `rounds(width, height)`'s rounds are its finest level's (every pixel).
+fn finest_rounds(width: u32, height: u32) -> usize {
+    (width.min(3) * height.min(3)) as usize
+}
+
+/// The identities of the last `count` records pushed to `snapshot` (a round's).
+fn last_records(snapshot: &FrozenIndex, count: usize) -> std::collections::HashSet<RecordIdentity> {
+    let all = snapshot.records();
+    all[all.len().saturating_sub(count)..]
+        .iter()
+        .map(Record::identity)
+        .collect()
 }
 
 /// Rounds of the sample positions of the pixels `needs` marks (row-major), after the centres:
@@ -442,11 +460,22 @@ fn run_watched<E>(
         Ok(())
     };
     // Only the region's pixels (the whole image without --region) will be shaded.
-    let lattice = rounds_in(settings.area(camera));
+    let area = settings.area(camera);
+    let lattice = rounds_in(area);
     let mut total = lattice.len();
+    // Records shrink where their neighbours disagree (`irradiance::validation`) after every
+    // round but the finest level's, whose rounds fill the gaps shrinking opens.
+    let coarse = lattice.len().saturating_sub(finest_rounds(area.width(), area.height()));
     let mut go_on = true;
-    for sites in lattice {
+    for (k, sites) in lattice.into_iter().enumerate() {
+        let before = outcome.records;
         run(sites, &mut snapshot, &mut outcome)?;
+        if k < coarse && outcome.records > before {
+            let fresh = last_records(&snapshot, (outcome.records - before) as usize);
+            if cache.shrink_where_neighbours_disagree(|_| true, |r| fresh.contains(&r.identity())) > 0 {
+                snapshot = cache.snapshot();
+            }
+        }
         go_on = watch(outcome.rounds, total);
         if !go_on {
             break;
@@ -463,6 +492,10 @@ fn run_watched<E>(
                 break;
             }
         }
+    }
+    // The record set is complete: each record's overshoot is fitted from its neighbours.
+    if go_on {
+        cache.fit_curvatures();
     }
     // The cache is complete: from now on lookups read its lock-free copy.
     cache.freeze();

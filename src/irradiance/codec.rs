@@ -92,6 +92,7 @@ pub fn decode(bytes: &[u8]) -> Result<Record, DecodeError> {
         translation_gradient,
         rotation_gradient,
         horizon,
+        curvature: 0.0,
     };
     validate(&record)?;
     Ok(record)

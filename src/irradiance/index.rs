@@ -123,6 +123,30 @@ impl RecordIndex {
         self.contention.load(Ordering::Relaxed)
     }
 
+    /// Puts `new` in the place of a record equal to `old` (validation shrinks a record: its
+    /// level and cell may change). False when no such record is held.
+    pub fn replace(&self, old: &Record, new: Record) -> bool {
+        let level = self.level_for(old.reach());
+        let (x, y, z) = self.cell_of(old.position, self.cell_size(level));
+        let key = (level, x, y, z);
+        {
+            let mut map = self.shards[shard_of(&key)].write().unwrap_or_else(|e| e.into_inner());
+            let Some(records) = map.get_mut(&key) else {
+                return false;
+            };
+            let Some(at) = records.iter().position(|r| r == old) else {
+                return false;
+            };
+            records.swap_remove(at);
+            if records.is_empty() {
+                map.remove(&key);
+            }
+        }
+        self.count.fetch_sub(1, Ordering::Relaxed);
+        self.insert(new);
+        true
+    }
+
     pub fn insert(&self, record: Record) {
         let level = self.level_for(record.reach());
         let (x, y, z) = self.cell_of(record.position, self.cell_size(level));
@@ -178,8 +202,7 @@ impl RecordIndex {
     /// records sums them in the same order, whatever order they arrived in.
     pub fn frozen(&self) -> FrozenIndex {
         let mut records = self.all();
-        let key = |r: &Record| [r.position, r.normal, r.value].map(|v| v.to_array().map(f32::to_bits));
-        records.sort_by_key(key);
+        records.sort_by_key(Record::identity);
         FrozenIndex::of(self.base_cell, records)
     }
 
@@ -252,6 +275,24 @@ impl FrozenIndex {
         self.records.len()
     }
 
+    /// The records, in the order they were listed.
+    pub fn records(&self) -> &[Record] {
+        &self.records
+    }
+
+    /// `for_each_near` with each record's position in `records()`.
+    pub fn for_each_near_indexed(&self, p: Vec3, mut visit: impl FnMut(usize, &Record)) {
+        let mut levels = self.occupied_levels;
+        while levels != 0 {
+            let level = levels.trailing_zeros();
+            levels &= levels - 1;
+            let (x, y, z) = cell_of(p, cell_size(self.base_cell, level));
+            if let Some(list) = self.cells.get(&(level, x, y, z)) {
+                list.iter().for_each(|&i| visit(i as usize, &self.records[i as usize]));
+            }
+        }
+    }
+
     pub fn is_empty(&self) -> bool {
         self.records.is_empty()
     }
@@ -259,15 +300,7 @@ impl FrozenIndex {
     /// Calls `visit` for every record whose reach may cover `p` (a superset, as
     /// `RecordIndex::for_each_near`), each once.
     pub fn for_each_near(&self, p: Vec3, mut visit: impl FnMut(&Record)) {
-        let mut levels = self.occupied_levels;
-        while levels != 0 {
-            let level = levels.trailing_zeros();
-            levels &= levels - 1;
-            let (x, y, z) = cell_of(p, cell_size(self.base_cell, level));
-            if let Some(list) = self.cells.get(&(level, x, y, z)) {
-                list.iter().for_each(|&i| visit(&self.records[i as usize]));
-            }
-        }
+        self.for_each_near_indexed(p, |_, r| visit(r));
     }
 }
 
@@ -276,6 +309,30 @@ mod tests {
     use super::*;
     use crate::irradiance::record::tests::flat_record;
     use crate::sampling::Rng;
+
+    /// A record replaced by a smaller one is found where the smaller one reaches only, and
+    /// counted once.
+    #[test]
+    fn a_replaced_record_moves_to_its_new_reach() {
+        let index = RecordIndex::new(0.01);
+        let big = flat_record(1.0, 2.0);
+        index.insert(big.clone());
+        index.insert(flat_record(5.0, 0.1));
+        let mut small = big.clone();
+        small.radii = [0.2, 0.2];
+        assert!(index.replace(&big, small.clone()));
+        assert!(!index.replace(&big, small.clone()), "the old form is gone");
+        assert_eq!(index.len(), 2);
+        let mut values = Vec::new();
+        index.for_each_near(Vec3::ZERO, |r| values.push((r.value.x, r.radii[0])));
+        values.sort_by(|a, b| a.0.total_cmp(&b.0));
+        assert_eq!(values, [(1.0, 0.2), (5.0, 0.1)]);
+        let mut far = 0;
+        index.for_each_near(Vec3::new(1.5, 0.0, 0.0), |r| {
+            far += usize::from((r.position - Vec3::new(1.5, 0.0, 0.0)).length() <= r.reach())
+        });
+        assert_eq!(far, 0);
+    }
 
     #[test]
     fn finds_every_record_whose_reach_covers_the_point() {

@@ -9,6 +9,7 @@ pub mod index;
 pub mod persist;
 pub mod record;
 pub mod trace;
+pub mod validation;
 
 use glam::Vec3;
 use hemisphere::Hemisphere;
@@ -246,6 +247,60 @@ impl IrradianceCache {
             .filter(|(v, _)| v.is_finite())
     }
 
+    /// Shrinks the records `revisable` picks whose extrapolation misses a neighbouring
+    /// record's value (`validation::shrink_factors`), checking only pairs with a record
+    /// `fresh` picks; a shrunk record's new form is appended to the file, where it replaces
+    /// the old one on loading. Returns how many shrank.
+    pub fn shrink_where_neighbours_disagree(
+        &self,
+        revisable: impl Fn(&Record) -> bool,
+        fresh: impl Fn(&Record) -> bool,
+    ) -> usize {
+        let frozen = self.index.frozen();
+        let records = frozen.records();
+        let revisable: Vec<bool> = records.iter().map(&revisable).collect();
+        let fresh: Vec<bool> = records.iter().map(&fresh).collect();
+        let factors = validation::shrink_factors(
+            &frozen,
+            self.settings.metric,
+            self.settings.accuracy,
+            &revisable,
+            &fresh,
+        );
+        let floor = self.settings.min_radius * STEEP_RADIUS_FRACTION;
+        let mut shrunk = 0;
+        for (old, factor) in records.iter().zip(factors) {
+            if factor >= 1.0 {
+                continue;
+            }
+            let mut new = old.clone();
+            new.radii = old.radii.map(|r| (r * factor).max(floor).min(r));
+            if new.radii == old.radii {
+                continue;
+            }
+            if let Some(file) = &self.file {
+                file.append(&new);
+            }
+            self.index.replace(old, new);
+            shrunk += 1;
+        }
+        shrunk
+    }
+
+    /// Fits every record's `curvature` from its neighbours (`validation::fit_curvatures`):
+    /// once the record set is complete, before the cache is frozen.
+    pub fn fit_curvatures(&self) {
+        let frozen = self.index.frozen();
+        let curvatures = validation::fit_curvatures(&frozen, self.settings.metric, self.settings.accuracy);
+        for (old, curvature) in frozen.records().iter().zip(curvatures) {
+            if curvature != old.curvature {
+                let mut new = old.clone();
+                new.curvature = curvature;
+                self.index.replace(old, new);
+            }
+        }
+    }
+
     /// Adds a record (and appends it to the file, if any).
     pub fn insert(&self, record: Record) {
         debug_assert!(self.frozen.get().is_none(), "a record inserted into a frozen cache");
@@ -363,6 +418,7 @@ impl IrradianceCache {
             translation_gradient,
             rotation_gradient,
             horizon,
+            curvature: 0.0,
         }
     }
 }

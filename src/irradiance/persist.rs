@@ -88,10 +88,19 @@ fn decode_file(bytes: &[u8], settings: &str, report: &mut LoadReport) -> Result<
         intact -= 1;
     }
     let torn = (whole - intact) * RECORD_BYTES;
-    let mut records = Vec::with_capacity(intact);
+    let mut records: Vec<Record> = Vec::with_capacity(intact);
+    // A record the prepass shrank is appended again (`shrink_where_neighbours_disagree`):
+    // the later form replaces the earlier one, in the earlier one's place.
+    let mut seen = std::collections::HashMap::new();
     for i in 0..intact {
         match record(i) {
-            Ok(r) => records.push(r),
+            Ok(r) => match seen.entry(r.identity()) {
+                std::collections::hash_map::Entry::Occupied(at) => records[*at.get()] = r,
+                std::collections::hash_map::Entry::Vacant(slot) => {
+                    slot.insert(records.len());
+                    records.push(r);
+                }
+            },
             Err(_) => report.corrupt += 1,
         }
     }
@@ -234,6 +243,27 @@ mod tests {
             file.append(&flat_record(i as f32 + 1.0, 1.0));
         }
         file.finish().unwrap();
+    }
+
+    /// A record appended again with smaller radii (the prepass shrank it) loads once, in its
+    /// later form and its first place; read-only loading agrees.
+    #[test]
+    fn a_revised_record_replaces_its_first_form() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("c.icc");
+        write_records(&path, 3);
+        let (file, _, _) = CacheFile::open(&path, "s").unwrap();
+        let mut revised = flat_record(2.0, 1.0);
+        revised.radii = [0.5, 0.25];
+        file.append(&revised);
+        file.finish().unwrap();
+        let (_, records, report) = CacheFile::open(&path, "s").unwrap();
+        let (read, _) = read_only(&path, "s").unwrap();
+        for records in [records, read] {
+            assert_eq!(records.iter().map(|r| r.value.x).collect::<Vec<_>>(), [1.0, 2.0, 3.0]);
+            assert_eq!(records[1].radii, [0.5, 0.25]);
+        }
+        assert_eq!(report.loaded, 3);
     }
 
     #[test]

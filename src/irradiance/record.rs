@@ -33,6 +33,11 @@ pub struct Record {
     /// Per tangent-plane sector around u_axis, the horizontal distance to the nearest low
     /// obstacle the hemisphere saw: light cannot be extrapolated past it (leak test).
     pub horizon: [f32; HORIZON_SECTORS],
+    /// How far the first-order extrapolation overshoots, relative to the value, per unit of
+    /// `t2` (0 at the record, 1 at its edge): fitted from the neighbouring records once the
+    /// record set is complete (`validation::fit_curvatures`), 0 until then. Not stored or sent:
+    /// every process derives it from the same records.
+    pub curvature: f32,
 }
 
 /// Which error metric weighs records.
@@ -49,6 +54,14 @@ pub enum Metric {
 /// one side more than the other would bias the cache.
 const MIN_EXTRAPOLATION: f32 = 0.5;
 const MAX_EXTRAPOLATION: f32 = 1.5;
+
+fn clamp_extrapolation(factor: f32) -> f32 {
+    if factor.is_finite() {
+        factor.clamp(MIN_EXTRAPOLATION, MAX_EXTRAPOLATION)
+    } else {
+        1.0
+    }
+}
 
 /// The sector (of `HORIZON_SECTORS`, counter-clockwise from the u axis) of the tangent-plane
 /// direction (u, v): the octant of its angle, found by comparisons instead of an arctangent
@@ -68,7 +81,15 @@ pub fn max_normal_deviation(accuracy: f32) -> f32 {
     (std::f32::consts::SQRT_2 * accuracy).min(std::f32::consts::FRAC_PI_4)
 }
 
+/// What tells records apart, and stays when validation revises one's radii or curvature.
+pub type RecordIdentity = [[u32; 3]; 3];
+
 impl Record {
+    /// The bits of the position, normal and value: no two records made apart share them.
+    pub fn identity(&self) -> RecordIdentity {
+        [self.position, self.normal, self.value].map(|v| v.to_array().map(f32::to_bits))
+    }
+
     pub fn v_axis(&self) -> Vec3 {
         self.normal.cross(self.u_axis)
     }
@@ -78,17 +99,33 @@ impl Record {
         self.radii[0].max(self.radii[1])
     }
 
-    /// The record's value moved to (point, normal) by its gradients.
+    /// The squared distance of a point from the record along its tangent plane, in units of
+    /// its radii: 1 on the edge of its ellipse.
+    pub fn t2(&self, point: Vec3) -> f32 {
+        let offset = point - self.position;
+        let tangent = offset - self.normal * offset.dot(self.normal);
+        let du = tangent.dot(self.u_axis) / self.radii[0];
+        let dv = tangent.dot(self.v_axis()) / self.radii[1];
+        du * du + dv * dv
+    }
+
+    /// The record's value moved to (point, normal) by its gradients, less its fitted
+    /// overshoot (`curvature`).
     pub fn extrapolate(&self, point: Vec3, normal: Vec3) -> Vec3 {
-        let factor = 1.0
-            + self.translation_gradient.dot(point - self.position)
-            + self.rotation_gradient.dot(normal - self.normal);
-        let factor = if factor.is_finite() {
-            factor.clamp(MIN_EXTRAPOLATION, MAX_EXTRAPOLATION)
-        } else {
-            1.0
-        };
-        self.value * factor
+        let mut factor = self.gradient_factor(point, normal);
+        if self.curvature != 0.0 {
+            factor -= self.curvature * self.t2(point);
+        }
+        self.value * clamp_extrapolation(factor)
+    }
+
+    /// The value moved by the gradients alone (the tangent the curvature corrects).
+    pub fn first_order(&self, point: Vec3, normal: Vec3) -> Vec3 {
+        self.value * clamp_extrapolation(self.gradient_factor(point, normal))
+    }
+
+    fn gradient_factor(&self, point: Vec3, normal: Vec3) -> f32 {
+        1.0 + self.translation_gradient.dot(point - self.position) + self.rotation_gradient.dot(normal - self.normal)
     }
 
     fn sector_of(&self, tangent_offset: Vec3) -> usize {
@@ -175,6 +212,7 @@ pub(crate) mod tests {
             translation_gradient: Vec3::ZERO,
             rotation_gradient: Vec3::ZERO,
             horizon: [f32::INFINITY; HORIZON_SECTORS],
+            curvature: 0.0,
         }
     }
 
