@@ -462,6 +462,33 @@ fn animations_of_meshes_or_lights_are_refused_for_frames_and_ignored_by_stills()
     assert!(!d.join("t.0001.exr").exists());
     // A still render of the file is the rest pose, as before frames existed.
     render(&scene, &["-x", "8", "-y", "6", "-o", s(&d.join("still.exr"))]);
+    // A light's animation likewise.
+    let mut b = GltfBuilder::new();
+    room(&mut b);
+    let camera = b.perspective_camera(YFOV);
+    b.node(json!({"camera": camera, "translation": [0.0, 1.2, 1.9]}));
+    let bulb = b.point_light([0.0, 2.0, 0.0], 5.0);
+    b.animation("flicker", &[(bulb, "translation", "STEP", &TIMES, &MOVES)]);
+    let scene = b.write(d, "bulb");
+    let refused = run(&[
+        "render",
+        s(&scene),
+        "-q",
+        "--frame",
+        "1",
+        "-x",
+        "8",
+        "-y",
+        "6",
+        "-o",
+        s(&d.join("l.exr")),
+    ]);
+    assert_eq!(refused.status.code(), Some(2), "{}", stderr(&refused));
+    let e = stderr(&refused);
+    assert!(
+        e.contains("animation 'flicker'") && e.contains("a light with it"),
+        "{e}"
+    );
 }
 
 #[test]
@@ -752,4 +779,108 @@ fn sigterm_stops_a_sequence_between_whole_frames_and_the_same_command_goes_on() 
     for n in 1..=6 {
         assert!(d.join("out").join(format!("s.000{n}.exr")).exists(), "frame {n}");
     }
+}
+
+#[test]
+fn animations_breaking_gltf_rules_are_named_when_frames_need_them() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let scene = animated_room(d, "good", &[("translation", "LINEAR", &TIMES, &MOVES)]);
+    let doc: Value = serde_json::from_str(&std::fs::read_to_string(&scene).unwrap()).unwrap();
+    let input = doc["animations"][0]["samplers"][0]["input"].clone();
+    type Edit = fn(&mut Value, &Value);
+    let cases: [(&str, Edit, &str); 4] = [
+        (
+            "bezier",
+            |a, _| a["samplers"][0]["interpolation"] = json!("BEZIER"),
+            "interpolation 'BEZIER' is not LINEAR, STEP or CUBICSPLINE",
+        ),
+        (
+            "sampler",
+            |a, _| a["channels"][0]["sampler"] = json!(5),
+            "sampler 5 out of range",
+        ),
+        (
+            "scalar",
+            |a, input| a["samplers"][0]["output"] = input.clone(),
+            "output must be VEC3 float, got float SCALAR",
+        ),
+        (
+            "cubic",
+            |a, _| a["samplers"][0]["interpolation"] = json!("CUBICSPLINE"),
+            "2 outputs for 2 key times (CUBICSPLINE needs three per key",
+        ),
+    ];
+    for (name, edit, expected) in cases {
+        let mut broken = doc.clone();
+        edit(&mut broken["animations"][0], &input);
+        let path = d.join(format!("{name}.gltf"));
+        std::fs::write(&path, serde_json::to_string(&broken).unwrap()).unwrap();
+        let out = d.join(format!("{name}.exr"));
+        let refused = run(&[
+            "render",
+            s(&path),
+            "-q",
+            "--frame",
+            "3",
+            "-x",
+            "8",
+            "-y",
+            "6",
+            "-o",
+            s(&out),
+        ]);
+        assert_eq!(refused.status.code(), Some(2), "{name}: {}", stderr(&refused));
+        let e = stderr(&refused);
+        assert!(
+            e.contains("animation 'walk': channel 0") && e.contains(expected),
+            "{name}: {e}"
+        );
+        // The still render of the same file does not need the animation.
+        render(&path, &["-x", "8", "-y", "6", "-o", s(&out)]);
+    }
+}
+
+#[test]
+fn a_reference_of_one_frame_has_that_frame_s_view() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let scene = animated_room(d, "walk", &[("translation", "LINEAR", &TIMES, &MOVES)]);
+    let frame = d.join("f.####.exr");
+    let mut args = vec!["--frame", "12", "-o", s(&frame)];
+    args.extend(BRUTE);
+    render(&scene, &args);
+    let reference = d.join("ref.####.exr");
+    run_ok(&[
+        "reference",
+        s(&scene),
+        "--frame",
+        "12",
+        "-x",
+        "48",
+        "-y",
+        "36",
+        "-ad",
+        "16",
+        "--noise",
+        "0.5",
+        "--max-seconds",
+        "5",
+        "-q",
+        "--no-preview",
+        "-o",
+        s(&reference),
+    ]);
+    let written = d.join("ref.0012.exr");
+    assert_eq!(view_numbers(&written), view_numbers(&d.join("f.0012.exr")));
+    let header = read_image(&written, &["icrender/frame", "icrender/frame_time_s"]).unwrap();
+    assert_eq!(header.attribute("icrender/frame"), Some("12"));
+    assert_eq!(header.attribute("icrender/frame_time_s"), Some("0.5"));
+    let several = run(&["reference", s(&scene), "--frames", "1-2", "-x", "8", "-y", "6", "-q"]);
+    assert_eq!(several.status.code(), Some(2));
+    assert!(
+        stderr(&several).contains("a reference is one image"),
+        "{}",
+        stderr(&several)
+    );
 }

@@ -13,7 +13,8 @@
 //! resumes the first unfinished one from its journal and goes on.
 
 use super::render::{
-    Outputs, checkpoint_key, job_stats, kept_after_stop, output_name, render_tiles, with_checkpoint_cache,
+    Outputs, check_denoiser, checkpoint_key, job_stats, kept_after_stop, output_name, render_tiles,
+    with_checkpoint_cache,
 };
 use super::{CommandError, CommandResult, warn};
 use crate::checkpoint::Checkpoint;
@@ -51,6 +52,9 @@ fn finished_before(checkpoint: Option<&Path>, frame: u32, exr: &Path) -> bool {
 /// --overwrite, every folder must be writable); frames a checkpoint says are finished are not
 /// checked, they are skipped.
 fn frame_outputs(args: &RenderArgs, frames: &Frames) -> Result<Vec<(u32, Option<Outputs>)>, CommandError> {
+    if args.denoise {
+        check_denoiser(args)?;
+    }
     let exr =
         NamePattern::new(&output_name(args), frames.count()).map_err(|e| CommandError::input(format!("-o {e}")))?;
     let stats = args

@@ -470,7 +470,7 @@ fn guides_text(d: &denoise::DenoisedFrame) -> &'static str {
 
 /// `--denoise` needs the library and a working device: checked before anything is rendered
 /// or written, so a render never runs for minutes only to fail at the end.
-fn check_denoiser(args: &RenderArgs) -> Result<(), CommandError> {
+pub(crate) fn check_denoiser(args: &RenderArgs) -> Result<(), CommandError> {
     denoise::Denoiser::new(denoise_quality(args), args.threads)
         .map(|_| ())
         .map_err(|e| CommandError::input(format!("--denoise: {e}")))
