@@ -644,8 +644,8 @@ fn a_prepass_over_all_frames_serves_frame_tasks_that_make_no_records() {
     let per_frame = prepass["frames"].as_array().unwrap();
     assert_eq!(per_frame.len(), 5);
     let total = prepass["records_total"].as_u64().unwrap();
-    // Two chunks of frames, each reading the file only.
-    for (chunk, frames) in [("a", "0-2"), ("b", "3-4")] {
+    // Two chunks of frames, each reading the file only, and all frames in one task.
+    for (chunk, frames) in [("a", "0-2"), ("b", "3-4"), ("all", "0-4")] {
         let out = d.join(format!("{chunk}.####.exr"));
         let stats = d.join(format!("{chunk}.json"));
         let mut args = vec![
@@ -666,6 +666,12 @@ fn a_prepass_over_all_frames_serves_frame_tasks_that_make_no_records() {
         let st = stats_of(&d.join(format!("{chunk}.000{n}.json")));
         assert_eq!(st["prepass_records"], 0, "frame {n}: {st}");
         assert_eq!(st["records_loaded"].as_u64().unwrap(), total);
+        // Every frame interpolates the file's records alone: the same image however chunked.
+        let (a, b) = (
+            read_exr(&d.join(format!("{chunk}.000{n}.exr"))),
+            read_exr(&d.join(format!("all.000{n}.exr"))),
+        );
+        assert_eq!(largest_difference(&a, &b), 0.0, "frame {n}");
     }
 }
 
