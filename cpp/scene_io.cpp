@@ -72,6 +72,9 @@ constexpr uint64_t kMaxNodeVisits = uint64_t(1) << 26;
 // overflow the stack, so the JSON is screened before tinygltf sees it.
 constexpr size_t kMaxJsonDepth = 256;
 constexpr double kHalfPi = 1.57079632679489661923;
+// Key times and values of all animations together (floats): a bound on what a file can make
+// the loader allocate beyond its buffers.
+constexpr uint64_t kMaxAnimationValues = uint64_t(1) << 26;
 
 // tinygltf messages are newline-terminated lines; callers want single lines.
 std::vector<std::string> split_lines(const std::string &text) {
@@ -877,6 +880,12 @@ struct icr_scene {
     std::vector<icr_texture> textures;
     std::vector<icr_light> lights;
     std::vector<icr_camera> cameras;
+    std::vector<icr_node> nodes;
+    std::vector<icr_channel> channels;
+    // Key times and values of the channels, one array per accessor read (channels may share
+    // one); icr_channel's pointers are set once every array is in place.
+    std::vector<std::vector<float>> anim_data;
+    std::vector<std::pair<size_t, size_t>> channel_data;  // channel -> (times, values) in anim_data
     std::string warnings;
 
     const char *keep(std::string s) {
@@ -895,6 +904,7 @@ class Converter {
         check_graph_and_memory();
         convert_textures_and_materials();
         walk_scene();
+        convert_animations();
         finish();
     }
 
@@ -911,6 +921,8 @@ class Converter {
     std::vector<char> on_path_;
     uint64_t visits_ = 0;
     bool warned_skin_ = false;
+    std::vector<int64_t> anim_accessor_data_;  // glTF accessor -> index into s_.anim_data (-1: not read)
+    uint64_t anim_values_ = 0;
 
     static std::string quoted_or_index(const std::string &name, const char *kind, size_t index) {
         if (!name.empty()) return std::string(kind) + " '" + shorten(name) + "'";
@@ -1419,18 +1431,26 @@ class Converter {
 
     // ----- nodes
 
-    Mat4 local_transform(const tinygltf::Node &node, const std::string &label) {
+    // The node's local transform as the file gives it, into `pose`: its matrix, or its
+    // translation, rotation (normalised) and scale with glTF's defaults where absent. Animations
+    // replace parts of the TRS at other times (Rust recomputes the matrix the way
+    // `local_transform` does).
+    void local_pose(const tinygltf::Node &node, const std::string &label, icr_node *pose) {
         if (!node.matrix.empty()) {
             if (node.matrix.size() != 16) fail(label + ": matrix must have 16 elements");
-            Mat4 m;
-            for (size_t i = 0; i < 16; ++i) m[i] = node.matrix[i];
-            return m;
+            pose->has_matrix = 1;
+            for (size_t i = 0; i < 16; ++i) pose->matrix[i] = node.matrix[i];
+            return;
         }
         if (!node.translation.empty() && node.translation.size() != 3)
             fail(label + ": translation must have 3 elements");
         if (!node.rotation.empty() && node.rotation.size() != 4) fail(label + ": rotation must have 4 elements");
         if (!node.scale.empty() && node.scale.size() != 3) fail(label + ": scale must have 3 elements");
-        double t[3] = {0, 0, 0}, s[3] = {1, 1, 1}, q[4] = {0, 0, 0, 1};
+        double *t = pose->translation, *s = pose->scale, *q = pose->rotation;
+        t[0] = t[1] = t[2] = 0.0;
+        s[0] = s[1] = s[2] = 1.0;
+        q[0] = q[1] = q[2] = 0.0;
+        q[3] = 1.0;
         for (size_t i = 0; i < node.translation.size(); ++i) t[i] = node.translation[i];
         for (size_t i = 0; i < node.scale.size(); ++i) s[i] = node.scale[i];
         for (size_t i = 0; i < node.rotation.size(); ++i) q[i] = node.rotation[i];
@@ -1438,19 +1458,27 @@ class Converter {
         // does not also scale.
         double ql = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
         if (ql > 0.0 && std::isfinite(ql)) {
-            for (double &c : q) c /= ql;
+            for (int i = 0; i < 4; ++i) q[i] /= ql;
         } else {
             warnings.push_back(label + ": rotation quaternion has no length, ignored");
             q[0] = q[1] = q[2] = 0.0;
             q[3] = 1.0;
         }
+    }
+
+    static Mat4 local_transform(const icr_node &pose) {
+        Mat4 m{};
+        if (pose.has_matrix) {
+            for (size_t i = 0; i < 16; ++i) m[i] = pose.matrix[i];
+            return m;
+        }
+        const double *t = pose.translation, *s = pose.scale, *q = pose.rotation;
         const double x = q[0], y = q[1], z = q[2], w = q[3];
         const double r[3][3] = {
             {1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)},
             {2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)},
             {2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)},
         };
-        Mat4 m{};
         for (int c = 0; c < 3; ++c)
             for (int row = 0; row < 3; ++row) m[size_t(c * 4 + row)] = r[row][c] * s[c];
         m[12] = t[0];
@@ -1466,13 +1494,18 @@ class Converter {
         size_t next_child;
     };
 
-    // Places one node (instances, camera, light) and returns its world matrix.
-    Mat4 place_node(size_t ni, const Mat4 &parent) {
+    // Places one node (instances, camera, light) and returns its world matrix. `parent_index`
+    // is -1 for a root.
+    Mat4 place_node(size_t ni, const Mat4 &parent, int64_t parent_index) {
         if (++visits_ > kMaxNodeVisits)
             fail("node graph expands to more than " + std::to_string(kMaxNodeVisits) + " node visits");
         const tinygltf::Node &node = m_.nodes[ni];
         const std::string label = quoted_or_index(node.name, "node", ni);
-        const Mat4 world = mul(parent, local_transform(node, label));
+        icr_node &pose = s_.nodes[ni];
+        pose.parent = int32_t(parent_index);
+        pose.in_scene = 1;
+        local_pose(node, label, &pose);
+        const Mat4 world = mul(parent, local_transform(pose));
 
         if (node.mesh >= 0) {
             // One copy of the name for all the node's primitives.
@@ -1491,15 +1524,22 @@ class Converter {
                 inst.node = uint32_t(ni);
                 inst.node_name = node_name;
                 s_.instances.push_back(inst);
+                pose.places |= ICR_PLACES_MESH;
             }
         } else if (node.mesh < -1) {
             fail(label + ": mesh " + std::to_string(node.mesh) + " out of range");
         }
 
-        if (node.camera >= 0 || node.camera < -1) add_camera(node, label, world);
+        if (node.camera >= 0 || node.camera < -1) {
+            add_camera(node, ni, label, world);
+            pose.places |= ICR_PLACES_CAMERA;
+        }
 
         auto lp = node.extensions.find("KHR_lights_punctual");
-        if (lp != node.extensions.end()) add_light(node, label, lp->second, world);
+        if (lp != node.extensions.end()) {
+            add_light(node, label, lp->second, world);
+            pose.places |= ICR_PLACES_LIGHT;
+        }
         return world;
     }
 
@@ -1519,7 +1559,7 @@ class Converter {
             if (on_path_[ni]) fail("node graph has a cycle at node " + std::to_string(index));
             if (path.size() > kMaxNodeDepth)
                 fail("node graph deeper than " + std::to_string(kMaxNodeDepth) + " levels");
-            Mat4 world = place_node(ni, parent_world);
+            Mat4 world = place_node(ni, parent_world, parent);
             on_path_[ni] = 1;
             path.push_back(PathEntry{ni, world, 0});
         };
@@ -1538,7 +1578,7 @@ class Converter {
         }
     }
 
-    void add_camera(const tinygltf::Node &node, const std::string &label, const Mat4 &world) {
+    void add_camera(const tinygltf::Node &node, size_t ni, const std::string &label, const Mat4 &world) {
         if (node.camera < 0 || size_t(node.camera) >= m_.cameras.size())
             fail(label + ": camera " + std::to_string(node.camera) + " out of range");
         const tinygltf::Camera &cam = m_.cameras[size_t(node.camera)];
@@ -1558,6 +1598,7 @@ class Converter {
         for (int i = 0; i < 3; ++i) out.position[i] = world[size_t(12 + i)];
         transform_dir(world, 0, 0, -1, out.forward);
         transform_dir(world, 0, 1, 0, out.up);
+        out.node = uint32_t(ni);
         s_.cameras.push_back(out);
     }
 
@@ -1612,10 +1653,157 @@ class Converter {
         mesh_prims_.assign(m_.meshes.size(), {});
         mesh_done_.assign(m_.meshes.size(), false);
         on_path_.assign(m_.nodes.size(), 0);
+        s_.nodes.assign(m_.nodes.size(), icr_node{});
+        for (size_t i = 0; i < m_.nodes.size(); ++i) {
+            icr_node &n = s_.nodes[i];
+            n.name = s_.keep(m_.nodes[i].name);
+            n.parent = -1;
+            n.rotation[3] = 1.0;
+            n.scale[0] = n.scale[1] = n.scale[2] = 1.0;
+        }
         for (int r : scene_roots()) walk_from(r);
     }
 
+
+    // ----- animations
+
+    // An accessor's elements as floats (normalised integers converted as glTF 2.0 says), read
+    // once however many channels use it.
+    size_t animation_floats(int accessor, const std::string &what, bool times, bool rotation, int components) {
+        AccessorView v = view_accessor(m_, accessor, what);
+        const int ct = v.component_type;
+        const bool is_float = ct == TINYGLTF_COMPONENT_TYPE_FLOAT;
+        const bool is_normalised = v.normalized && (ct == TINYGLTF_COMPONENT_TYPE_BYTE ||
+                                                    ct == TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE ||
+                                                    ct == TINYGLTF_COMPONENT_TYPE_SHORT ||
+                                                    ct == TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT);
+        if (v.components != components || !(is_float || (rotation && is_normalised)))
+            fail(what + " must be " + (times ? "SCALAR float (key times in seconds)"
+                                             : rotation ? "VEC4 of float or normalized integers (x y z w)"
+                                                        : "VEC3 float") +
+                 ", got " + (v.normalized ? "normalized " : "") + component_name(ct) + " " +
+                 type_name(m_.accessors[size_t(accessor)].type));
+        if (anim_accessor_data_[size_t(accessor)] >= 0) return size_t(anim_accessor_data_[size_t(accessor)]);
+        const uint64_t n = mul_checked(v.count, uint64_t(components), what);
+        anim_values_ = add_checked(anim_values_, n, what);
+        if (anim_values_ > kMaxAnimationValues)
+            fail("the animations hold more than " + std::to_string(kMaxAnimationValues) + " key values");
+        std::vector<float> out(static_cast<size_t>(n));
+        const int size = tinygltf::GetComponentSizeInBytes(uint32_t(ct));
+        for (uint64_t i = 0; i < v.count; ++i) {
+            const unsigned char *e = v.first + i * v.stride;
+            for (int c = 0; c < components; ++c) {
+                const unsigned char *p = e + c * size;
+                float f;
+                switch (ct) {
+                    case TINYGLTF_COMPONENT_TYPE_BYTE: f = std::max(float(int8_t(p[0])) / 127.0f, -1.0f); break;
+                    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE: f = float(p[0]) / 255.0f; break;
+                    case TINYGLTF_COMPONENT_TYPE_SHORT: f = std::max(float(load<int16_t>(p)) / 32767.0f, -1.0f); break;
+                    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT: f = float(load<uint16_t>(p)) / 65535.0f; break;
+                    default: f = load<float>(p); break;
+                }
+                if (!std::isfinite(f)) fail(what + ": element " + std::to_string(i) + " is not finite");
+                out[size_t(i * uint64_t(components) + uint64_t(c))] = f;
+            }
+        }
+        s_.anim_data.push_back(std::move(out));
+        anim_accessor_data_[size_t(accessor)] = int64_t(s_.anim_data.size() - 1);
+        return s_.anim_data.size() - 1;
+    }
+
+    // Every channel of every animation, its sampler checked against glTF 2.0's rules. Which of
+    // them a render uses (and whether it can) is Rust's decision.
+    void convert_animations() {
+        anim_accessor_data_.assign(m_.accessors.size(), -1);
+        for (size_t a = 0; a < m_.animations.size(); ++a) {
+            const tinygltf::Animation &anim = m_.animations[a];
+            const std::string alabel = quoted_or_index(anim.name, "animation", a);
+            const char *aname = s_.keep(anim.name);
+            for (size_t c = 0; c < anim.channels.size(); ++c) {
+                const tinygltf::AnimationChannel &ch = anim.channels[c];
+                const std::string clabel = alabel + ": channel " + std::to_string(c);
+                icr_channel out{};
+                out.animation = uint32_t(a);
+                out.animation_name = aname;
+                const bool node_ok = ch.target_node >= 0 && size_t(ch.target_node) < m_.nodes.size();
+                out.node = node_ok ? uint32_t(ch.target_node) : UINT32_MAX;
+                if (ch.target_path == "translation") out.path = ICR_ANIM_TRANSLATION;
+                else if (ch.target_path == "rotation") out.path = ICR_ANIM_ROTATION;
+                else if (ch.target_path == "scale") out.path = ICR_ANIM_SCALE;
+                else if (ch.target_path == "weights") out.path = ICR_ANIM_WEIGHTS;
+                else out.path = ICR_ANIM_OTHER;
+                size_t times = SIZE_MAX, values = SIZE_MAX;
+                // A channel that breaks glTF's rules is kept with its reason: a still render
+                // never evaluates animations and loads the file as before; a render of frames
+                // that needs the channel refuses it, naming the reason.
+                try {
+                    convert_channel(anim, ch, clabel, out, &times, &values);
+                } catch (const LoadError &e) {
+                    out.error = s_.keep(e.what());
+                    out.key_count = 0;
+                    out.components = 0;
+                    times = values = SIZE_MAX;
+                }
+                s_.channels.push_back(out);
+                s_.channel_data.emplace_back(times, values);
+            }
+        }
+    }
+
+    // Reads one channel's sampler into `out` (the indices of its times and values in
+    // s_.anim_data), or fails with the rule it breaks.
+    void convert_channel(const tinygltf::Animation &anim, const tinygltf::AnimationChannel &ch,
+                         const std::string &clabel, icr_channel &out, size_t *times_out, size_t *values_out) {
+        if (out.node == UINT32_MAX) fail(clabel + ": target node " + std::to_string(ch.target_node) + " out of range");
+        if (ch.sampler < 0 || size_t(ch.sampler) >= anim.samplers.size())
+            fail(clabel + ": sampler " + std::to_string(ch.sampler) + " out of range");
+        const tinygltf::AnimationSampler &sampler = anim.samplers[size_t(ch.sampler)];
+        if (sampler.interpolation == "LINEAR") out.interpolation = ICR_INTERP_LINEAR;
+        else if (sampler.interpolation == "STEP") out.interpolation = ICR_INTERP_STEP;
+        else if (sampler.interpolation == "CUBICSPLINE") out.interpolation = ICR_INTERP_CUBICSPLINE;
+        else
+            fail(clabel + ": interpolation '" + shorten(sampler.interpolation) + "' is not LINEAR, STEP or CUBICSPLINE");
+        // Not read: morph targets are not supported, and other paths belong to extensions this
+        // loader does not implement.
+        if (out.path == ICR_ANIM_WEIGHTS || out.path == ICR_ANIM_OTHER) return;
+        const tinygltf::Node &target = m_.nodes[out.node];
+        if (!target.matrix.empty())
+            fail(clabel + ": " + quoted_or_index(target.name, "node", out.node) +
+                 " has a matrix and is animated (glTF 2.0 allows animating only nodes given by translation, "
+                 "rotation and scale)");
+        const bool rotation = out.path == ICR_ANIM_ROTATION;
+        const uint32_t components = rotation ? 4 : 3;
+        const size_t times = animation_floats(sampler.input, clabel + ": input (key times)", true, false, 1);
+        const size_t values = animation_floats(sampler.output, clabel + ": output", false, rotation, int(components));
+        const std::vector<float> &t = s_.anim_data[times];
+        if (t.size() > std::numeric_limits<uint32_t>::max() / 3) fail(clabel + ": too many keys");
+        for (size_t k = 1; k < t.size(); ++k)
+            if (!(t[k] > t[k - 1])) {
+                char buf[160];
+                std::snprintf(buf, sizeof buf, "key times must increase strictly, but key %zu is at %g s after %g s", k,
+                              double(t[k]), double(t[k - 1]));
+                fail(clabel + ": " + buf);
+            }
+        const uint64_t per_key = out.interpolation == ICR_INTERP_CUBICSPLINE ? 3 : 1;
+        const uint64_t outputs = s_.anim_data[values].size() / components;
+        if (outputs != per_key * t.size())
+            fail(clabel + ": " + std::to_string(outputs) + " outputs for " + std::to_string(t.size()) + " key times (" +
+                 sampler.interpolation + " needs " +
+                 (per_key == 3 ? "three per key: in-tangent, value, out-tangent" : "one per key") + ")");
+        if (per_key == 3 && t.size() < 2) fail(clabel + ": CUBICSPLINE needs at least two keys");
+        out.components = components;
+        out.key_count = uint32_t(t.size());
+        *times_out = times;
+        *values_out = values;
+    }
+
     void finish() {
+        for (size_t c = 0; c < s_.channels.size(); ++c) {
+            const auto [times, values] = s_.channel_data[c];
+            if (times == SIZE_MAX) continue;
+            s_.channels[c].times = s_.anim_data[times].data();
+            s_.channels[c].values = s_.anim_data[values].data();
+        }
         s_.meshes.reserve(s_.mesh_data.size());
         for (const MeshData &md : s_.mesh_data) {
             icr_mesh out{};
@@ -1800,6 +1988,10 @@ extern "C" icr_scene_view icr_scene_get_view(const icr_scene *scene) {
     v.light_count = scene->lights.size();
     v.cameras = array_ptr(scene->cameras);
     v.camera_count = scene->cameras.size();
+    v.nodes = array_ptr(scene->nodes);
+    v.node_count = scene->nodes.size();
+    v.channels = array_ptr(scene->channels);
+    v.channel_count = scene->channels.size();
     v.warnings = scene->warnings.c_str();
     return v;
 }

@@ -89,7 +89,59 @@ typedef struct icr_camera {
     double position[3];           /* world; double, as a light's */
     float forward[3];             /* world, unit (node's -Z) */
     float up[3];                  /* world, unit (node's +Y) */
+    uint32_t node;                /* the glTF node that places it (see icr_node, for animation) */
 } icr_camera;
+
+/* What a node places itself (not its children): bits of icr_node.places. */
+#define ICR_PLACES_MESH 1u
+#define ICR_PLACES_LIGHT 2u
+#define ICR_PLACES_CAMERA 4u
+
+/*
+ * A glTF node's rest pose, for evaluating animations: one per node of the file, in file order.
+ * World matrices at rest are already in instances, lights and cameras; these let the renderer
+ * recompute a node's world matrix at another time (parent first, as glTF composes them).
+ */
+typedef struct icr_node {
+    const char *name;             /* never NULL; "" when unnamed */
+    int32_t parent;               /* the parent node, -1 for a root or a node outside the scene */
+    int32_t in_scene;             /* 1 when the scene's node trees reach it */
+    uint32_t places;              /* ICR_PLACES_* bits */
+    int32_t has_matrix;           /* 1: `matrix` is the local transform (such a node may not be animated) */
+    double matrix[16];            /* column-major local matrix when has_matrix */
+    double translation[3];        /* local TRS otherwise, glTF's defaults where absent */
+    double rotation[4];           /* x y z w, normalised as the loader uses it */
+    double scale[3];
+} icr_node;
+
+enum icr_anim_path {
+    ICR_ANIM_TRANSLATION = 0,
+    ICR_ANIM_ROTATION = 1,
+    ICR_ANIM_SCALE = 2,
+    ICR_ANIM_WEIGHTS = 3,         /* morph target weights: not read (key_count 0) */
+    ICR_ANIM_OTHER = 4            /* a path of some extension: not read (key_count 0) */
+};
+enum icr_interpolation { ICR_INTERP_LINEAR = 0, ICR_INTERP_STEP = 1, ICR_INTERP_CUBICSPLINE = 2 };
+
+/*
+ * One animation channel with its sampler, checked against the glTF 2.0 rules: key times
+ * finite and strictly increasing, as many outputs as keys (three per key for CUBICSPLINE: in-
+ * tangent, value, out-tangent), at least two keys for CUBICSPLINE. Rotations stored as
+ * normalised integers are converted to floats. A channel that breaks a rule is still listed,
+ * with `error` set and no keys: a still render does not need it.
+ */
+typedef struct icr_channel {
+    uint32_t animation;           /* index of its animation in the file */
+    const char *animation_name;   /* never NULL; "" when unnamed */
+    uint32_t node;                /* the target node (< node_count), or UINT32_MAX when the file's is out of range */
+    int32_t path;                 /* icr_anim_path */
+    int32_t interpolation;        /* icr_interpolation */
+    uint32_t key_count;
+    uint32_t components;          /* 3 (translation, scale) or 4 (rotation x y z w); 0 when not read */
+    const float *times;           /* key_count seconds */
+    const float *values;          /* key_count * components (x3 for CUBICSPLINE) */
+    const char *error;            /* NULL, or why the channel breaks glTF's rules (then nothing is read) */
+} icr_channel;
 
 typedef struct icr_scene_view {
     const icr_mesh *meshes;         size_t mesh_count;
@@ -98,6 +150,8 @@ typedef struct icr_scene_view {
     const icr_texture *textures;    size_t texture_count;
     const icr_light *lights;        size_t light_count;
     const icr_camera *cameras;      size_t camera_count;
+    const icr_node *nodes;          size_t node_count;
+    const icr_channel *channels;    size_t channel_count;
     const char *warnings;           /* newline-separated loader warnings, "" when none */
 } icr_scene_view;
 

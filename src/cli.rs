@@ -268,6 +268,18 @@ pub struct RenderArgs {
     /// moment and started again with the same command resumes instead of starting over.
     #[arg(long = "checkpoint", value_name = "DIR")]
     pub checkpoint: Option<PathBuf>,
+    /// Render frames A to B (both included) of the scene's glTF animation of its camera, each to
+    /// its own EXR: `-o out.####.exr` (or `%04d`) takes the zero-padded frame number; a name
+    /// without one gets `.####` before its extension. Frame N is at time N / --fps. The
+    /// irradiance cache is carried from frame to frame. One process only.
+    #[arg(long = "frames", value_name = "A-B", value_parser = crate::frames::parse_range, conflicts_with = "frame")]
+    pub frames: Option<crate::frames::FrameRange>,
+    /// Render frame N of the animation alone (as --frames N-N).
+    #[arg(long = "frame", value_name = "N", value_parser = whole_number::<u32>)]
+    pub frame: Option<u32>,
+    /// Frames per second of --frames and --frame: frame N is at time N / fps of the animation.
+    #[arg(long = "fps", default_value_t = 24.0, allow_negative_numbers = true)]
+    pub fps: f64,
     /// Store half floats in the EXR's light layers (default: full floats); data layers and
     /// Cryptomatte always stay full floats.
     #[arg(long = "half")]
@@ -311,6 +323,16 @@ fn parse_aovs(text: &str) -> Result<AovList, String> {
 }
 
 impl RenderArgs {
+    /// The frames asked for (`--frames`, `--frame`), None for a still image.
+    pub fn frames(&self) -> Result<Option<crate::frames::Frames>, String> {
+        let range = match (self.frames, self.frame) {
+            (Some(r), _) => r,
+            (None, Some(n)) => crate::frames::FrameRange { first: n, last: n },
+            (None, None) => return Ok(None),
+        };
+        crate::frames::Frames::new(range, self.fps).map(Some)
+    }
+
     /// The data layers to write: `--aovs`, or the default set.
     pub fn aovs(&self) -> Vec<Aov> {
         self.aovs
@@ -486,6 +508,9 @@ mod num_bounds {
     }
     impl Max for usize {
         const MAX: usize = usize::MAX;
+    }
+    impl Max for u32 {
+        const MAX: u32 = u32::MAX;
     }
 }
 

@@ -4,10 +4,12 @@
 
 use crate::cli::{CacheBuildArg, MetricArg, RenderArgs, parse_tile};
 use crate::commands::{CommandError, warn};
+use crate::frames::Frames;
 use crate::irradiance::record::Metric;
 use crate::irradiance::{CacheSettings, IrradianceCache};
 use crate::memory;
 use crate::render::pixel::RenderSettings;
+use crate::scene::animation::FramesPlan;
 use crate::scene::footprint::EmitterFootprint;
 use crate::scene::view::{Camera, View};
 use crate::scene::{LoadOptions, Scene};
@@ -28,6 +30,9 @@ pub struct Job {
     pub build_s: f64,
     /// What each thread did in an MPI prepass (see `parallel::prepass`), for the rank's report.
     pub prepass_threads: Vec<crate::render::pixel::ThreadStats>,
+    /// With --frames or --frame: the frames, and what the animations do (the view above is the
+    /// first frame's; `at_time` moves it).
+    pub frames: Option<(Frames, FramesPlan)>,
 }
 
 /// Largest image side we accept: beyond it framebuffers stop fitting in memory sensibly.
@@ -93,6 +98,7 @@ pub fn validate(args: &RenderArgs) -> Result<(), String> {
     if args.af_read_only && args.ambient_file.is_none() {
         return Err("--af-read-only needs a cache file to read: give -af FILE".into());
     }
+    args.frames()?;
     Ok(())
 }
 
@@ -207,8 +213,13 @@ impl Job {
         let build_start = Instant::now();
         let tracer = Tracer::new(&scene).map_err(|e| CommandError::input(format!("{}: {e}", args.scene.display())))?;
         let build_s = build_start.elapsed().as_secs_f64();
+        let frames = match args.frames()? {
+            Some(frames) => Some((frames, plan_frames(args, &scene, frames)?)),
+            None => None,
+        };
+        let time = frames.as_ref().map(|(f, _)| f.time(f.range.first));
         let (view, view_note) =
-            crate::commands::view::choose_view(&scene, &tracer, &args.view, args.width, args.height)
+            crate::commands::view::choose_view(&scene, &tracer, &args.view, args.width, args.height, time)
                 .map_err(|e| CommandError::input(format!("{}: view: {e}", args.scene.display())))?;
         if let Some(note) = view_note {
             warn(&format!("{}: {note}", args.scene.display()));
@@ -298,6 +309,71 @@ impl Job {
             load_s,
             build_s,
             prepass_threads: Vec::new(),
+            frames,
         })
     }
+
+    /// Moves the view to where the animation puts the camera at `time` (a frame's), with
+    /// what depends on it (the emitters' footprint in the image); every other part of the job,
+    /// the cache among them, stays.
+    pub fn at_time(&mut self, args: &RenderArgs, time: f64) -> Result<(), CommandError> {
+        let (view, _) = crate::commands::view::choose_view(
+            &self.scene,
+            &self.tracer,
+            &args.view,
+            args.width,
+            args.height,
+            Some(time),
+        )
+        .map_err(|e| CommandError::input(format!("{}: view at {time} s: {e}", args.scene.display())))?;
+        self.camera = view.camera(args.width, args.height);
+        self.view = view;
+        if self.settings.emission_footprint.is_some() {
+            self.settings.emission_footprint = Some(std::sync::Arc::new(EmitterFootprint::new(
+                &self.scene.emitters,
+                &self.camera,
+            )));
+        }
+        Ok(())
+    }
+}
+
+/// What rendering `frames` of this scene means: refused when its animations move anything but
+/// cameras (see `Rig::plan_frames`); said on stderr when the frames will all be alike (nothing
+/// animates the camera, or -vp -vd -vu override all of it) or run past the animation's end.
+fn plan_frames(args: &RenderArgs, scene: &Scene, frames: Frames) -> Result<FramesPlan, CommandError> {
+    let camera = scene.cameras.first().map(|c| c.node);
+    let plan = scene
+        .rig
+        .plan_frames(camera)
+        .map_err(|e| CommandError::input(format!("{}: {e}", args.scene.display())))?;
+    for note in &plan.notes {
+        warn(&format!("{}: {note}", args.scene.display()));
+    }
+    let v = &args.view;
+    let overridden = v.vp.is_some() && v.vd.is_some() && v.vu.is_some();
+    if frames.count() > 1 && !args.quiet {
+        let why = if camera.is_none() {
+            Some("the scene has no camera, so every frame has the same automatic view")
+        } else if !plan.camera_animated {
+            Some("no animation moves the scene's camera, so every frame shows the same view")
+        } else if overridden {
+            Some("-vp, -vd and -vu replace the animated camera, so every frame shows the same view")
+        } else {
+            None
+        };
+        if let Some(why) = why {
+            warn(&format!("{}: --frames {}: {why}", args.scene.display(), frames.text()));
+        } else if let Some((_, end)) = plan.keys
+            && frames.time(frames.range.last) > end
+        {
+            warn(&format!(
+                "{}: the camera's animation ends at {end} s (frame {:.1} at {} fps): later frames hold its last pose",
+                args.scene.display(),
+                end * frames.fps,
+                frames.fps
+            ));
+        }
+    }
+    Ok(plan)
 }

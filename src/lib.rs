@@ -8,6 +8,7 @@ pub mod checkpoint;
 pub mod cli;
 pub mod commands;
 pub mod export;
+pub mod frames;
 pub mod image;
 pub mod irradiance;
 pub mod job;

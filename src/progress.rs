@@ -39,7 +39,25 @@ impl Style {
 const JSON_EVERY: Duration = Duration::from_secs(1);
 const JSON_STEP: f64 = 0.01;
 
+/// A frame of a sequence (--frames): its number, its place among the sequence's frames, and
+/// when the sequence began. Progress then counts over the whole sequence, and JSON lines carry
+/// the frame.
+#[derive(Clone, Copy, Debug)]
+pub struct InSequence {
+    pub frame: u32,
+    pub index: usize,
+    pub count: usize,
+    pub start: Instant,
+}
+
+impl InSequence {
+    fn overall(&self, fraction: f64) -> f64 {
+        ((self.index as f64 + fraction) / self.count.max(1) as f64).min(1.0)
+    }
+}
+
 pub struct Progress {
+    sequence: Option<InSequence>,
     total: usize,
     done: AtomicUsize,
     rounds: AtomicUsize,
@@ -60,6 +78,7 @@ impl Progress {
 
     pub fn with_style(total: usize, style: Style) -> Progress {
         Progress {
+            sequence: None,
             total: total.max(1),
             done: AtomicUsize::new(0),
             rounds: AtomicUsize::new(0),
@@ -77,6 +96,13 @@ impl Progress {
             prepass_only: true,
             ..Progress::with_style(1, style)
         }
+    }
+
+    /// This progress is one frame's of a sequence (see `InSequence`).
+    pub fn in_sequence(mut self, sequence: InSequence) -> Progress {
+        self.start = sequence.start;
+        self.sequence = Some(sequence);
+        self
     }
 
     /// The prepass has `rounds` rounds in all (it learns of its sample rounds late: called
@@ -109,11 +135,17 @@ impl Progress {
         0.5 * prepass + 0.5 * tiles
     }
 
+    /// The fraction of all there is to do: of the sequence, for a frame of one.
+    fn overall(&self) -> f64 {
+        let own = self.fraction();
+        self.sequence.map_or(own, |s| s.overall(own))
+    }
+
     fn show(&self, phase: &str, force: bool) {
         if self.style == Style::Silent {
             return;
         }
-        let fraction = self.fraction();
+        let fraction = self.overall();
         let mut last = self.last.lock().unwrap_or_else(|e| e.into_inner());
         let due = match (*last, self.style) {
             (None, _) => true,
@@ -144,16 +176,17 @@ impl Progress {
 
     fn json_line(&self, phase: &str, fraction: f64, elapsed: f64) {
         let remaining = (fraction > 0.0).then(|| elapsed * (1.0 - fraction) / fraction);
-        let line = serde_json::json!({
+        let mut line = serde_json::json!({
             "event": "progress",
             "phase": phase,
             "fraction": (fraction * 1e4).round() / 1e4,
             "elapsed_s": (elapsed * 1e3).round() / 1e3,
             "remaining_s": remaining.map(|r| (r * 1e3).round() / 1e3),
         });
-        let mut out = std::io::stdout().lock();
-        let _ = writeln!(out, "{line}");
-        let _ = out.flush();
+        if let Some(s) = &self.sequence {
+            line["frame"] = s.frame.into();
+        }
+        print_line(&line);
     }
 
     /// The tiles are done: the bar's line ends.
@@ -163,21 +196,52 @@ impl Progress {
         }
     }
 
-    /// The outputs are written: with JSON, a last line, event `done`, naming the EXR.
+    /// The outputs are written: with JSON, a last line, event `done`, naming the EXR; for a
+    /// frame of a sequence, event `frame_done` with the frame and its EXR (a farm manager may
+    /// pick the file up now: it is whole).
     pub fn done(&self, output: &std::path::Path) {
         if self.style != Style::Json {
             return;
         }
-        let line = serde_json::json!({
-            "event": "done",
-            "fraction": 1.0,
-            "elapsed_s": (self.start.elapsed().as_secs_f64() * 1e3).round() / 1e3,
-            "output": output.display().to_string(),
-        });
-        let mut out = std::io::stdout().lock();
-        let _ = writeln!(out, "{line}");
-        let _ = out.flush();
+        let elapsed = (self.start.elapsed().as_secs_f64() * 1e3).round() / 1e3;
+        let line = match &self.sequence {
+            Some(s) => serde_json::json!({
+                "event": "frame_done",
+                "frame": s.frame,
+                "fraction": (s.overall(1.0) * 1e4).round() / 1e4,
+                "elapsed_s": elapsed,
+                "output": output.display().to_string(),
+            }),
+            None => serde_json::json!({
+                "event": "done",
+                "fraction": 1.0,
+                "elapsed_s": elapsed,
+                "output": output.display().to_string(),
+            }),
+        };
+        print_line(&line);
     }
+}
+
+/// The last line of a sequence's JSON progress: event `done`, the frames and their outputs'
+/// name pattern (`#` for the digits).
+pub fn sequence_done(style: Style, start: Instant, frames: &str, pattern: &str) {
+    if style != Style::Json {
+        return;
+    }
+    print_line(&serde_json::json!({
+        "event": "done",
+        "fraction": 1.0,
+        "elapsed_s": (start.elapsed().as_secs_f64() * 1e3).round() / 1e3,
+        "frames": frames,
+        "output": pattern,
+    }));
+}
+
+fn print_line(line: &serde_json::Value) {
+    let mut out = std::io::stdout().lock();
+    let _ = writeln!(out, "{line}");
+    let _ = out.flush();
 }
 
 #[cfg(test)]
@@ -203,6 +267,16 @@ mod tests {
         // More steps than announced never pass 1.
         p.advance(3);
         assert_eq!(p.fraction(), 1.0);
+        // A frame of a sequence counts over the sequence.
+        let p = Progress::with_style(4, Style::Silent).in_sequence(InSequence {
+            frame: 12,
+            index: 2,
+            count: 4,
+            start: Instant::now(),
+        });
+        p.advance(2);
+        assert_eq!(p.fraction(), 0.5);
+        assert_eq!(p.overall(), 0.625);
         // A prepass alone is the whole of its fraction.
         let p = Progress::prepass_only(Style::Silent);
         p.prepass_rounds(4);

@@ -217,6 +217,14 @@ pub struct RenderStats {
     pub denoised_layers: Vec<String>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub denoise_s: Option<f64>,
+    /// With --frames or --frame: the frame, its scene time (seconds) and the records the cache
+    /// held when the frame began (read from -af and made for earlier frames: carried).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub frame: Option<u32>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub frame_time_s: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub records_before: Option<u64>,
     pub per_thread: Vec<ThreadReport>,
     pub per_rank: Vec<RankReport>,
 }

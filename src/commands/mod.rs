@@ -4,6 +4,7 @@ pub mod bench;
 pub mod cache;
 pub mod compare;
 pub mod export;
+pub mod frames;
 pub mod info;
 pub mod merge;
 pub mod reference;

@@ -3,9 +3,10 @@
 //! The noise is estimated from two independent halves of the passes: their difference has
 //! twice the variance of each half, so the combined image's standard error is RMS(A - B) / 2.
 
-use super::render::{Outputs, job_stats};
+use super::render::{Outputs, job_stats, output_name};
 use super::{CommandError, CommandResult};
 use crate::cli::ReferenceArgs;
+use crate::frames::{FrameTag, NamePattern};
 use crate::image::framebuffer::FrameBuffer;
 use crate::image::metrics;
 use crate::job::{Job, validate};
@@ -50,7 +51,23 @@ pub fn run(args: &ReferenceArgs) -> CommandResult {
     if !(args.noise > 0.0 && args.max_seconds > 0.0) {
         return Err(CommandError::input("--noise and --max-seconds must be positive".into()));
     }
-    let outputs = Outputs::check(&render_args)?;
+    // One frame of the camera's animation (--frame N) is one image; a sequence is not.
+    let outputs = match render_args.frames()? {
+        Some(frames) if frames.count() > 1 => {
+            return Err(CommandError::input(
+                "--frames: a reference is one image: give --frame N for one frame of the animation".into(),
+            ));
+        }
+        Some(frames) => {
+            let n = frames.range.first;
+            let name = |p: &std::path::Path| NamePattern::new(p, 1).map(|pattern| pattern.path(n));
+            let exr = name(&output_name(&render_args)).map_err(|e| CommandError::input(format!("-o {e}")))?;
+            let stats = (render_args.stats.as_deref().map(name).transpose())
+                .map_err(|e| CommandError::input(format!("--stats {e}")))?;
+            Outputs::checked(&render_args, exr, stats, Some(FrameTag::of(&frames, n)))?
+        }
+        None => Outputs::check(&render_args)?,
+    };
     let mut job = Job::prepare(&render_args, crate::memory::Role::Single)?;
     // Every pass places its samples anew over each pixel: the reference integrates the pixel's
     // area, as a box-filtered render converges to.

@@ -5,6 +5,7 @@ use super::{CommandError, CommandResult, warn};
 use crate::checkpoint::{self, Checkpoint, Restored};
 use crate::cli::RenderArgs;
 use crate::cli::{DenoiseQualityArg, ModeArg, ProgressArg};
+use crate::frames::FrameTag;
 use crate::image::data::{Aov, FAR_DEPTH};
 use crate::image::denoise;
 use crate::image::denoise::Quality;
@@ -36,6 +37,11 @@ pub fn producible_layers(needs: SceneNeeds, shading: &ShadingOptions) -> Vec<Lay
             Layer::Indirect => needs.diffuse && ambient_light,
         })
         .collect()
+}
+
+/// The EXR name -o gives, or the default (for frames, a pattern: see `frames::NamePattern`).
+pub fn output_name(args: &RenderArgs) -> PathBuf {
+    args.output.clone().unwrap_or_else(|| default_output(&args.scene))
 }
 
 fn default_output(scene: &Path) -> PathBuf {
@@ -227,6 +233,9 @@ pub struct Outputs {
     pub exr: PathBuf,
     pub png: Option<PathBuf>,
     pub stats: Option<PathBuf>,
+    /// The frame of a sequence these are (--frames, --frame): said in the header, and part of
+    /// the settings parts of one image share (`icrender merge` refuses parts of other frames).
+    pub frame: Option<FrameTag>,
 }
 
 impl Outputs {
@@ -234,15 +243,21 @@ impl Outputs {
         if args.denoise {
             check_denoiser(args)?;
         }
-        let exr = args.output.clone().unwrap_or_else(|| default_output(&args.scene));
+        Outputs::checked(args, output_name(args), args.stats.clone(), None)
+    }
+
+    /// The outputs of one frame of a sequence, or of a still image when `frame` is None: the
+    /// EXR at `exr` (a name ending in .exr), its preview beside it, the statistics at `stats`.
+    pub fn checked(
+        args: &RenderArgs,
+        exr: PathBuf,
+        stats: Option<PathBuf>,
+        frame: Option<FrameTag>,
+    ) -> Result<Outputs, CommandError> {
         not_a_directory(&exr)?;
         check_exr_name(&exr)?;
         let png = (!args.no_preview).then(|| exr.with_extension("png"));
-        let outputs = Outputs {
-            exr,
-            png,
-            stats: args.stats.clone(),
-        };
+        let outputs = Outputs { exr, png, stats, frame };
         if let Some(stats) = &outputs.stats
             && (same_file(stats, &outputs.exr) || outputs.png.as_deref().is_some_and(|png| same_file(stats, png)))
         {
@@ -322,7 +337,14 @@ impl Outputs {
         ];
         let aovs = args.aovs();
         let mut attributes = attributes;
-        attributes.push((SETTINGS_ATTRIBUTE.to_string(), part_settings(args)));
+        let settings = match &self.frame {
+            Some(f) => format!("{}; frame {} at {} s", part_settings(args), f.number, f.time),
+            None => part_settings(args),
+        };
+        attributes.push((SETTINGS_ATTRIBUTE.to_string(), settings));
+        if let Some(f) = &self.frame {
+            attributes.extend(f.attributes());
+        }
         if let Some(r) = region {
             attributes.push((REGION_ATTRIBUTE.to_string(), r.text()));
         }
@@ -448,7 +470,7 @@ fn guides_text(d: &denoise::DenoisedFrame) -> &'static str {
 
 /// `--denoise` needs the library and a working device: checked before anything is rendered
 /// or written, so a render never runs for minutes only to fail at the end.
-fn check_denoiser(args: &RenderArgs) -> Result<(), CommandError> {
+pub(crate) fn check_denoiser(args: &RenderArgs) -> Result<(), CommandError> {
     denoise::Denoiser::new(denoise_quality(args), args.threads)
         .map(|_| ())
         .map_err(|e| CommandError::input(format!("--denoise: {e}")))
@@ -653,20 +675,25 @@ fn run_parallel(args: &RenderArgs, mode: Mode) -> CommandResult {
 
 /// What a render stopped by `signal` says: nothing was written, and what a rerun resumes.
 fn interrupted(args: &RenderArgs, signal: i32) -> CommandError {
-    let kept = match (&args.checkpoint, &args.ambient_file) {
+    CommandError {
+        message: format!(
+            "stopped by {}: no image written; {}",
+            crate::sys::signals::name(signal),
+            kept_after_stop(args)
+        ),
+        exit: super::Exit::Interrupted(signal),
+    }
+}
+
+/// What a stopped render leaves for the next run: the checkpoint, or the cache file, or nothing.
+pub(crate) fn kept_after_stop(args: &RenderArgs) -> String {
+    match (&args.checkpoint, &args.ambient_file) {
         (Some(dir), _) => format!(
             "the finished tiles and the cache are kept in {}: the same command resumes",
             dir.display()
         ),
         (None, Some(file)) => format!("the cache's records are kept in {}", file.display()),
         (None, None) => "nothing is kept (--checkpoint DIR would keep the finished tiles)".into(),
-    };
-    CommandError {
-        message: format!(
-            "stopped by {}: no image written; {kept}",
-            crate::sys::signals::name(signal)
-        ),
-        exit: super::Exit::Interrupted(signal),
     }
 }
 
@@ -677,6 +704,13 @@ pub fn run(args: &RenderArgs) -> CommandResult {
         None => Mode::Serial,
     };
     if mode != Mode::Serial {
+        if args.frames.is_some() || args.frame.is_some() {
+            return Err(CommandError::input(
+                "--frames and --frame render in one process (no mpirun, no --mode): a farm runs one task per \
+                 chunk of frames; under mpirun render one image at a time"
+                    .into(),
+            ));
+        }
         if args.region.is_some() {
             return Err(CommandError::input(
                 "--region renders in one process (no mpirun, no --mode): run one task per region and \
@@ -696,6 +730,9 @@ pub fn run(args: &RenderArgs) -> CommandResult {
             "--reference compares whole images: render the regions, merge them, and `icrender compare` the merged image"
                 .into(),
         ));
+    }
+    if let Some(frames) = args.frames()? {
+        return super::frames::run(args, frames);
     }
     let outputs = Outputs::check(args)?;
     image_io::open_in_background();

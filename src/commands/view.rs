@@ -17,17 +17,24 @@ fn vec3(v: &[f32]) -> Vec3 {
 /// Below this share of lit probe rays an automatic view is said to be mostly dark.
 const DARK_AUTO_VIEW: f32 = 0.1;
 
-/// The view, and a warning when it is an automatic view that sees little lit surface.
+/// The view, and a warning when it is an automatic view that sees little lit surface. `time`:
+/// the scene time (seconds) of a frame, where the camera's animation places it; None for a
+/// still image, which takes the camera where the file puts it at rest.
 pub fn choose_view(
     scene: &Scene,
     tracer: &Tracer,
     args: &ViewArgs,
     width: u32,
     height: u32,
+    time: Option<f64>,
 ) -> Result<(View, Option<String>), String> {
     let aspect = width as f32 / height as f32;
     let mut note = None;
-    let mut view = match scene.cameras.first() {
+    let camera = match time {
+        Some(t) if !scene.cameras.is_empty() => Some(scene.camera_at(0, t)),
+        _ => scene.cameras.first().cloned(),
+    };
+    let mut view = match camera.as_ref() {
         Some(c) if c.perspective => {
             let vertical = c.yfov.to_degrees();
             View {

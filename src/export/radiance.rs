@@ -468,6 +468,7 @@ mod tests {
             punctual_lights: lights,
             emitters: EmitterSet::default(),
             cameras: Vec::new(),
+            rig: Default::default(),
             origin: DVec3::ZERO,
             bounds_min: lo,
             bounds_max: hi,

@@ -138,6 +138,12 @@ impl IrradianceCache {
         self.frozen.get_or_init(|| self.index.frozen());
     }
 
+    /// Lets records join again after a `freeze`: the next frame of a sequence adds the records
+    /// its view needs to those the frames before made (its own prepass freezes it again).
+    pub fn thaw(&mut self) {
+        self.frozen = OnceLock::new();
+    }
+
     /// Attaches a persistent file: its records join the cache, new ones are appended to it.
     pub fn with_file(mut self, path: &std::path::Path, settings_line: &str) -> Result<IrradianceCache, String> {
         let (file, records, report) = CacheFile::open(path, settings_line)?;

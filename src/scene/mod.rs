@@ -1,6 +1,7 @@
 //! The scene as the renderer sees it: world-space triangle meshes with their materials,
 //! textures, light sources, cameras and bounds, built from a loaded glTF file.
 
+pub mod animation;
 pub mod auto_view;
 pub mod footprint;
 pub mod lambert;
@@ -74,6 +75,8 @@ pub struct Scene {
     pub emitters: EmitterSet,
     /// Cameras as the file places them, in world coordinates (`to_tracing` for the renderer's).
     pub cameras: Vec<GltfCamera>,
+    /// The node trees' rest poses and animations (`camera_at` places a camera at a time).
+    pub rig: animation::Rig,
     /// The world point the renderer's coordinates are relative to (the bounds' centre; see
     /// `placement`): meshes, lights, bounds and views are all stored relative to it.
     pub origin: DVec3,
@@ -189,6 +192,7 @@ impl Scene {
             punctual_lights,
             emitters: EmitterSet::new(emitter_triangles),
             cameras: gltf.cameras,
+            rig: animation::Rig::new(gltf.nodes, gltf.channels),
             origin,
             bounds_min,
             bounds_max,
@@ -196,6 +200,18 @@ impl Scene {
             warnings,
             names: names::Names::new(object_names, material_names),
         })
+    }
+
+    /// Camera `index` as the animations place it at `time` (seconds): its node's world
+    /// matrix evaluated as the loader evaluates the rest pose's, so a camera nothing animates
+    /// is exactly where the file puts it.
+    pub fn camera_at(&self, index: usize, time: f64) -> GltfCamera {
+        let mut camera = self.cameras[index].clone();
+        let world = self.rig.world_at(camera.node, time);
+        camera.position = [world[12], world[13], world[14]];
+        camera.forward = animation::transform_dir(&world, 0.0, 0.0, -1.0);
+        camera.up = animation::transform_dir(&world, 0.0, 1.0, 0.0);
+        camera
     }
 
     pub fn triangle_count(&self) -> usize {

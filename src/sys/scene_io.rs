@@ -91,6 +91,77 @@ pub struct GltfCamera {
     pub position: [f64; 3],
     pub forward: [f32; 3],
     pub up: [f32; 3],
+    /// The glTF node that places it (an index into `GltfScene::nodes`).
+    pub node: usize,
+}
+
+/// What a node places itself (not its children).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Places {
+    pub mesh: bool,
+    pub light: bool,
+    pub camera: bool,
+}
+
+/// A node's local transform at rest, as the file gives it.
+#[derive(Clone, Debug, PartialEq)]
+pub enum LocalPose {
+    /// Column-major (such a node may not be animated).
+    Matrix([f64; 16]),
+    /// Translation, rotation (x y z w, normalised) and scale.
+    Trs {
+        translation: [f64; 3],
+        rotation: [f64; 4],
+        scale: [f64; 3],
+    },
+}
+
+/// A glTF node's rest pose and place in the tree, for evaluating animations.
+#[derive(Clone, Debug)]
+pub struct GltfNode {
+    pub name: String,
+    pub parent: Option<usize>,
+    /// Whether the scene's node trees reach it (nodes outside place nothing).
+    pub in_scene: bool,
+    pub places: Places,
+    pub pose: LocalPose,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum AnimPath {
+    Translation,
+    Rotation,
+    Scale,
+    /// Morph target weights: not read (morph targets are not supported).
+    Weights,
+    /// A path of an extension: not read.
+    Other,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Interpolation {
+    Linear,
+    Step,
+    CubicSpline,
+}
+
+/// One animation channel and its sampler's keys.
+#[derive(Clone, Debug)]
+pub struct GltfChannel {
+    pub animation: usize,
+    pub animation_name: String,
+    /// The target node; None when the file's index is out of range (`error` says so).
+    pub node: Option<usize>,
+    pub path: AnimPath,
+    pub interpolation: Interpolation,
+    /// Key times in seconds, strictly increasing (checked by the loader).
+    pub times: Vec<f32>,
+    /// Values per key (`components` each; for CUBICSPLINE three per key: in-tangent, value,
+    /// out-tangent).
+    pub values: Vec<f32>,
+    pub components: usize,
+    /// Why the channel breaks glTF's rules (then it has no keys).
+    pub error: Option<String>,
 }
 
 #[derive(Clone, Debug, Default)]
@@ -101,6 +172,9 @@ pub struct GltfScene {
     pub textures: Vec<GltfTexture>,
     pub lights: Vec<GltfLight>,
     pub cameras: Vec<GltfCamera>,
+    /// Every node of the file, in file order.
+    pub nodes: Vec<GltfNode>,
+    pub channels: Vec<GltfChannel>,
     pub warnings: Vec<String>,
 }
 
@@ -253,6 +327,78 @@ unsafe fn copy_scene(view: abi::icr_scene_view) -> Result<GltfScene, String> {
                 position: c.position,
                 forward: c.forward,
                 up: c.up,
+                node: c.node as usize,
+            });
+        }
+        let node_count = view.node_count;
+        for n in slice_or_empty(view.nodes, view.node_count) {
+            let parent = usize::try_from(n.parent).ok();
+            if parent.is_some_and(|p| p >= node_count) {
+                return Err(format!(
+                    "a node's parent {parent:?} is past the node count {node_count}"
+                ));
+            }
+            scene.nodes.push(GltfNode {
+                name: owned_string(n.name),
+                parent,
+                in_scene: n.in_scene != 0,
+                places: Places {
+                    mesh: n.places & abi::ICR_PLACES_MESH != 0,
+                    light: n.places & abi::ICR_PLACES_LIGHT != 0,
+                    camera: n.places & abi::ICR_PLACES_CAMERA != 0,
+                },
+                pose: if n.has_matrix != 0 {
+                    LocalPose::Matrix(n.matrix)
+                } else {
+                    LocalPose::Trs {
+                        translation: n.translation,
+                        rotation: n.rotation,
+                        scale: n.scale,
+                    }
+                },
+            });
+        }
+        for c in slice_or_empty(view.channels, view.channel_count) {
+            let node = (c.node != u32::MAX).then_some(c.node as usize);
+            if node.is_some_and(|n| n >= node_count) {
+                return Err(format!("an animation channel targets node {node:?} of {node_count}"));
+            }
+            let keys = c.key_count as usize;
+            let components = c.components as usize;
+            let interpolation = match c.interpolation as u32 {
+                abi::icr_interpolation_ICR_INTERP_STEP => Interpolation::Step,
+                abi::icr_interpolation_ICR_INTERP_CUBICSPLINE => Interpolation::CubicSpline,
+                _ => Interpolation::Linear,
+            };
+            let per_key = if interpolation == Interpolation::CubicSpline {
+                3
+            } else {
+                1
+            };
+            let (times, values) = if keys == 0 || c.times.is_null() || c.values.is_null() {
+                (Vec::new(), Vec::new())
+            } else {
+                (
+                    slice_or_empty(c.times, keys).to_vec(),
+                    slice_or_empty(c.values, keys * per_key * components).to_vec(),
+                )
+            };
+            scene.channels.push(GltfChannel {
+                animation: c.animation as usize,
+                animation_name: owned_string(c.animation_name),
+                node,
+                path: match c.path as u32 {
+                    abi::icr_anim_path_ICR_ANIM_TRANSLATION => AnimPath::Translation,
+                    abi::icr_anim_path_ICR_ANIM_ROTATION => AnimPath::Rotation,
+                    abi::icr_anim_path_ICR_ANIM_SCALE => AnimPath::Scale,
+                    abi::icr_anim_path_ICR_ANIM_WEIGHTS => AnimPath::Weights,
+                    _ => AnimPath::Other,
+                },
+                interpolation,
+                times,
+                values,
+                components,
+                error: (!c.error.is_null()).then(|| owned_string(c.error)),
             });
         }
         let warnings = owned_string(view.warnings);

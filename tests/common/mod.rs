@@ -108,9 +108,15 @@ pub struct GltfBuilder {
     cameras: Vec<Value>,
     images: Vec<Value>,
     textures: Vec<Value>,
+    animations: Vec<Value>,
     pub extensions_used: Vec<String>,
     pub extensions_required: Vec<String>,
 }
+
+/// An animation channel for `GltfBuilder::animation`: (node, path "translation" | "rotation" |
+/// "scale", interpolation "LINEAR" | "STEP" | "CUBICSPLINE", key times, values: 3 or 4 per key,
+/// three times that for CUBICSPLINE).
+pub type Channel<'a> = (usize, &'a str, &'a str, &'a [f32], &'a [f32]);
 
 /// A Lambertian material (specularFactor 0, metallic 0) of albedo `rgb`.
 pub fn lambertian(name: &str, rgb: [f32; 3]) -> Value {
@@ -199,6 +205,51 @@ impl GltfBuilder {
         self.node(json!({"translation": position, "extensions": {"KHR_lights_punctual": {"light": light}}}))
     }
 
+    /// A perspective camera (vertical field of view in radians); place it with a node
+    /// `{"camera": index, ...}`.
+    pub fn perspective_camera(&mut self, yfov: f32) -> usize {
+        self.cameras
+            .push(json!({"type": "perspective", "perspective": {"yfov": yfov, "znear": 0.01}}));
+        self.cameras.len() - 1
+    }
+
+    /// A float accessor of `components`-vectors (1: SCALAR) over `values`.
+    fn float_accessor(&mut self, values: &[f32], components: usize) -> usize {
+        let bytes: Vec<u8> = values.iter().flat_map(|v| v.to_le_bytes()).collect();
+        let view = self.push_view(&bytes, None);
+        let kind = match components {
+            1 => "SCALAR",
+            3 => "VEC3",
+            _ => "VEC4",
+        };
+        let mut accessor =
+            json!({"bufferView": view, "componentType": 5126, "count": values.len() / components, "type": kind});
+        if components == 1 {
+            let lo = values.iter().cloned().fold(f32::INFINITY, f32::min);
+            let hi = values.iter().cloned().fold(f32::NEG_INFINITY, f32::max);
+            accessor["min"] = json!([lo]);
+            accessor["max"] = json!([hi]);
+        }
+        self.accessors.push(accessor);
+        self.accessors.len() - 1
+    }
+
+    /// An animation: one channel per entry, each with its own sampler.
+    pub fn animation(&mut self, name: &str, channels: &[Channel<'_>]) -> usize {
+        let mut samplers = Vec::new();
+        let mut out = Vec::new();
+        for (i, (node, path, interpolation, times, values)) in channels.iter().enumerate() {
+            let components = if *path == "rotation" { 4 } else { 3 };
+            let input = self.float_accessor(times, 1);
+            let output = self.float_accessor(values, components);
+            samplers.push(json!({"input": input, "output": output, "interpolation": interpolation}));
+            out.push(json!({"sampler": i, "target": {"node": node, "path": path}}));
+        }
+        self.animations
+            .push(json!({"name": name, "channels": out, "samplers": samplers}));
+        self.animations.len() - 1
+    }
+
     pub fn texture(&mut self, uri: &str) -> usize {
         self.images.push(json!({"uri": uri}));
         self.textures.push(json!({"source": self.images.len() - 1}));
@@ -222,10 +273,19 @@ impl GltfBuilder {
                 }
             }
         }
+        // The scene's roots: the nodes no node has as a child.
+        let children: Vec<u64> = (self.nodes.iter())
+            .filter_map(|n| n.get("children").and_then(|c| c.as_array()))
+            .flatten()
+            .filter_map(|c| c.as_u64())
+            .collect();
+        let roots: Vec<usize> = (0..self.nodes.len())
+            .filter(|i| !children.contains(&(*i as u64)))
+            .collect();
         let mut doc = json!({
             "asset": {"version": "2.0", "generator": "icrender tests"},
             "scene": 0,
-            "scenes": [{"nodes": (0..self.nodes.len()).collect::<Vec<_>>()}],
+            "scenes": [{"nodes": roots}],
             "nodes": self.nodes,
             "meshes": self.meshes,
             "accessors": self.accessors,
@@ -237,6 +297,9 @@ impl GltfBuilder {
         }
         if !self.cameras.is_empty() {
             doc["cameras"] = json!(self.cameras);
+        }
+        if !self.animations.is_empty() {
+            doc["animations"] = json!(self.animations);
         }
         if !self.images.is_empty() {
             doc["images"] = json!(self.images);

@@ -92,7 +92,7 @@ fn rays(path: &Path, seconds: f64, threads: Option<usize>) -> CommandResult {
     let tracer = Tracer::new(&scene)?;
     let build_s = build_start.elapsed().as_secs_f64();
     let (width, height) = (1024u32, 1024u32);
-    let (view, _) = crate::commands::view::choose_view(&scene, &tracer, &Default::default(), width, height)?;
+    let (view, _) = crate::commands::view::choose_view(&scene, &tracer, &Default::default(), width, height, None)?;
     let camera = view.camera(width, height);
     let primary = |i: u64| {
         let p = i % (width as u64 * height as u64);

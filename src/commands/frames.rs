@@ -1,0 +1,231 @@
+//! `icrender render --frames A-B` (and `--frame N`): a sequence of frames of the scene's camera
+//! animation, each written whole to its own EXR before the next begins (a farm may pick frame
+//! files up as they appear).
+//!
+//! The scene, its BVH and the irradiance cache are made once. Only cameras animate (see
+//! `scene::animation`), so the indirect light does not change from frame to frame and the
+//! cache's records hold for every frame: each frame's prepass finds the records earlier frames
+//! made and adds only those its own view needs that are missing.
+//!
+//! With `--checkpoint DIR` each frame journals its tiles in `DIR/frame-N/` and, once its files
+//! are written, leaves `DIR/frame-N/done`; the cache goes to `DIR/cache.icc` (unless -af names
+//! a file) and is shared by all frames. The same command run again skips the finished frames,
+//! resumes the first unfinished one from its journal and goes on.
+
+use super::render::{
+    Outputs, check_denoiser, checkpoint_key, job_stats, kept_after_stop, output_name, render_tiles,
+    with_checkpoint_cache,
+};
+use super::{CommandError, CommandResult, warn};
+use crate::checkpoint::Checkpoint;
+use crate::cli::{ProgressArg, RenderArgs};
+use crate::frames::{FrameTag, Frames, NamePattern};
+use crate::job::Job;
+use crate::progress::{self, InSequence, Progress};
+use crate::render::render_resumable;
+use crate::shading::Integrator;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// A frame's own checkpoint directory.
+fn frame_dir(checkpoint: &Path, frame: u32) -> PathBuf {
+    checkpoint.join(format!("frame-{frame}"))
+}
+
+/// The marker a frame leaves in its checkpoint directory once its outputs are written: the EXR
+/// it wrote, so that a rerun naming other outputs renders it again.
+fn done_marker(checkpoint: &Path, frame: u32) -> PathBuf {
+    frame_dir(checkpoint, frame).join("done")
+}
+
+/// Whether an earlier run of this checkpoint finished `frame` into `exr` (and the file is
+/// still there).
+fn finished_before(checkpoint: Option<&Path>, frame: u32, exr: &Path) -> bool {
+    let Some(dir) = checkpoint else {
+        return false;
+    };
+    std::fs::read(done_marker(dir, frame)).is_ok_and(|named| named == exr.as_os_str().as_encoded_bytes())
+        && exr.is_file()
+}
+
+/// Every frame's outputs, checked before anything is rendered (none may exist unless
+/// --overwrite, every folder must be writable); frames a checkpoint says are finished are not
+/// checked, they are skipped.
+fn frame_outputs(args: &RenderArgs, frames: &Frames) -> Result<Vec<(u32, Option<Outputs>)>, CommandError> {
+    if args.denoise {
+        check_denoiser(args)?;
+    }
+    let exr =
+        NamePattern::new(&output_name(args), frames.count()).map_err(|e| CommandError::input(format!("-o {e}")))?;
+    let stats = args
+        .stats
+        .as_deref()
+        .map(|s| NamePattern::new(s, frames.count()))
+        .transpose()
+        .map_err(|e| CommandError::input(format!("--stats {e}")))?;
+    let mut out = Vec::with_capacity(frames.count());
+    for n in frames.numbers() {
+        let path = exr.path(n);
+        if finished_before(args.checkpoint.as_deref(), n, &path) {
+            out.push((n, None));
+            continue;
+        }
+        let tag = FrameTag::of(frames, n);
+        let outputs = Outputs::checked(args, path, stats.as_ref().map(|s| s.path(n)), Some(tag))?;
+        out.push((n, Some(outputs)));
+    }
+    Ok(out)
+}
+
+/// Renders the frames (one process; `render::run` has checked the options).
+pub fn run(args: &RenderArgs, frames: Frames) -> CommandResult {
+    let sequence_start = Instant::now();
+    if args.reference.is_some() && frames.count() > 1 {
+        return Err(CommandError::input(
+            "--reference compares one image: give --frame N, or compare each frame with `icrender compare`".into(),
+        ));
+    }
+    let outputs = frame_outputs(args, &frames)?;
+    crate::sys::image_io::open_in_background();
+    let reference = match &args.reference {
+        Some(path) => Some(
+            crate::sys::image_io::read_image(path, &[])
+                .map_err(|e| CommandError::input(format!("{}: {e}", path.display())))?,
+        ),
+        None => None,
+    };
+    let all_tiles = render_tiles(args)?;
+    if let Some(dir) = &args.checkpoint {
+        // The cache file goes in it (`with_checkpoint_cache`), opened before the first frame.
+        std::fs::create_dir_all(dir)
+            .map_err(|e| CommandError::input(format!("{}: cannot create the directory: {e}", dir.display())))?;
+    }
+    let mut job = Job::prepare(&with_checkpoint_cache(args), crate::memory::Role::Single)?;
+    let style = progress::Style::chosen(args.progress == ProgressArg::Json, args.quiet);
+    crate::sys::signals::catch_termination().map_err(CommandError::failed)?;
+    let mut written = Vec::new();
+    let mut cache_warned = false;
+    for (index, (n, outputs)) in outputs.into_iter().enumerate() {
+        let Some(outputs) = outputs else {
+            if !args.quiet {
+                eprintln!("icrender: frame {n}: finished by an earlier run of this checkpoint, skipped");
+            }
+            written.push(n);
+            continue;
+        };
+        let frame_start = Instant::now();
+        let time = frames.time(n);
+        job.at_time(args, time)?;
+        let records_before = job.cache.as_mut().map_or(0, |c| {
+            c.thaw();
+            c.len() as u64
+        });
+        let (journal, restored) = match &args.checkpoint {
+            Some(dir) => {
+                let key = format!("{}; frame {n} at {time} s", checkpoint_key(args));
+                let (journal, restored) =
+                    Checkpoint::open(&frame_dir(dir, n), &key, &all_tiles, args.width, args.height)
+                        .map_err(CommandError::input)?;
+                if !args.quiet && restored.count() > 0 {
+                    eprintln!(
+                        "icrender: frame {n}: resuming: {} of {} tiles are already finished",
+                        restored.count(),
+                        all_tiles.len()
+                    );
+                }
+                (Some(journal), Some(restored))
+            }
+            None => (None, None),
+        };
+        let tiles_restored = restored.as_ref().map_or(0, |r| r.count());
+        let progress = Progress::with_style(all_tiles.len(), style).in_sequence(InSequence {
+            frame: n,
+            index,
+            count: frames.count(),
+            start: sequence_start,
+        });
+        let integrator = Integrator::new(&job.scene, &job.tracer, &job.shading, job.cache.as_ref());
+        let render_start = Instant::now();
+        let rendered = render_resumable(
+            &integrator,
+            &job.camera,
+            &job.settings,
+            &progress,
+            journal.as_ref().zip(restored),
+        );
+        let render_s = render_start.elapsed().as_secs_f64();
+        // The frame's records reach the file before the next frame (a killed job keeps them).
+        if let Some(cache) = &job.cache
+            && let Err(e) = cache.finish()
+            && !cache_warned
+        {
+            cache_warned = true;
+            warn(&format!(
+                "{}: cache file not fully written: {e}",
+                args.ambient_file.as_deref().unwrap_or(Path::new("")).display()
+            ));
+        }
+        if let Some(signal) = crate::sys::signals::received() {
+            return Err(CommandError {
+                message: format!(
+                    "stopped by {} during frame {n}: {}, frame {n} is not; {}",
+                    crate::sys::signals::name(signal),
+                    frames_written(&written),
+                    kept_after_stop(args)
+                ),
+                exit: super::Exit::Interrupted(signal),
+            });
+        }
+        let mut stats = job_stats(args, &job, "serial", 1, render_s);
+        stats.tiles_restored = tiles_restored as u64;
+        stats.add_threads(&rendered.threads);
+        if let Some(prepass) = &rendered.prepass {
+            stats.add_prepass(prepass);
+        }
+        stats.frame = Some(n);
+        stats.frame_time_s = Some(time);
+        stats.records_before = Some(records_before);
+        stats.wall_s = frame_start.elapsed().as_secs_f64();
+        stats.single_rank();
+        if stats.nonfinite_dropped > 0 {
+            warn(&format!(
+                "frame {n}: {} non-finite contribution(s) were dropped",
+                stats.nonfinite_dropped
+            ));
+        }
+        outputs.write(args, &job, &rendered.frame, &stats)?;
+        if let Some(dir) = &args.checkpoint {
+            // Only after the files: a frame killed while writing them is rendered again.
+            std::fs::write(done_marker(dir, n), outputs.exr.as_os_str().as_encoded_bytes())
+                .map_err(|e| CommandError::failed(format!("{}: {e}", done_marker(dir, n).display())))?;
+        }
+        progress.done(&outputs.exr);
+        written.push(n);
+        if !args.quiet {
+            eprintln!(
+                "icrender: frame {n} ({time:.4} s): {}x{} in {render_s:.2} s ({} records made, {records_before} carried, \
+                 {:.0}% of lookups hit) -> {}",
+                args.width,
+                args.height,
+                stats.records_computed,
+                100.0 * stats.hits as f64 / stats.lookups.max(1) as f64,
+                outputs.exr.display()
+            );
+        }
+        if let (Some(reference), Some(path)) = (&reference, &args.reference) {
+            super::render::report_error(&outputs.exr, reference, path, render_s)?;
+        }
+    }
+    let pattern = NamePattern::new(&output_name(args), frames.count()).map_err(CommandError::input)?;
+    progress::sequence_done(style, sequence_start, &frames.text(), &pattern.text());
+    Ok(())
+}
+
+/// "frames 1-4 are written" or "no frame is written", for a stopped sequence.
+fn frames_written(written: &[u32]) -> String {
+    match (written.first(), written.last()) {
+        (Some(a), Some(b)) if a == b => format!("frame {a} is written"),
+        (Some(a), Some(b)) => format!("frames {a}-{b} are written"),
+        _ => "no frame is written".into(),
+    }
+}
