@@ -143,6 +143,18 @@ fn linear_pose(t: f64) -> ([f64; 3], [f64; 4]) {
     (translation, [0.0, half.sin(), 0.0, half.cos()])
 }
 
+/// Runs a small render of `scene` with `frames` (`--frames A-B` or `--frame N`) to `out`, which
+/// must be refused as bad input (exit 2); returns what it said.
+fn refused_frames(scene: &Path, frames: &[&str], out: &Path) -> String {
+    let mut args = vec!["render", s(scene), "-q"];
+    args.extend(frames);
+    args.extend(["-x", "8", "-y", "6", "-o", s(out)]);
+    let refused = run(&args);
+    let e = stderr(&refused);
+    assert_eq!(refused.status.code(), Some(2), "{}: {e}", scene.display());
+    e
+}
+
 #[test]
 fn each_frame_is_the_still_render_of_the_camera_where_the_animation_puts_it() {
     let dir = tempfile::tempdir().unwrap();
@@ -436,21 +448,7 @@ fn animations_of_meshes_or_lights_are_refused_for_frames_and_ignored_by_stills()
     let group = b.node(json!({"name": "trolley", "children": [cart]}));
     b.animation("push", &[(group, "translation", "LINEAR", &TIMES, &MOVES)]);
     let scene = b.write(d, "trolley");
-    let refused = run(&[
-        "render",
-        s(&scene),
-        "-q",
-        "--frames",
-        "1-2",
-        "-x",
-        "8",
-        "-y",
-        "6",
-        "-o",
-        s(&d.join("t.exr")),
-    ]);
-    assert_eq!(refused.status.code(), Some(2), "{}", stderr(&refused));
-    let e = stderr(&refused);
+    let e = refused_frames(&scene, &["--frames", "1-2"], &d.join("t.exr"));
     assert!(
         e.contains("trolley.gltf")
             && e.contains("animation 'push'")
@@ -470,21 +468,7 @@ fn animations_of_meshes_or_lights_are_refused_for_frames_and_ignored_by_stills()
     let bulb = b.point_light([0.0, 2.0, 0.0], 5.0);
     b.animation("flicker", &[(bulb, "translation", "STEP", &TIMES, &MOVES)]);
     let scene = b.write(d, "bulb");
-    let refused = run(&[
-        "render",
-        s(&scene),
-        "-q",
-        "--frame",
-        "1",
-        "-x",
-        "8",
-        "-y",
-        "6",
-        "-o",
-        s(&d.join("l.exr")),
-    ]);
-    assert_eq!(refused.status.code(), Some(2), "{}", stderr(&refused));
-    let e = stderr(&refused);
+    let e = refused_frames(&scene, &["--frame", "1"], &d.join("l.exr"));
     assert!(
         e.contains("animation 'flicker'") && e.contains("a light with it"),
         "{e}"
@@ -681,21 +665,7 @@ fn a_broken_camera_animation_is_refused_for_frames_and_a_still_render_ignores_it
     let d = dir.path();
     // Key times that go back: glTF 2.0 requires them to increase strictly.
     let scene = animated_room(d, "broken", &[("translation", "LINEAR", &[1.0, 0.5], &MOVES)]);
-    let refused = run(&[
-        "render",
-        s(&scene),
-        "-q",
-        "--frames",
-        "1-2",
-        "-x",
-        "8",
-        "-y",
-        "6",
-        "-o",
-        s(&d.join("b.exr")),
-    ]);
-    assert_eq!(refused.status.code(), Some(2), "{}", stderr(&refused));
-    let e = stderr(&refused);
+    let e = refused_frames(&scene, &["--frames", "1-2"], &d.join("b.exr"));
     assert!(
         e.contains("broken.gltf") && e.contains("animation 'walk'") && e.contains("key times must increase strictly"),
         "{e}"
@@ -823,21 +793,7 @@ fn animations_breaking_gltf_rules_are_named_when_frames_need_them() {
         let path = d.join(format!("{name}.gltf"));
         std::fs::write(&path, serde_json::to_string(&broken).unwrap()).unwrap();
         let out = d.join(format!("{name}.exr"));
-        let refused = run(&[
-            "render",
-            s(&path),
-            "-q",
-            "--frame",
-            "3",
-            "-x",
-            "8",
-            "-y",
-            "6",
-            "-o",
-            s(&out),
-        ]);
-        assert_eq!(refused.status.code(), Some(2), "{name}: {}", stderr(&refused));
-        let e = stderr(&refused);
+        let e = refused_frames(&path, &["--frame", "3"], &out);
         assert!(
             e.contains("animation 'walk': channel 0") && e.contains(expected),
             "{name}: {e}"
