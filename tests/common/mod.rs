@@ -180,6 +180,56 @@ impl GltfBuilder {
         self.meshes.len() - 1
     }
 
+    /// Adds a mesh with optional NORMAL and TEXCOORD_0 attributes; returns the mesh index.
+    pub fn mesh_with(
+        &mut self,
+        positions: &[[f32; 3]],
+        normals: Option<&[[f32; 3]]>,
+        texcoords: Option<&[[f32; 2]]>,
+        indices: &[[u32; 3]],
+        material: Option<usize>,
+    ) -> usize {
+        let mesh = self.mesh(positions, indices, material);
+        let mut extra = Vec::new();
+        if let Some(n) = normals {
+            extra.push(("NORMAL", n.iter().flatten().copied().collect::<Vec<f32>>(), "VEC3"));
+        }
+        if let Some(t) = texcoords {
+            extra.push(("TEXCOORD_0", t.iter().flatten().copied().collect(), "VEC2"));
+        }
+        for (name, values, kind) in extra {
+            let a = self.float_accessor(&values, kind);
+            self.meshes[mesh]["primitives"][0]["attributes"][name] = json!(a);
+        }
+        mesh
+    }
+
+    /// A float accessor of `kind` ("SCALAR", "VEC2", "VEC3", "VEC4") over `values`.
+    pub fn float_accessor(&mut self, values: &[f32], kind: &str) -> usize {
+        let bytes: Vec<u8> = values.iter().flat_map(|v| v.to_le_bytes()).collect();
+        let view = self.push_view(&bytes, None);
+        let per = match kind {
+            "SCALAR" => 1,
+            "VEC2" => 2,
+            "VEC3" => 3,
+            _ => 4,
+        };
+        self.accessors
+            .push(json!({"bufferView": view, "componentType": 5126, "count": values.len() / per, "type": kind}));
+        self.accessors.len() - 1
+    }
+
+    /// A normalized signed short VEC4 accessor (a quaternion per element, as
+    /// EXT_mesh_gpu_instancing allows for ROTATION).
+    pub fn normalized_short_vec4(&mut self, values: &[[f32; 4]]) -> usize {
+        let bytes: Vec<u8> = (values.iter().flatten())
+            .flat_map(|v| ((v * 32767.0).round() as i16).to_le_bytes())
+            .collect();
+        let view = self.push_view(&bytes, None);
+        self.accessors.push(json!({"bufferView": view, "componentType": 5122, "normalized": true, "count": values.len(), "type": "VEC4"}));
+        self.accessors.len() - 1
+    }
+
     /// Adds a quad (two triangles, counter-clockwise a-b-c-d seen from its front).
     pub fn quad(&mut self, corners: [[f32; 3]; 4], material: Option<usize>) -> usize {
         let mesh = self.mesh(&corners, &[[0, 1, 2], [0, 2, 3]], material);
@@ -256,10 +306,17 @@ impl GltfBuilder {
 
     /// Writes `name.gltf` and `name.bin` into `dir`; returns the .gltf path.
     pub fn write(&self, dir: &Path, name: &str) -> PathBuf {
+        self.write_edited(dir, name, |_| {})
+    }
+
+    /// As `write`, with the glTF JSON changed by `edit` first.
+    pub fn write_edited(&self, dir: &Path, name: &str, edit: impl FnOnce(&mut Value)) -> PathBuf {
         let bin_name = format!("{name}.bin");
         std::fs::write(dir.join(&bin_name), &self.bin).unwrap();
         let path = dir.join(format!("{name}.gltf"));
-        std::fs::write(&path, serde_json::to_string_pretty(&self.to_json(&bin_name)).unwrap()).unwrap();
+        let mut doc = self.to_json(&bin_name);
+        edit(&mut doc);
+        std::fs::write(&path, serde_json::to_string_pretty(&doc).unwrap()).unwrap();
         path
     }
 }

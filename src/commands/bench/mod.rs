@@ -1,5 +1,6 @@
 //! `icrender bench rays`: how fast Embree traces this scene's rays, outside the renderer, so the
-//! renderer's own throughput has a ceiling to be compared with. `icrender bench messages`: what
+//! renderer's own throughput has a ceiling to be compared with; with the load and BVH build
+//! times and the process's peak memory, what instancing saves (`--flatten` for the copies). `icrender bench messages`: what
 //! a message costs between two MPI ranks (link.rs: it talks MPI directly, for this command
 //! alone, and shares nothing with the renderer's MPI modes).
 
@@ -15,12 +16,22 @@ use glam::Vec3;
 use std::path::Path;
 use std::time::Instant;
 
-/// Traces `make_ray(i)` for i = 0, 1, ... on `threads` threads for about `seconds`; Mrays/s.
+/// What one ray of a measurement asks Embree.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Query {
+    /// The closest hit, with the given coherence.
+    Closest(Coherence),
+    /// Whether anything blocks the segment (a shadow ray): the ray's length is its direction's.
+    Occluded,
+}
+
+/// Traces `make_ray(i)` for i = 0, 1, ... on `threads` threads for about `seconds`; Mrays/s
+/// and the fraction of rays that hit (blocked, for shadow rays).
 fn throughput(
     tracer: &Tracer,
     threads: usize,
     seconds: f64,
-    coherence: Coherence,
+    query: Query,
     make_ray: &(dyn Fn(u64) -> (Vec3, Vec3) + Sync),
 ) -> (f64, f64) {
     let start = Instant::now();
@@ -34,7 +45,10 @@ fn throughput(
                         for _ in 0..4096 {
                             let (o, d) = make_ray(i);
                             i += 1;
-                            hits += tracer.raw_intersect(o, d, coherence).is_some() as u64;
+                            hits += match query {
+                                Query::Closest(coherence) => tracer.raw_intersect(o, d, coherence).is_some(),
+                                Query::Occluded => tracer.segment_blocked(o, o + d),
+                            } as u64;
                         }
                         rays += 4096;
                     }
@@ -56,7 +70,8 @@ pub fn run(args: &BenchArgs) -> CommandResult {
             scene,
             seconds,
             threads,
-        } => rays(scene, *seconds, *threads),
+            flatten,
+        } => rays(scene, *seconds, *threads, *flatten),
         BenchCommand::Messages { sizes } => messages(sizes),
     }
 }
@@ -84,13 +99,19 @@ fn messages(sizes: &str) -> CommandResult {
     Ok(())
 }
 
-fn rays(path: &Path, seconds: f64, threads: Option<usize>) -> CommandResult {
+fn rays(path: &Path, seconds: f64, threads: Option<usize>, flatten: bool) -> CommandResult {
     let load_start = Instant::now();
-    let scene = Scene::load(path, &LoadOptions::default())?;
+    let options = LoadOptions {
+        flatten,
+        ..LoadOptions::default()
+    };
+    let scene = Scene::load(path, &options)?;
     let load_s = load_start.elapsed().as_secs_f64();
     let build_start = Instant::now();
     let tracer = Tracer::new(&scene)?;
     let build_s = build_start.elapsed().as_secs_f64();
+    // Before any ray: what loading and building took at most.
+    let peak = peak_memory();
     let (width, height) = (1024u32, 1024u32);
     let (view, _) = crate::commands::view::choose_view(&scene, &tracer, &Default::default(), width, height)?;
     let camera = view.camera(width, height);
@@ -107,22 +128,75 @@ fn rays(path: &Path, seconds: f64, threads: Option<usize>) -> CommandResult {
         let r = (1.0 - z * z).max(0.0).sqrt();
         (o, Vec3::new(r * phi.cos(), r * phi.sin(), z))
     };
+    // Shadow rays as the renderer casts them: from the surfaces the view sees to a point on an
+    // emitter the light tree picks for that surface, stopping short of the emitter.
+    let shading_points: Vec<(Vec3, Vec3)> = (0..4096u64)
+        .filter_map(|i| {
+            let (o, d) = primary(i.wrapping_mul(2_654_435_761) % (width as u64 * height as u64));
+            let hit = tracer.intersect(&scene, o, d, Coherence::Incoherent)?;
+            Some((tracer.spawn_point(&hit, hit.facing_normal), hit.facing_normal))
+        })
+        .collect();
+    let shadow = |i: u64| {
+        let (p, n) = shading_points[(i % shading_points.len().max(1) as u64) as usize];
+        let mut rng = Rng::new(i, 7);
+        match scene
+            .emitters
+            .sample(p, n, rng.next_f32(), rng.next_f32(), rng.next_f32())
+        {
+            Some(light) => (p, (light.position - p) * 0.999),
+            None => (p, n),
+        }
+    };
     let all = threads.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
-    println!("scene        {} ({} triangles)", path.display(), scene.triangle_count());
+    println!(
+        "scene        {} ({} triangles, {} stored{})",
+        path.display(),
+        scene.triangle_count(),
+        scene.stored_triangle_count(),
+        if flatten { ", --flatten" } else { "" }
+    );
+    if !scene.instancing.is_empty() {
+        println!(
+            "instancing   {} shared meshes in {} placements, {} Embree instances of {} prototypes",
+            scene.instancing.meshes.len(),
+            scene.instancing.placements.len(),
+            scene.instancing.instances.len(),
+            scene.instancing.prototypes.len()
+        );
+    }
     println!("embree       {} ", tracer.embree_version);
     println!("load         {load_s:.3} s");
     println!("bvh build    {build_s:.3} s");
+    match peak {
+        Some(bytes) => println!("peak memory  {:.1} MB (after the build)", bytes as f64 / 1e6),
+        None => println!("peak memory  unknown (no /proc/self/status)"),
+    }
     for t in [1, all] {
-        let (p, ph) = throughput(&tracer, t, seconds, Coherence::Coherent, &primary);
-        let (r, rh) = throughput(&tracer, t, seconds, Coherence::Incoherent, &incoherent);
-        println!(
+        let (p, ph) = throughput(&tracer, t, seconds, Query::Closest(Coherence::Coherent), &primary);
+        let (r, rh) = throughput(&tracer, t, seconds, Query::Closest(Coherence::Incoherent), &incoherent);
+        let shadows = (!shading_points.is_empty() && !scene.emitters.is_empty())
+            .then(|| throughput(&tracer, t, seconds, Query::Occluded, &shadow));
+        print!(
             "{t} thread(s)  primary {p:.2} Mrays/s ({:.0}% hit)   incoherent {r:.2} Mrays/s ({:.0}% hit)",
             ph * 100.0,
             rh * 100.0
         );
+        match shadows {
+            Some((s, sh)) => println!("   shadow {s:.2} Mrays/s ({:.0}% blocked)", sh * 100.0),
+            None => println!(),
+        }
         if all == 1 {
             break;
         }
     }
     Ok(())
+}
+
+/// The process's peak resident memory so far (Linux's VmHWM), in bytes.
+fn peak_memory() -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb * 1024)
 }
