@@ -467,6 +467,10 @@ pub enum BenchCommand {
         /// (as `render --flatten`).
         #[arg(long = "flatten")]
         flatten: bool,
+        /// The view the primary rays (and the shadow rays' surfaces) come from, as for render
+        /// (default: the automatic view).
+        #[command(flatten)]
+        view: ViewArgs,
     },
     /// Message cost between two MPI ranks (run under `mpirun -np 2`): round trips at several
     /// sizes, and the latency and bandwidth fitted to them, as JSON on rank 0. What the cluster

@@ -217,15 +217,50 @@ impl Surveys {
         for (i, instance) in gltf.instances.iter().enumerate() {
             uses[instance.mesh].push(i);
         }
+        let world = |i: usize| DMat4::from_cols_array(&gltf.instances[i].world);
+        // First placements, then the rest on every core: x32's 1,344 placements of 10.6
+        // million triangles took 0.15 s on one.
+        let mut references: Vec<Option<placement::Reference>> = (0..gltf.meshes.len()).map(|_| None).collect();
+        let mut rest = Vec::new();
         for (m, users) in uses.iter().enumerate().filter(|(_, u)| u.len() >= 2) {
-            let worlds: Vec<DMat4> = (users.iter())
-                .map(|&i| DMat4::from_cols_array(&gltf.instances[i].world))
+            let (r, first) = placement::survey_first(&gltf.meshes[m], &world(users[0]));
+            per_instance[users[0]] = Some(first);
+            references[m] = Some(r);
+            rest.extend(users[1..].iter().map(|&i| (m, i)));
+        }
+        let next = std::sync::atomic::AtomicUsize::new(0);
+        let threads = std::thread::available_parallelism()
+            .map_or(1, |n| n.get())
+            .min(rest.len().max(1));
+        let surveyed: Vec<Vec<(usize, Surveyed)>> = std::thread::scope(|scope| {
+            let workers: Vec<_> = (0..threads)
+                .map(|_| {
+                    scope.spawn(|| {
+                        let (mut out, mut points) = (Vec::new(), Vec::new());
+                        loop {
+                            let k = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                            let Some(&(m, i)) = rest.get(k) else {
+                                return out;
+                            };
+                            let reference = references[m].as_ref().expect("surveyed first");
+                            out.push((
+                                i,
+                                placement::survey_next(&gltf.meshes[m], &world(i), reference, &mut points),
+                            ));
+                        }
+                    })
+                })
                 .collect();
-            let survey = placement::survey(&gltf.meshes[m], &worlds);
-            for (&i, s) in users.iter().zip(survey.placements) {
-                per_instance[i] = Some(s);
-            }
-            reference[m] = Some(survey.kept);
+            workers
+                .into_iter()
+                .map(|w| w.join().expect("a survey thread panicked"))
+                .collect()
+        });
+        for (i, s) in surveyed.into_iter().flatten() {
+            per_instance[i] = Some(s);
+        }
+        for (m, r) in references.into_iter().enumerate() {
+            reference[m] = r.map(|r| r.kept);
         }
         Surveys {
             per_instance,

@@ -95,16 +95,11 @@ pub fn tracing_point(p: DVec3, origin: DVec3) -> [f32; 3] {
     }
 }
 
-/// What placing one mesh by several transforms keeps, without copying it (the survey
-/// `instancing` decides by): the triangles the first placement keeps, and per placement the
-/// bounds of the points its triangles use (for the tracing origin), whether it keeps exactly
-/// the first one's triangles, and if so the bounds of their corners, from which a copy's f32
-/// bounds follow (`tracing_bounds`). It does not depend on the tracing origin.
-pub struct MeshSurvey {
-    pub kept: Vec<bool>,
-    pub placements: Vec<PlacementSurvey>,
-}
-
+/// What placing a mesh by a transform keeps, found without copying it (the survey
+/// `instancing` decides by): the bounds of the points its triangles use (for the tracing
+/// origin), whether it keeps exactly the triangles the mesh's first placement keeps, and if so
+/// the bounds of their corners, from which a copy's f32 bounds follow (`tracing_bounds`). It
+/// does not depend on the tracing origin.
 #[derive(Clone, Copy, Debug)]
 pub struct PlacementSurvey {
     pub used: Bounds,
@@ -114,57 +109,82 @@ pub struct PlacementSurvey {
     pub kept_bounds: Bounds,
 }
 
-/// Surveys the placements of `source` by `worlds` (at least one). Per placement one pass over
-/// the vertices and one over the triangles, with the same test `place_mesh` makes.
-pub fn survey(source: &GltfMesh, worlds: &[DMat4]) -> MeshSurvey {
+/// A mesh's first placement, which the others are compared with: the triangles it keeps, the
+/// vertices any triangle uses and those its kept triangles use.
+pub struct Reference {
+    pub kept: Vec<bool>,
+    referenced: Vec<bool>,
+    corner: Vec<bool>,
+}
+
+/// Surveys the first placement of `source`, by `world`.
+pub fn survey_first(source: &GltfMesh, world: &DMat4) -> (Reference, PlacementSurvey) {
+    let mut points = Vec::new();
+    placed_points(source, world, &mut points);
+    let kept: Vec<bool> = source.indices.iter().map(|t| area_kept(&points, t)).collect();
     let mut referenced = vec![false; source.positions.len()];
-    source
-        .indices
-        .iter()
-        .flatten()
-        .for_each(|&i| referenced[i as usize] = true);
-    let mut points: Vec<DVec3> = Vec::with_capacity(source.positions.len());
-    let mut kept: Vec<bool> = Vec::new();
     let mut corner = vec![false; source.positions.len()];
-    let mut placements = Vec::with_capacity(worlds.len());
-    for (k, world) in worlds.iter().enumerate() {
-        // Points no triangle may use become NaN: a triangle with one has a NaN area, and is
-        // dropped by the area test alone, as `triangle_kept` drops it.
-        points.clear();
-        points.extend(source.positions.iter().map(|p| {
-            let w = world.transform_point3(DVec3::new(p[0] as f64, p[1] as f64, p[2] as f64));
-            if valid_world_point(w) { w } else { DVec3::NAN }
-        }));
-        let area_kept = |&[a, b, c]: &[u32; 3]| {
-            let (pa, pb, pc) = (points[a as usize], points[b as usize], points[c as usize]);
-            let area2 = (pb - pa).cross(pc - pa).length_squared();
-            area2 > 0.0 && area2.is_finite()
-        };
-        let regular = if k == 0 {
-            kept = source.indices.iter().map(area_kept).collect();
-            for (&tri, _) in source.indices.iter().zip(&kept).filter(|(_, k)| **k) {
-                tri.iter().for_each(|&i| corner[i as usize] = true);
-            }
-            true
-        } else {
-            source.indices.iter().zip(&kept).all(|(t, &k)| area_kept(t) == k)
-        };
-        let (mut used, mut kept_bounds) = (EMPTY, EMPTY);
-        for ((p, &r), &c) in points.iter().zip(&referenced).zip(&corner) {
-            if r && !p.is_nan() {
-                used = (used.0.min(*p), used.1.max(*p));
-                if regular && c {
-                    kept_bounds = (kept_bounds.0.min(*p), kept_bounds.1.max(*p));
-                }
+    for (tri, &k) in source.indices.iter().zip(&kept) {
+        for &i in tri {
+            referenced[i as usize] = true;
+            corner[i as usize] |= k;
+        }
+    }
+    let reference = Reference {
+        kept,
+        referenced,
+        corner,
+    };
+    let survey = bounds_of(&points, &reference, true);
+    (reference, survey)
+}
+
+/// Surveys a further placement of `source`, by `world`, against the first one's `reference`
+/// (`points`: a buffer to reuse). One pass over the vertices and one over the triangles, with
+/// the test `place_mesh` makes.
+pub fn survey_next(
+    source: &GltfMesh,
+    world: &DMat4,
+    reference: &Reference,
+    points: &mut Vec<DVec3>,
+) -> PlacementSurvey {
+    placed_points(source, world, points);
+    let regular = (source.indices.iter().zip(&reference.kept)).all(|(t, &k)| area_kept(points, t) == k);
+    bounds_of(points, reference, regular)
+}
+
+/// The mesh's points placed in world space (f64). Points no triangle may use become NaN: a
+/// triangle with one has a NaN area, and is dropped by the area test alone (`area_kept`), as
+/// `triangle_kept` drops it.
+fn placed_points(source: &GltfMesh, world: &DMat4, points: &mut Vec<DVec3>) {
+    points.clear();
+    points.extend(source.positions.iter().map(|p| {
+        let w = world.transform_point3(DVec3::new(p[0] as f64, p[1] as f64, p[2] as f64));
+        if valid_world_point(w) { w } else { DVec3::NAN }
+    }));
+}
+
+fn area_kept(points: &[DVec3], &[a, b, c]: &[u32; 3]) -> bool {
+    let (pa, pb, pc) = (points[a as usize], points[b as usize], points[c as usize]);
+    let area2 = (pb - pa).cross(pc - pa).length_squared();
+    area2 > 0.0 && area2.is_finite()
+}
+
+fn bounds_of(points: &[DVec3], reference: &Reference, regular: bool) -> PlacementSurvey {
+    let (mut used, mut kept_bounds) = (EMPTY, EMPTY);
+    for ((p, &r), &c) in points.iter().zip(&reference.referenced).zip(&reference.corner) {
+        if r && !p.is_nan() {
+            used = (used.0.min(*p), used.1.max(*p));
+            if regular && c {
+                kept_bounds = (kept_bounds.0.min(*p), kept_bounds.1.max(*p));
             }
         }
-        placements.push(PlacementSurvey {
-            used,
-            regular,
-            kept_bounds,
-        });
     }
-    MeshSurvey { kept, placements }
+    PlacementSurvey {
+        used,
+        regular,
+        kept_bounds,
+    }
 }
 
 /// The f32 bounds, in tracing coordinates, of points whose world bounds are `bounds`: rounding

@@ -7,7 +7,7 @@
 mod link;
 
 use super::{CommandError, CommandResult};
-use crate::cli::{BenchArgs, BenchCommand};
+use crate::cli::{BenchArgs, BenchCommand, ViewArgs};
 use crate::sampling::Rng;
 use crate::scene::{LoadOptions, Scene};
 use crate::sys::embree::Coherence;
@@ -71,7 +71,8 @@ pub fn run(args: &BenchArgs) -> CommandResult {
             seconds,
             threads,
             flatten,
-        } => rays(scene, *seconds, *threads, *flatten),
+            view,
+        } => rays(scene, *seconds, *threads, *flatten, view),
         BenchCommand::Messages { sizes } => messages(sizes),
     }
 }
@@ -99,7 +100,7 @@ fn messages(sizes: &str) -> CommandResult {
     Ok(())
 }
 
-fn rays(path: &Path, seconds: f64, threads: Option<usize>, flatten: bool) -> CommandResult {
+fn rays(path: &Path, seconds: f64, threads: Option<usize>, flatten: bool, view: &ViewArgs) -> CommandResult {
     let load_start = Instant::now();
     let options = LoadOptions {
         flatten,
@@ -113,7 +114,7 @@ fn rays(path: &Path, seconds: f64, threads: Option<usize>, flatten: bool) -> Com
     // Before any ray: what loading and building took at most.
     let peak = peak_memory();
     let (width, height) = (1024u32, 1024u32);
-    let (view, _) = crate::commands::view::choose_view(&scene, &tracer, &Default::default(), width, height)?;
+    let (view, _) = crate::commands::view::choose_view(&scene, &tracer, view, width, height)?;
     let camera = view.camera(width, height);
     let primary = |i: u64| {
         let p = i % (width as u64 * height as u64);
