@@ -79,6 +79,11 @@ fn checker(dir: &Path) -> &'static str {
 /// placed three times, once mirrored: every kind of placement, and the only lights are
 /// instanced.
 fn props_scene(dir: &Path) -> PathBuf {
+    props_scene_at(dir, "props", [0.0; 3])
+}
+
+/// The props scene with every root node under one node translated by `offset`.
+fn props_scene_at(dir: &Path, name: &str, offset: [f64; 3]) -> PathBuf {
     let mut b = GltfBuilder::new();
     let floor = b.material(lambertian("floor", [0.6, 0.6, 0.6]));
     let texture = b.texture(checker(dir));
@@ -120,7 +125,15 @@ fn props_scene(dir: &Path) -> PathBuf {
     b.node(
         json!({"name": "lamp_mirrored", "mesh": lamp_mesh, "translation": [0.0, 4.0, -2.5], "scale": [-1.0, 1.0, 1.0]}),
     );
-    b.write_edited(dir, "props", roots_only)
+    b.write_edited(dir, name, |doc| {
+        roots_only(doc);
+        if offset != [0.0; 3] {
+            let roots = doc["scenes"][0]["nodes"].clone();
+            let nodes = doc["nodes"].as_array_mut().unwrap();
+            nodes.push(json!({"name": "far", "translation": offset, "children": roots}));
+            doc["scenes"][0]["nodes"] = json!([nodes.len() - 1]);
+        }
+    })
 }
 
 /// The scene lists only the nodes no other node has as a child.
@@ -141,10 +154,19 @@ fn info(scene: &Path, extra: &[&str]) -> Value {
     serde_json::from_str(&stdout(&run_ok(&args))).unwrap()
 }
 
-const VIEW: &str = "-vp 0 9 7 -vd 0 -1 -0.8 -vh 60 -vv 45 -x 96 -y 72";
+const VIEW: &str = "-vd 0 -1 -0.8 -vh 60 -vv 45 -x 96 -y 72";
+
+/// The props' view (from (0, 9, 7), moved with the scene by `offset`) and `extra` options.
+fn args_at(offset: [f64; 3], extra: &str) -> Vec<String> {
+    let vp = [offset[0], 9.0 + offset[1], 7.0 + offset[2]];
+    format!("-vp {} {} {} {VIEW} {extra}", vp[0], vp[1], vp[2])
+        .split_whitespace()
+        .map(String::from)
+        .collect()
+}
 
 fn args(extra: &str) -> Vec<String> {
-    format!("{VIEW} {extra}").split_whitespace().map(String::from).collect()
+    args_at([0.0; 3], extra)
 }
 
 /// How two renders of the same scene differ in a layer (channel names as `rgb`, or a data
@@ -253,6 +275,30 @@ fn an_instanced_scene_renders_as_its_flattened_copy() {
         flattened.attribute("icrender/options")
     );
     assert_same_image(&instanced, &flattened, "props");
+}
+
+/// Far from glTF's origin (map coordinates) the instances are placed relative to the tracing
+/// origin as the copies are: the same triangles, bounds and image.
+#[test]
+fn instances_far_from_the_origin_render_as_their_copies() {
+    let dir = tempfile::tempdir().unwrap();
+    let offset = [1.0e6, -2.5e5, 3.0e6];
+    let scene = props_scene_at(dir.path(), "far_props", offset);
+    let (shared, copied) = (info(&scene, &[]), info(&scene, &["--flatten"]));
+    assert_eq!(shared["instancing"]["placements"], 9, "{shared}");
+    for key in ["triangles", "placed_meshes", "dropped_triangles", "bounds", "lights"] {
+        assert_eq!(shared[key], copied[key], "{key}");
+    }
+    let a = args_at(offset, "-ab 1 --aovs all");
+    let a: Vec<&str> = a.iter().map(String::as_str).collect();
+    let (instanced, _) = render_to(dir.path(), &scene, "far_instanced", &a);
+    let mut f = a.clone();
+    f.push("--flatten");
+    let (flattened, _) = render_to(dir.path(), &scene, "far_flattened", &f);
+    // The view must see the props (not empty space): most pixels are lit.
+    let lit = rgb(&instanced, "direct")[0].iter().filter(|&&v| v > 0.0).count();
+    assert!(lit > 96 * 72 / 2, "{lit} lit pixels");
+    assert_same_image(&instanced, &flattened, "far out");
 }
 
 /// Corners of the lamp (a 1 x 1 quad in y = 0, front facing -y) placed by scale, then a turn
