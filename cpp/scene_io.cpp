@@ -1021,6 +1021,7 @@ class Converter {
         bool done = false;
         uint64_t bytes = 0;      // icr_mesh arrays of its triangle primitives
         uint64_t triangles = 0;
+        uint64_t primitives = 0;  // its triangle primitives: each placed on its own
     };
     std::vector<MeshCost> mesh_cost_;
 
@@ -1043,6 +1044,7 @@ class Converter {
                 const uint64_t ni = prim.indices >= 0 ? view_accessor(m_, prim.indices, "indices").count : nv;
                 c.bytes = sat_add(c.bytes, sat_add(sat_mul(nv, per_vertex), sat_mul(ni, 4)));
                 c.triangles = sat_add(c.triangles, ni / 3);
+                c.primitives = sat_add(c.primitives, 1);
             } catch (const LoadError &) {
                 // reported by the conversion, with its context
             }
@@ -1139,14 +1141,22 @@ class Converter {
 
         // A mesh placed once is copied into world space; one placed more often is stored once
         // (in the renderer and in Embree's prototype) unless the renderer flattens everything.
-        uint64_t distinct = 0, placed = 0, triangles = 0, placements = 0;
+        // Placements are counted per primitive (each is a mesh of its own to the renderer). An
+        // instanced placement costs about 1 KiB more than the small allocations every placement
+        // has: its transforms, its world-space survey, its object's name and, unless it shares
+        // a prototype instance with other meshes, an Embree instance.
+        uint64_t distinct = 0, placed = 0, triangles = 0, placements = 0, instanced = 0;
         for (size_t m = 0; m < uses.size(); ++m) {
             if (uses[m] == 0) continue;
             const MeshCost &c = mesh_cost(m);
+            const bool copied = flatten_ || uses[m] == 1;
             distinct = sat_add(distinct, c.bytes);
-            placed = sat_add(placed, (flatten_ || uses[m] == 1) ? sat_mul(c.bytes, uses[m]) : c.bytes);
+            placed = sat_add(placed, copied ? sat_mul(c.bytes, uses[m]) : c.bytes);
             triangles = sat_add(triangles, sat_mul(c.triangles, uses[m]));
-            placements = sat_add(placements, uses[m]);
+            // Each primitive is a mesh of its own to the renderer, placed by every use.
+            const uint64_t primitive_placements = sat_mul(c.primitives, uses[m]);
+            placements = sat_add(placements, primitive_placements);
+            if (!copied) instanced = sat_add(instanced, primitive_placements);
         }
 
         // Images are decoded only for textures used as base colour.
@@ -1164,8 +1174,9 @@ class Converter {
         }
 
         // Per placement the renderer also keeps a few small allocations (vectors, instance).
-        const uint64_t need = sat_add(sat_add(sat_mul(distinct, 2), placed),
-                                      sat_add(sat_mul(placements, 256), sat_mul(texels, 24)));
+        const uint64_t need =
+            sat_add(sat_add(sat_add(sat_mul(distinct, 2), placed), sat_mul(instanced, 1024)),
+                    sat_add(sat_mul(placements, 256), sat_mul(texels, 24)));
         std::string limited_by;
         const uint64_t limit = scene_memory_limit(&limited_by);
         if (need > limit)
