@@ -471,6 +471,13 @@ pub enum BenchCommand {
         /// (default: the automatic view).
         #[command(flatten)]
         view: ViewArgs,
+        /// Write the shadow rays (origin and offset to the emitter point, 6 little-endian f32
+        /// each) to FILE, to trace the same rays in another scene with --shadow-rays.
+        #[arg(long = "save-shadow-rays", value_name = "FILE")]
+        save_shadow_rays: Option<PathBuf>,
+        /// Trace the shadow rays saved in FILE (by --save-shadow-rays) instead of making them.
+        #[arg(long = "shadow-rays", value_name = "FILE", conflicts_with = "save_shadow_rays")]
+        shadow_rays: Option<PathBuf>,
     },
     /// Message cost between two MPI ranks (run under `mpirun -np 2`): round trips at several
     /// sizes, and the latency and bandwidth fitted to them, as JSON on rank 0. What the cluster

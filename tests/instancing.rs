@@ -580,3 +580,75 @@ fn ext_mesh_gpu_instancing_with_bad_attributes_is_refused() {
         );
     }
 }
+
+/// Through the tracer itself: random rays in the props scene hit the same object, triangle,
+/// material and point through instances as through copies, and shadow segments are blocked
+/// alike (but for rays that graze an edge: rounding decides those, at most 1 in 1000 here).
+#[test]
+fn rays_through_instances_hit_what_rays_through_copies_hit() {
+    use icrender::sampling::Rng;
+    use icrender::scene::{LoadOptions, Scene};
+    use icrender::sys::embree::Coherence;
+    use icrender::tracer::Tracer;
+    let dir = tempfile::tempdir().unwrap();
+    let path = props_scene_at(dir.path(), "far_props", [1.0e6, -2.5e5, 3.0e6]);
+    let shared = Scene::load(&path, &LoadOptions::default()).unwrap();
+    let copied = Scene::load(
+        &path,
+        &LoadOptions {
+            flatten: true,
+            ..LoadOptions::default()
+        },
+    )
+    .unwrap();
+    assert_eq!(shared.instancing.placements.len(), 9);
+    assert!(copied.instancing.placements.is_empty());
+    assert_eq!(shared.origin, copied.origin);
+    assert_ne!(
+        shared.origin,
+        glam::DVec3::ZERO,
+        "the scene is far out: coordinates are re-centred"
+    );
+    let (ts, tc) = (Tracer::new(&shared).unwrap(), Tracer::new(&copied).unwrap());
+    let (lo, hi) = (shared.bounds_min, shared.bounds_max);
+    let mut rng = Rng::new(17, 0);
+    let mut point = || lo + (hi - lo) * glam::Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32());
+    let (mut hits, mut differ, mut blocked, mut blocked_differ) = (0, 0, 0, 0);
+    let n = 100_000;
+    for _ in 0..n {
+        let (a, b) = (point(), point());
+        let dir = (b - a).normalize();
+        match (
+            ts.intersect(&shared, a, dir, Coherence::Incoherent),
+            tc.intersect(&copied, a, dir, Coherence::Incoherent),
+        ) {
+            (Some(s), Some(c)) => {
+                hits += 1;
+                let same = s.object == c.object
+                    && s.prim_id == c.prim_id
+                    && s.material == c.material
+                    && (s.position - c.position).length() <= 1e-5 * shared.size()
+                    && s.geometric_normal.dot(c.geometric_normal) > 0.9999
+                    && s.normal.dot(c.normal) > 0.9999;
+                differ += !same as usize;
+            }
+            (None, None) => {}
+            _ => differ += 1,
+        }
+        let length = (b - a).length();
+        let s = ts.transmittance(&shared, a, dir, length);
+        let c = tc.transmittance(&copied, a, dir, length);
+        blocked += (c < 1.0) as usize;
+        blocked_differ += ((s - c).abs() > 1e-6) as usize;
+    }
+    println!("{hits} hits, {differ} differ; {blocked} blocked, {blocked_differ} differ");
+    assert!(
+        hits > n / 5 && blocked > n / 10,
+        "{hits} hits, {blocked} blocked: the rays miss the props"
+    );
+    assert!(differ * 1000 <= n, "{differ} of {n} closest hits differ");
+    assert!(
+        blocked_differ * 1000 <= n,
+        "{blocked_differ} of {n} shadow segments differ"
+    );
+}

@@ -72,7 +72,19 @@ pub fn run(args: &BenchArgs) -> CommandResult {
             threads,
             flatten,
             view,
-        } => rays(scene, *seconds, *threads, *flatten, view),
+            save_shadow_rays,
+            shadow_rays,
+        } => rays(
+            scene,
+            &RaysOptions {
+                seconds: *seconds,
+                threads: *threads,
+                flatten: *flatten,
+                view,
+                save_shadow_rays: save_shadow_rays.as_deref(),
+                shadow_rays: shadow_rays.as_deref(),
+            },
+        ),
         BenchCommand::Messages { sizes } => messages(sizes),
     }
 }
@@ -100,13 +112,30 @@ fn messages(sizes: &str) -> CommandResult {
     Ok(())
 }
 
-fn rays(path: &Path, seconds: f64, threads: Option<usize>, flatten: bool, view: &ViewArgs) -> CommandResult {
+/// What `bench rays` was asked for beside the scene.
+struct RaysOptions<'a> {
+    seconds: f64,
+    threads: Option<usize>,
+    flatten: bool,
+    view: &'a ViewArgs,
+    save_shadow_rays: Option<&'a Path>,
+    shadow_rays: Option<&'a Path>,
+}
+
+fn rays(path: &Path, options: &RaysOptions<'_>) -> CommandResult {
+    let RaysOptions {
+        seconds,
+        threads,
+        flatten,
+        view,
+        ..
+    } = *options;
     let load_start = Instant::now();
-    let options = LoadOptions {
+    let load_options = LoadOptions {
         flatten,
         ..LoadOptions::default()
     };
-    let scene = Scene::load(path, &options)?;
+    let scene = Scene::load(path, &load_options)?;
     let load_s = load_start.elapsed().as_secs_f64();
     let build_start = Instant::now();
     let tracer = Tracer::new(&scene)?;
@@ -130,7 +159,9 @@ fn rays(path: &Path, seconds: f64, threads: Option<usize>, flatten: bool, view: 
         (o, Vec3::new(r * phi.cos(), r * phi.sin(), z))
     };
     // Shadow rays as the renderer casts them: from the surfaces the view sees to a point on an
-    // emitter the light tree picks for that surface, stopping short of the emitter.
+    // emitter the light tree picks for that surface, stopping short of the emitter. Made before
+    // the clock starts: picking through the light tree is not the ray's cost (x32's tree holds
+    // 32 times the single room's emitters).
     let shading_points: Vec<(Vec3, Vec3)> = (0..4096u64)
         .filter_map(|i| {
             let (o, d) = primary(i.wrapping_mul(2_654_435_761) % (width as u64 * height as u64));
@@ -138,17 +169,28 @@ fn rays(path: &Path, seconds: f64, threads: Option<usize>, flatten: bool, view: 
             Some((tracer.spawn_point(&hit, hit.facing_normal), hit.facing_normal))
         })
         .collect();
-    let shadow = |i: u64| {
-        let (p, n) = shading_points[(i % shading_points.len().max(1) as u64) as usize];
-        let mut rng = Rng::new(i, 7);
-        match scene
-            .emitters
-            .sample(p, n, rng.next_f32(), rng.next_f32(), rng.next_f32())
-        {
-            Some(light) => (p, (light.position - p) * 0.999),
-            None => (p, n),
-        }
+    let segments: Vec<(Vec3, Vec3)> = match options.shadow_rays {
+        Some(file) => read_segments(file)?,
+        None => (0..(1u64 << 16))
+            .filter_map(|i| {
+                let (p, n) = *shading_points.get((i % shading_points.len().max(1) as u64) as usize)?;
+                let mut rng = Rng::new(i, 7);
+                let light = scene
+                    .emitters
+                    .sample(p, n, rng.next_f32(), rng.next_f32(), rng.next_f32())?;
+                Some((p, (light.position - p) * 0.999))
+            })
+            .collect(),
     };
+    if let Some(file) = options.save_shadow_rays {
+        let bytes: Vec<u8> = (segments.iter())
+            .flat_map(|(o, d)| [o.to_array(), d.to_array()])
+            .flatten()
+            .flat_map(f32::to_le_bytes)
+            .collect();
+        std::fs::write(file, bytes).map_err(|e| CommandError::failed(format!("{}: {e}", file.display())))?;
+    }
+    let shadow = |i: u64| segments[(i % segments.len() as u64) as usize];
     let all = threads.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
     println!(
         "scene        {} ({} triangles, {} stored{})",
@@ -176,8 +218,7 @@ fn rays(path: &Path, seconds: f64, threads: Option<usize>, flatten: bool, view: 
     for t in [1, all] {
         let (p, ph) = throughput(&tracer, t, seconds, Query::Closest(Coherence::Coherent), &primary);
         let (r, rh) = throughput(&tracer, t, seconds, Query::Closest(Coherence::Incoherent), &incoherent);
-        let shadows = (!shading_points.is_empty() && !scene.emitters.is_empty())
-            .then(|| throughput(&tracer, t, seconds, Query::Occluded, &shadow));
+        let shadows = (!segments.is_empty()).then(|| throughput(&tracer, t, seconds, Query::Occluded, &shadow));
         print!(
             "{t} thread(s)  primary {p:.2} Mrays/s ({:.0}% hit)   incoherent {r:.2} Mrays/s ({:.0}% hit)",
             ph * 100.0,
@@ -192,6 +233,25 @@ fn rays(path: &Path, seconds: f64, threads: Option<usize>, flatten: bool, view: 
         }
     }
     Ok(())
+}
+
+/// Shadow rays written by --save-shadow-rays.
+fn read_segments(file: &Path) -> Result<Vec<(Vec3, Vec3)>, CommandError> {
+    let bad = |why: String| CommandError::input(format!("{}: {why}", file.display()));
+    let bytes = std::fs::read(file).map_err(|e| bad(e.to_string()))?;
+    if bytes.is_empty() || !bytes.len().is_multiple_of(24) {
+        return Err(bad(format!(
+            "{} bytes is not a list of shadow rays (24 bytes each)",
+            bytes.len()
+        )));
+    }
+    let values: Vec<f32> = (bytes.chunks_exact(4))
+        .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+        .collect();
+    Ok(values
+        .chunks_exact(6)
+        .map(|v| (Vec3::new(v[0], v[1], v[2]), Vec3::new(v[3], v[4], v[5])))
+        .collect())
 }
 
 /// The process's peak resident memory so far (Linux's VmHWM), in bytes.
