@@ -11,7 +11,8 @@ Each configuration runs `icrender bench rays SCENE --threads 1` --repeats times,
 with the others, and keeps each figure's best (interference from other work only ever slows a
 run down): load and BVH build seconds, the process's peak resident memory (the kernel's
 figure for the whole process, from wait4), and one-thread rates of primary rays, shadow rays
-and incoherent rays. Every run looks from the single room's automatic view, inside room (0, 0),
+and incoherent rays, per second of the tracing thread's CPU time (on a shared machine the wall
+clock also counts the time other work held the core). Every run looks from the single room's automatic view, inside room (0, 0),
 which x32 places where the single room is, so the primary rays are the same rays in all three;
 the shadow rays are the single room's (from the surfaces the view sees to a point on the
 emitter its light tree picks there, saved once with --save-shadow-rays and traced everywhere
@@ -74,9 +75,9 @@ def parse_bench(out):
         ("load_s", r"^load\s+([0-9.]+) s"),
         ("build_s", r"^bvh build\s+([0-9.]+) s"),
         ("peak_after_build_mb", r"^peak memory\s+([0-9.]+) MB"),
-        ("primary", r"1 thread\(s\).*primary ([0-9.]+) Mrays/s"),
-        ("incoherent", r"1 thread\(s\).*incoherent ([0-9.]+) Mrays/s"),
-        ("shadow", r"1 thread\(s\).*shadow ([0-9.]+) Mrays/s"),
+        ("primary", r"1 thread\(s\)  per CPU second: primary ([0-9.]+) Mrays"),
+        ("incoherent", r"1 thread\(s\)  per CPU second:.*incoherent ([0-9.]+) Mrays"),
+        ("shadow", r"1 thread\(s\)  per CPU second:.*shadow ([0-9.]+) Mrays"),
         ("blocked", r"1 thread\(s\).*shadow [0-9.]+ Mrays/s \(([0-9]+)% blocked\)"),
     ]:
         match = re.search(pattern, out, re.MULTILINE)
@@ -139,10 +140,10 @@ def main():
             print(f"  run {repeat + 1}/{args.repeats} {name}: load {figures['load_s']:.3f} s, "
                   f"build {figures['build_s']:.3f} s, peak {figures['peak_mb']:.0f} MB", file=sys.stderr)
 
-    print(f"best of {args.repeats} runs, one thread, {args.seconds:g} s per kind of ray; machine: "
+    print(f"best of {args.repeats} runs, one thread, {args.seconds:g} s per kind of ray, rays per CPU second; machine: "
           f"{os.cpu_count()} cores, load average {os.getloadavg()[0]:.2f} at the end")
     header = ("", "triangles", "stored", "load s", "build s", "load+build s", "peak MB",
-              "primary Mrays/s", "shadow Mrays/s", "blocked %", "incoherent Mrays/s")
+              "primary Mrays", "shadow Mrays", "blocked %", "incoherent Mrays")
     rows = []
     for name, _, _ in CONFIGS:
         b = best(runs[name])

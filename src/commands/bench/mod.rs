@@ -25,20 +25,29 @@ enum Query {
     Occluded,
 }
 
-/// Traces `make_ray(i)` for i = 0, 1, ... on `threads` threads for about `seconds`; Mrays/s
-/// and the fraction of rays that hit (blocked, for shadow rays).
+/// What a measurement found: Mrays per second of wall clock, Mrays per second of the tracing
+/// threads' CPU time (what a shared machine's other work disturbs least), and the fraction of
+/// rays that hit (were blocked, for shadow rays).
+struct Rate {
+    wall: f64,
+    cpu: f64,
+    hit: f64,
+}
+
+/// Traces `make_ray(i)` for i = 0, 1, ... on `threads` threads for about `seconds`.
 fn throughput(
     tracer: &Tracer,
     threads: usize,
     seconds: f64,
     query: Query,
     make_ray: &(dyn Fn(u64) -> (Vec3, Vec3) + Sync),
-) -> (f64, f64) {
+) -> Rate {
     let start = Instant::now();
-    let results: Vec<(u64, u64)> = std::thread::scope(|scope| {
+    let results: Vec<(u64, u64, f64)> = std::thread::scope(|scope| {
         let workers: Vec<_> = (0..threads)
             .map(|t| {
                 scope.spawn(move || {
+                    let cpu = cpu_time::ThreadTime::now();
                     let (mut rays, mut hits) = (0u64, 0u64);
                     let mut i = t as u64 * (1 << 40);
                     while start.elapsed().as_secs_f64() < seconds {
@@ -52,16 +61,21 @@ fn throughput(
                         }
                         rays += 4096;
                     }
-                    (rays, hits)
+                    (rays, hits, cpu.elapsed().as_secs_f64())
                 })
             })
             .collect();
-        workers.into_iter().map(|w| w.join().unwrap_or((0, 0))).collect()
+        workers.into_iter().map(|w| w.join().unwrap_or((0, 0, 0.0))).collect()
     });
     let elapsed = start.elapsed().as_secs_f64();
     let rays: u64 = results.iter().map(|r| r.0).sum();
     let hits: u64 = results.iter().map(|r| r.1).sum();
-    (rays as f64 / elapsed / 1e6, hits as f64 / rays.max(1) as f64)
+    let cpu: f64 = results.iter().map(|r| r.2).sum();
+    Rate {
+        wall: rays as f64 / elapsed / 1e6,
+        cpu: rays as f64 / cpu.max(1e-9) / 1e6,
+        hit: hits as f64 / rays.max(1) as f64,
+    }
 }
 
 pub fn run(args: &BenchArgs) -> CommandResult {
@@ -216,16 +230,26 @@ fn rays(path: &Path, options: &RaysOptions<'_>) -> CommandResult {
         None => println!("peak memory  unknown (no /proc/self/status)"),
     }
     for t in [1, all] {
-        let (p, ph) = throughput(&tracer, t, seconds, Query::Closest(Coherence::Coherent), &primary);
-        let (r, rh) = throughput(&tracer, t, seconds, Query::Closest(Coherence::Incoherent), &incoherent);
+        let p = throughput(&tracer, t, seconds, Query::Closest(Coherence::Coherent), &primary);
+        let r = throughput(&tracer, t, seconds, Query::Closest(Coherence::Incoherent), &incoherent);
         let shadows = (!segments.is_empty()).then(|| throughput(&tracer, t, seconds, Query::Occluded, &shadow));
         print!(
-            "{t} thread(s)  primary {p:.2} Mrays/s ({:.0}% hit)   incoherent {r:.2} Mrays/s ({:.0}% hit)",
-            ph * 100.0,
-            rh * 100.0
+            "{t} thread(s)  primary {:.2} Mrays/s ({:.0}% hit)   incoherent {:.2} Mrays/s ({:.0}% hit)",
+            p.wall,
+            p.hit * 100.0,
+            r.wall,
+            r.hit * 100.0
         );
-        match shadows {
-            Some((s, sh)) => println!("   shadow {s:.2} Mrays/s ({:.0}% blocked)", sh * 100.0),
+        match &shadows {
+            Some(s) => println!("   shadow {:.2} Mrays/s ({:.0}% blocked)", s.wall, s.hit * 100.0),
+            None => println!(),
+        }
+        print!(
+            "{t} thread(s)  per CPU second: primary {:.2} Mrays   incoherent {:.2} Mrays",
+            p.cpu, r.cpu
+        );
+        match &shadows {
+            Some(s) => println!("   shadow {:.2} Mrays", s.cpu),
             None => println!(),
         }
         if all == 1 {
