@@ -898,7 +898,8 @@ namespace {
 
 class Converter {
   public:
-    Converter(const tinygltf::Model &model, icr_scene &scene) : m_(model), s_(scene) {}
+    Converter(const tinygltf::Model &model, icr_scene &scene, bool flatten)
+        : m_(model), s_(scene), flatten_(flatten) {}
 
     void run() {
         check_graph_and_memory();
@@ -913,6 +914,9 @@ class Converter {
   private:
     const tinygltf::Model &m_;
     icr_scene &s_;
+    // The renderer copies every placement into world space (ICR_LOAD_FLATTEN): only the
+    // memory estimate depends on it.
+    const bool flatten_;
     std::vector<std::vector<int64_t>> mesh_prims_;  // glTF mesh -> icr_mesh per primitive (-1: skipped)
     std::vector<bool> mesh_done_;
     std::vector<int> image_pixels_;  // glTF image -> index into s_.pixels (-1: not decoded)
@@ -1029,6 +1033,7 @@ class Converter {
         bool done = false;
         uint64_t bytes = 0;      // icr_mesh arrays of its triangle primitives
         uint64_t triangles = 0;
+        uint64_t primitives = 0;  // its triangle primitives: each placed on its own
     };
     std::vector<MeshCost> mesh_cost_;
 
@@ -1051,6 +1056,7 @@ class Converter {
                 const uint64_t ni = prim.indices >= 0 ? view_accessor(m_, prim.indices, "indices").count : nv;
                 c.bytes = sat_add(c.bytes, sat_add(sat_mul(nv, per_vertex), sat_mul(ni, 4)));
                 c.triangles = sat_add(c.triangles, ni / 3);
+                c.primitives = sat_add(c.primitives, 1);
             } catch (const LoadError &) {
                 // reported by the conversion, with its context
             }
@@ -1090,14 +1096,15 @@ class Converter {
     // would let a small file expand exponentially) and nesting deeper than kMaxNodeDepth, then
     // works out the memory the loaded scene will take and refuses the scene if that is more
     // than the machine has: the arrays made here, the renderer's copy of them, its world-space
-    // copy of every placed mesh, and the decoded textures (RGBA here and in the renderer, and
+    // copy of every mesh placed once (of every placed mesh with ICR_LOAD_FLATTEN; a mesh placed
+    // more often is held once more, by Embree), and the decoded textures (RGBA here and in the renderer, and
     // the renderer's linear float copy).
     void check_graph_and_memory() {
         mesh_cost_.assign(m_.meshes.size(), MeshCost{});
         extent_w_.assign(m_.images.size(), 0);
         extent_h_.assign(m_.images.size(), 0);
-        std::vector<char> reached(m_.nodes.size(), 0), on_path(m_.nodes.size(), 0), mesh_seen(m_.meshes.size(), 0);
-        uint64_t distinct = 0, placed = 0, triangles = 0, placements = 0;
+        std::vector<char> reached(m_.nodes.size(), 0), on_path(m_.nodes.size(), 0);
+        std::vector<uint64_t> uses(m_.meshes.size(), 0);  // placements of each mesh
         std::vector<std::pair<size_t, size_t>> path;  // node, next child
         auto enter = [&](int index, int64_t parent) {
             if (index < 0 || size_t(index) >= m_.nodes.size()) {
@@ -1116,12 +1123,16 @@ class Converter {
             reached[ni] = on_path[ni] = 1;
             const int mesh = m_.nodes[ni].mesh;
             if (mesh >= 0 && size_t(mesh) < m_.meshes.size()) {
-                const MeshCost &c = mesh_cost(size_t(mesh));
-                if (!mesh_seen[size_t(mesh)]) distinct = sat_add(distinct, c.bytes);
-                mesh_seen[size_t(mesh)] = 1;
-                placed = sat_add(placed, c.bytes);
-                triangles = sat_add(triangles, c.triangles);
-                ++placements;
+                uint64_t count = 1;
+                try {
+                    GpuInstancing g;
+                    const std::string label = quoted_or_index(m_.nodes[ni].name, "node", ni);
+                    if (gpu_instancing(m_.nodes[ni], label, &g, false))
+                        count = std::max<uint64_t>(1, gpu_instance_count(g, label));
+                } catch (const LoadError &) {
+                    // reported by the conversion, with its context
+                }
+                uses[size_t(mesh)] = sat_add(uses[size_t(mesh)], count);
             }
             path.emplace_back(ni, 0);
         };
@@ -1140,6 +1151,26 @@ class Converter {
             }
         }
 
+        // A mesh placed once is copied into world space; one placed more often is stored once
+        // (in the renderer and in Embree's prototype) unless the renderer flattens everything.
+        // Placements are counted per primitive (each is a mesh of its own to the renderer). An
+        // instanced placement costs about 1 KiB more than the small allocations every placement
+        // has: its transforms, its world-space survey, its object's name and, unless it shares
+        // a prototype instance with other meshes, an Embree instance.
+        uint64_t distinct = 0, placed = 0, triangles = 0, placements = 0, instanced = 0;
+        for (size_t m = 0; m < uses.size(); ++m) {
+            if (uses[m] == 0) continue;
+            const MeshCost &c = mesh_cost(m);
+            const bool copied = flatten_ || uses[m] == 1;
+            distinct = sat_add(distinct, c.bytes);
+            placed = sat_add(placed, copied ? sat_mul(c.bytes, uses[m]) : c.bytes);
+            triangles = sat_add(triangles, sat_mul(c.triangles, uses[m]));
+            // Each primitive is a mesh of its own to the renderer, placed by every use.
+            const uint64_t primitive_placements = sat_mul(c.primitives, uses[m]);
+            placements = sat_add(placements, primitive_placements);
+            if (!copied) instanced = sat_add(instanced, primitive_placements);
+        }
+
         // Images are decoded only for textures used as base colour.
         uint64_t texels = 0;
         std::vector<char> image_seen(m_.images.size(), 0);
@@ -1155,8 +1186,9 @@ class Converter {
         }
 
         // Per placement the renderer also keeps a few small allocations (vectors, instance).
-        const uint64_t need = sat_add(sat_add(sat_mul(distinct, 2), placed),
-                                      sat_add(sat_mul(placements, 256), sat_mul(texels, 24)));
+        const uint64_t need =
+            sat_add(sat_add(sat_add(sat_mul(distinct, 2), placed), sat_mul(instanced, 1024)),
+                    sat_add(sat_mul(placements, 256), sat_mul(texels, 24)));
         std::string limited_by;
         const uint64_t limit = scene_memory_limit(&limited_by);
         if (need > limit)
@@ -1454,31 +1486,32 @@ class Converter {
         for (size_t i = 0; i < node.translation.size(); ++i) t[i] = node.translation[i];
         for (size_t i = 0; i < node.scale.size(); ++i) s[i] = node.scale[i];
         for (size_t i = 0; i < node.rotation.size(); ++i) q[i] = node.rotation[i];
-        // Exporters write quaternions rounded to a few digits; renormalise so the rotation
-        // does not also scale.
+        if (!normalise(q)) warnings.push_back(label + ": rotation quaternion has no length, ignored");
+    }
+
+    // Exporters write quaternions rounded to a few digits: the rotation is renormalised so that
+    // it does not also scale; one without length becomes none (false).
+    static bool normalise(double q[4]) {
         double ql = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
         if (ql > 0.0 && std::isfinite(ql)) {
             for (int i = 0; i < 4; ++i) q[i] /= ql;
-        } else {
-            warnings.push_back(label + ": rotation quaternion has no length, ignored");
-            q[0] = q[1] = q[2] = 0.0;
-            q[3] = 1.0;
+            return true;
         }
+        q[0] = q[1] = q[2] = 0.0;
+        q[3] = 1.0;
+        return false;
     }
 
-    static Mat4 local_transform(const icr_node &pose) {
-        Mat4 m{};
-        if (pose.has_matrix) {
-            for (size_t i = 0; i < 16; ++i) m[i] = pose.matrix[i];
-            return m;
-        }
-        const double *t = pose.translation, *s = pose.scale, *q = pose.rotation;
+    // Translation * rotation * scale, as glTF composes a node's (and EXT_mesh_gpu_instancing an
+    // instance's) transform, of a unit quaternion.
+    static Mat4 compose(const double t[3], const double q[4], const double s[3]) {
         const double x = q[0], y = q[1], z = q[2], w = q[3];
         const double r[3][3] = {
             {1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)},
             {2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)},
             {2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)},
         };
+        Mat4 m{};
         for (int c = 0; c < 3; ++c)
             for (int row = 0; row < 3; ++row) m[size_t(c * 4 + row)] = r[row][c] * s[c];
         m[12] = t[0];
@@ -1486,6 +1519,137 @@ class Converter {
         m[14] = t[2];
         m[15] = 1.0;
         return m;
+    }
+
+    // `compose` of a quaternion as a file gives it (normalised first; `no_length` set when it
+    // has none).
+    static Mat4 trs_matrix(const double t[3], const double q_in[4], const double s[3], bool *no_length) {
+        double q[4] = {q_in[0], q_in[1], q_in[2], q_in[3]};
+        if (!normalise(q)) *no_length = true;
+        return compose(t, q, s);
+    }
+
+    static Mat4 local_transform(const icr_node &pose) {
+        if (pose.has_matrix) {
+            Mat4 m{};
+            for (size_t i = 0; i < 16; ++i) m[i] = pose.matrix[i];
+            return m;
+        }
+        return compose(pose.translation, pose.rotation, pose.scale);
+    }
+
+    // ----- EXT_mesh_gpu_instancing
+
+    struct GpuInstancing {
+        int translation = -1, rotation = -1, scale = -1;  // accessors, -1 when absent
+    };
+
+    // The extension's attributes on a node, checked for what an index can be; false when the
+    // node does not use it. `report`: warn about attributes it ignores.
+    bool gpu_instancing(const tinygltf::Node &node, const std::string &label, GpuInstancing *out,
+                        bool report = true) {
+        auto it = node.extensions.find("EXT_mesh_gpu_instancing");
+        if (it == node.extensions.end()) return false;
+        const std::string ctx = label + ": EXT_mesh_gpu_instancing";
+        const tinygltf::Value &ext = it->second;
+        if (!ext.IsObject() || !ext.Has("attributes") || !ext.Get("attributes").IsObject())
+            fail(ctx + " has no \"attributes\" object");
+        const tinygltf::Value &attributes = ext.Get("attributes");
+        for (const std::string &key : attributes.Keys()) {
+            const tinygltf::Value &v = attributes.Get(key);
+            int *slot = key == "TRANSLATION" ? &out->translation
+                        : key == "ROTATION"  ? &out->rotation
+                        : key == "SCALE"     ? &out->scale
+                                             : nullptr;
+            if (!slot) {
+                // Custom attributes (_ID, _COLOR, ...) are the application's; others are unknown.
+                if (report && (key.empty() || key[0] != '_'))
+                    warnings.push_back(ctx + ": unknown attribute " + shorten(key) + " ignored");
+                continue;
+            }
+            if (!v.IsNumber() || v.GetNumberAsDouble() != std::floor(v.GetNumberAsDouble()) ||
+                v.GetNumberAsDouble() < 0.0 || v.GetNumberAsDouble() >= double(m_.accessors.size()))
+                fail(ctx + ": " + key + " is not an accessor index");
+            *slot = int(v.GetNumberAsDouble());
+        }
+        return true;
+    }
+
+    // How many instances the attributes give (their common count); 0 when they give no
+    // transform at all. Accessors are checked against their buffers (view_accessor).
+    uint64_t gpu_instance_count(const GpuInstancing &g, const std::string &ctx) {
+        uint64_t count = 0;
+        for (auto [index, name] : {std::pair<int, const char *>{g.translation, "TRANSLATION"},
+                                   {g.rotation, "ROTATION"},
+                                   {g.scale, "SCALE"}}) {
+            if (index < 0) continue;
+            const uint64_t n = view_accessor(m_, index, ctx + ": " + name).count;
+            if (count != 0 && n != count)
+                fail(ctx + ": " + name + " has " + std::to_string(n) + " instances where another attribute has " +
+                     std::to_string(count) + " (all must have the same count)");
+            count = n;
+        }
+        return count;
+    }
+
+    // Element i of a float VEC3/VEC4 accessor, or of a normalized byte/short VEC4 (ROTATION).
+    static void read_vector(const AccessorView &a, uint64_t i, double *out) {
+        const unsigned char *e = a.first + i * a.stride;
+        for (int c = 0; c < a.components; ++c) {
+            switch (a.component_type) {
+                case TINYGLTF_COMPONENT_TYPE_FLOAT: out[c] = load<float>(e + 4 * c); break;
+                case TINYGLTF_COMPONENT_TYPE_BYTE: out[c] = std::max(double(load<int8_t>(e + c)) / 127.0, -1.0); break;
+                case TINYGLTF_COMPONENT_TYPE_SHORT:
+                    out[c] = std::max(double(load<int16_t>(e + 2 * c)) / 32767.0, -1.0);
+                    break;
+                default: out[c] = 0.0;
+            }
+        }
+    }
+
+    // The world matrices of a node's placements: its own, or with EXT_mesh_gpu_instancing one
+    // per instance, node world * (translation * rotation * scale) of the instance.
+    std::vector<Mat4> placements_of(const tinygltf::Node &node, const std::string &label, const Mat4 &world) {
+        GpuInstancing g;
+        if (!gpu_instancing(node, label, &g)) return {world};
+        const std::string ctx = label + ": EXT_mesh_gpu_instancing";
+        const uint64_t count = gpu_instance_count(g, ctx);
+        if (count == 0) {
+            warnings.push_back(ctx + " gives no TRANSLATION, ROTATION or SCALE; the mesh is placed once");
+            return {world};
+        }
+        auto view = [&](int index, const char *name, std::initializer_list<int> types, int components) {
+            AccessorView a;
+            if (index < 0) return a;
+            a = view_accessor(m_, index, ctx + ": " + name);
+            const bool float_ok = a.component_type == TINYGLTF_COMPONENT_TYPE_FLOAT;
+            bool type_ok = false;
+            for (int t : types) type_ok = type_ok || a.component_type == t;
+            if (a.components != components || !type_ok || (!float_ok && !a.normalized))
+                fail(ctx + ": " + name + " must be " +
+                     (components == 4 ? "VEC4 float, or normalized byte or short" : "VEC3 float") + ", got " +
+                     component_name(a.component_type) + (a.normalized ? " normalized " : " ") +
+                     type_name(m_.accessors[size_t(index)].type));
+            return a;
+        };
+        const AccessorView t = view(g.translation, "TRANSLATION", {TINYGLTF_COMPONENT_TYPE_FLOAT}, 3);
+        const AccessorView r = view(g.rotation, "ROTATION",
+                                    {TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_COMPONENT_TYPE_BYTE,
+                                     TINYGLTF_COMPONENT_TYPE_SHORT},
+                                    4);
+        const AccessorView sc = view(g.scale, "SCALE", {TINYGLTF_COMPONENT_TYPE_FLOAT}, 3);
+        std::vector<Mat4> out;
+        out.reserve(size_t(count));
+        bool no_length = false;
+        for (uint64_t i = 0; i < count; ++i) {
+            double tv[3] = {0, 0, 0}, q[4] = {0, 0, 0, 1}, s[3] = {1, 1, 1};
+            if (t.first) read_vector(t, i, tv);
+            if (r.first) read_vector(r, i, q);
+            if (sc.first) read_vector(sc, i, s);
+            out.push_back(mul(world, trs_matrix(tv, q, s, &no_length)));
+        }
+        if (no_length) warnings.push_back(ctx + ": a ROTATION quaternion has no length, taken as none");
+        return out;
     }
 
     struct PathEntry {
@@ -1516,18 +1680,23 @@ class Converter {
                 warnings.push_back("skins are ignored; skinned meshes use their bind pose");
                 warned_skin_ = true;
             }
+            const std::vector<Mat4> placements = placements_of(node, label, world);
             for (int64_t mi : mesh_primitives(size_t(node.mesh))) {
                 if (mi < 0) continue;
-                icr_instance inst{};
-                inst.mesh = uint32_t(mi);
-                for (size_t i = 0; i < 16; ++i) inst.world[i] = world[i];
-                inst.node = uint32_t(ni);
-                inst.node_name = node_name;
-                s_.instances.push_back(inst);
+                for (const Mat4 &placed : placements) {
+                    icr_instance inst{};
+                    inst.mesh = uint32_t(mi);
+                    for (size_t i = 0; i < 16; ++i) inst.world[i] = placed[i];
+                    inst.node = uint32_t(ni);
+                    inst.node_name = node_name;
+                    s_.instances.push_back(inst);
+                }
                 pose.places |= ICR_PLACES_MESH;
             }
         } else if (node.mesh < -1) {
             fail(label + ": mesh " + std::to_string(node.mesh) + " out of range");
+        } else if (node.extensions.count("EXT_mesh_gpu_instancing")) {
+            warnings.push_back(label + ": EXT_mesh_gpu_instancing on a node without a mesh is ignored");
         }
 
         if (node.camera >= 0 || node.camera < -1) {
@@ -1820,6 +1989,7 @@ class Converter {
 };
 
 const char *const kSupportedRequired[] = {
+    "EXT_mesh_gpu_instancing",
     "KHR_lights_punctual",
     "KHR_materials_emissive_strength",
     "KHR_materials_specular",
@@ -1914,7 +2084,7 @@ icr_scene *load_scene(const std::string &path, uint32_t flags) {
     }
 
     std::unique_ptr<icr_scene> scene(new icr_scene());
-    Converter conv(model, *scene);
+    Converter conv(model, *scene, (flags & ICR_LOAD_FLATTEN) != 0);
     conv.run();
 
     std::vector<std::string> warnings = split_lines(twarn);

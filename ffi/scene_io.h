@@ -27,7 +27,9 @@ typedef struct icr_mesh {
     int32_t material;        /* index into materials, or -1 for the glTF default material */
 } icr_mesh;
 
-/* A placement of a mesh primitive in the world. */
+/* A placement of a mesh primitive in the world: one per node naming the mesh, or with
+ * EXT_mesh_gpu_instancing one per instance of the node (node world * instance TRS), in the
+ * instances' order. */
 typedef struct icr_instance {
     uint32_t mesh;           /* index into meshes */
     double world[16];         /* column-major 4x4, as glTF stores matrices */
@@ -159,6 +161,7 @@ typedef struct icr_scene icr_scene;
 
 /* Flags of icr_scene_load. */
 #define ICR_LOAD_ALLOW_OUTSIDE_REFS 1u /* buffers and images may lie outside the file's folder */
+#define ICR_LOAD_FLATTEN 2u            /* the caller copies every placement of a mesh (memory estimate) */
 
 /*
  * Loads a .gltf or .glb file. On failure returns NULL and writes a one-line, NUL-terminated

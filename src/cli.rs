@@ -244,6 +244,11 @@ pub struct RenderArgs {
     /// Let the scene read buffers and images outside its own folder (refused by default).
     #[arg(long = "allow-outside-refs")]
     pub allow_outside_refs: bool,
+    /// Copy every placement of a mesh used by several nodes (or EXT_mesh_gpu_instancing) into
+    /// world space instead of tracing it through Embree instances: the way meshes used once
+    /// are held. For comparison; it takes more memory and a longer BVH build.
+    #[arg(long = "flatten")]
+    pub flatten: bool,
     /// Write statistics as JSON to this file.
     #[arg(long = "stats")]
     pub stats: Option<PathBuf>,
@@ -426,6 +431,9 @@ pub struct InfoArgs {
     /// Let the scene read buffers and images outside its own folder (refused by default).
     #[arg(long = "allow-outside-refs")]
     pub allow_outside_refs: bool,
+    /// Describe the scene with every shared mesh copied per placement (as `render --flatten`).
+    #[arg(long = "flatten")]
+    pub flatten: bool,
     /// Print the description as JSON.
     #[arg(long = "json")]
     pub json: bool,
@@ -477,6 +485,21 @@ pub enum BenchCommand {
         /// Threads for the second, parallel measurement (default: every core).
         #[arg(long = "threads")]
         threads: Option<usize>,
+        /// Copy every placement of shared meshes into world space instead of instancing them
+        /// (as `render --flatten`).
+        #[arg(long = "flatten")]
+        flatten: bool,
+        /// The view the primary rays (and the shadow rays' surfaces) come from, as for render
+        /// (default: the automatic view).
+        #[command(flatten)]
+        view: ViewArgs,
+        /// Write the shadow rays (origin and offset to the emitter point, 6 little-endian f32
+        /// each) to FILE, to trace the same rays in another scene with --shadow-rays.
+        #[arg(long = "save-shadow-rays", value_name = "FILE")]
+        save_shadow_rays: Option<PathBuf>,
+        /// Trace the shadow rays saved in FILE (by --save-shadow-rays) instead of making them.
+        #[arg(long = "shadow-rays", value_name = "FILE", conflicts_with = "save_shadow_rays")]
+        shadow_rays: Option<PathBuf>,
     },
     /// Message cost between two MPI ranks (run under `mpirun -np 2`): round trips at several
     /// sizes, and the latency and bandwidth fitted to them, as JSON on rank 0. What the cluster

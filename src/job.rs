@@ -193,6 +193,7 @@ impl Job {
             lambertian: args.lambertian,
             allow_outside_refs: args.allow_outside_refs,
             max_memory: args.max_memory,
+            flatten: args.flatten,
         };
         let scene = Scene::load(&args.scene, &material_options)?;
         if let Some(limit) = args.max_memory {

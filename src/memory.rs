@@ -92,7 +92,7 @@ impl Estimate {
         Estimate {
             runtime: RUNTIME_BYTES,
             scene: scene.memory_bytes(),
-            bvh: scene.triangle_count() as u64 * BVH_BYTES_PER_TRIANGLE,
+            bvh: scene.stored_triangle_count() as u64 * BVH_BYTES_PER_TRIANGLE,
             images: frames * pixels * FRAME_BYTES_PER_PIXEL,
             cache: if job.cache {
                 (samples * records_per_sample(job.ambient_bounces)) as u64 * RECORD_BYTES

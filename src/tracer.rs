@@ -3,8 +3,9 @@
 //! through.
 
 use crate::scene::Scene;
-use crate::sys::embree::{self, Coherence, Device, TriangleMeshData};
-use glam::Vec3;
+use crate::scene::instancing::{self, HitTriangle};
+use crate::sys::embree::{self, Coherence, Device, InstanceData, TriangleMeshData};
+use glam::{DVec3, Vec3};
 use std::sync::Arc;
 
 pub struct Tracer {
@@ -28,7 +29,8 @@ pub struct SurfaceHit {
     pub facing_normal: Vec3,
     pub uv: Option<[f32; 2]>,
     pub material: u32,
-    pub geom_id: u32,
+    /// The object (placed mesh: `WorldMesh::object`, `Placement::object`) hit.
+    pub object: u32,
     pub prim_id: u32,
 }
 
@@ -37,6 +39,9 @@ pub struct SurfaceHit {
 const MAX_TRANSPARENT_PASSES: u32 = 64;
 
 impl Tracer {
+    /// Builds the BVHs: the copied meshes and, per prototype of shared meshes, a scene of its
+    /// members placed by an instance per placement (geometry ids: the copied meshes, then the
+    /// prototype instances in order).
     pub fn new(scene: &Scene) -> Result<Tracer, embree::EmbreeError> {
         let device = Arc::new(Device::new()?);
         let meshes: Vec<TriangleMeshData<'_>> = scene
@@ -47,7 +52,34 @@ impl Tracer {
                 indices: &m.indices,
             })
             .collect();
-        let embree_scene = embree::Scene::build(&device, &meshes)?;
+        let shared = &scene.instancing;
+        let prototypes = (shared.prototypes.iter())
+            .map(|proto| {
+                // The members' vertices in the prototype's space: Embree's copy, the only one
+                // besides the shared mesh itself.
+                let positions: Vec<Vec<[f32; 3]>> = (proto.members.iter().zip(&proto.to_prototype))
+                    .map(|(&m, to)| {
+                        (shared.meshes[m as usize].positions.iter())
+                            .map(|p| to.transform_point3(DVec3::from(p.map(f64::from))).as_vec3().to_array())
+                            .collect()
+                    })
+                    .collect();
+                let members: Vec<TriangleMeshData<'_>> = (proto.members.iter().zip(&positions))
+                    .map(|(&m, positions)| TriangleMeshData {
+                        positions,
+                        indices: &shared.meshes[m as usize].indices,
+                    })
+                    .collect();
+                embree::Scene::build(&device, &members).map(Arc::new)
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        let instances: Vec<InstanceData<'_>> = (shared.instances.iter())
+            .map(|i| InstanceData {
+                prototype: &prototypes[i.prototype as usize],
+                transform: instancing::embree_transform(&i.to_tracing),
+            })
+            .collect();
+        let embree_scene = embree::Scene::build_with_instances(&device, &meshes, &instances)?;
         Ok(Tracer {
             embree: embree_scene,
             scale_epsilon: 1e-5 * scene.size(),
@@ -89,28 +121,49 @@ impl Tracer {
         let hit = self
             .embree
             .intersect(org.to_array(), dir.to_array(), 0.0, tfar, coherence)?;
-        let mesh = &scene.meshes[hit.geom_id as usize];
-        let [a, b, c] = mesh.indices[hit.prim_id as usize];
-        let (a, b, c) = (a as usize, b as usize, c as usize);
-        let (u, v) = (hit.u, hit.v);
+        let (triangle, object) = match hit.instance {
+            None => {
+                let mesh = &scene.meshes[hit.geom_id as usize];
+                let [a, b, c] = mesh.indices[hit.prim_id as usize].map(|i| i as usize);
+                let triangle = HitTriangle {
+                    corners: [a, b, c].map(|i| Vec3::from(mesh.positions[i])),
+                    normals: mesh.normals.as_ref().map(|ns| [ns[a], ns[b], ns[c]]),
+                    texcoords: mesh.texcoords.as_ref().map(|t| [t[a], t[b], t[c]]),
+                    u: hit.u,
+                    v: hit.v,
+                    material: mesh.material,
+                };
+                (triangle, mesh.object)
+            }
+            Some(instance) => {
+                let shared = &scene.instancing;
+                let p = shared.placement_of(instance - scene.meshes.len() as u32, hit.geom_id);
+                let triangle = shared.hit_triangle(p, hit.prim_id, hit.u, hit.v, scene.origin);
+                (triangle, shared.placements[p as usize].object)
+            }
+        };
+        let HitTriangle {
+            corners: [pa, pb, pc],
+            u,
+            v,
+            ..
+        } = triangle;
         let w = 1.0 - u - v;
-        let p = |i: usize| Vec3::from(mesh.positions[i]);
-        let position = w * p(a) + u * p(b) + v * p(c);
-        let geometric_normal = (p(b) - p(a)).cross(p(c) - p(a)).try_normalize().unwrap_or(-dir);
+        let position = w * pa + u * pb + v * pc;
+        let geometric_normal = (pb - pa).cross(pc - pa).try_normalize().unwrap_or(-dir);
         let toward_ray = if geometric_normal.dot(dir) > 0.0 { -1.0 } else { 1.0 };
         let facing_normal = geometric_normal * toward_ray;
         let mut normal = facing_normal;
-        if let Some(ns) = &mesh.normals {
-            let interpolated = w * ns[a] + u * ns[b] + v * ns[c];
+        if let Some([na, nb, nc]) = triangle.normals {
+            let interpolated = w * na + u * nb + v * nc;
             if let Some(n) = interpolated.try_normalize() {
                 // Keep the shading normal on the side the ray sees.
                 normal = if n.dot(facing_normal) < 0.0 { -n } else { n };
             }
         }
-        let uv = mesh.texcoords.as_ref().map(|t| {
-            let (ta, tb, tc) = (t[a], t[b], t[c]);
-            [w * ta[0] + u * tb[0] + v * tc[0], w * ta[1] + u * tb[1] + v * tc[1]]
-        });
+        let uv = triangle
+            .texcoords
+            .map(|[ta, tb, tc]| [w * ta[0] + u * tb[0] + v * tc[0], w * ta[1] + u * tb[1] + v * tc[1]]);
         Some(SurfaceHit {
             position,
             distance: hit.t,
@@ -118,8 +171,8 @@ impl Tracer {
             normal,
             facing_normal,
             uv,
-            material: mesh.material,
-            geom_id: hit.geom_id,
+            material: triangle.material,
+            object,
             prim_id: hit.prim_id,
         })
     }

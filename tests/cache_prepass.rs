@@ -105,15 +105,26 @@ fn the_prepass_leaves_no_tile_seams_where_progressive_records_do() {
     }
 }
 
-/// The cached indirect layer's mean over brute force's (the same pixels, no cache) less one.
+/// The cached indirect layer's mean over brute force's (the same pixels, no cache) less one,
+/// averaged over three seeds (which records a seed makes moves a large surface's mean by
+/// about a point either way on the conference room).
 fn indirect_bias(scene: &Path, size: [&str; 2]) -> f64 {
     let dir = tempfile::tempdir().unwrap();
     let common = ["-x", size[0], "-y", size[1], "-ab", "1", "-ad", "256", "--threads", "2"];
     let (brute, _) = render_to(dir.path(), scene, "brute", &[&common[..], &["-aa", "0"]].concat());
-    let (cached, stats) = render_to(dir.path(), scene, "cached", &common);
-    assert_eq!(stats["gap_records"], 0, "every pixel centre was a prepass site");
     let indirect = |image: &ImageData| mean(&rgb(image, "indirect").concat());
-    indirect(&cached) / indirect(&brute) - 1.0
+    let seeds = ["1", "2", "3"];
+    let biases: Vec<f64> = seeds
+        .iter()
+        .map(|seed| {
+            let name = format!("cached-{seed}");
+            let (cached, stats) = render_to(dir.path(), scene, &name, &[&common[..], &["--seed", seed]].concat());
+            assert_eq!(stats["gap_records"], 0, "every pixel centre was a prepass site");
+            indirect(&cached) / indirect(&brute) - 1.0
+        })
+        .collect();
+    println!("indirect bias by seed: {biases:?}");
+    biases.iter().sum::<f64>() / biases.len() as f64
 }
 
 /// Interpolating a complete record set keeps the cache's indirect light within a few percent
@@ -127,8 +138,9 @@ fn the_prepass_cache_agrees_with_brute_force() {
 /// The conference room's ceiling sees only lit pools on the table and floor: records whose
 /// size ignored where the light comes from were as wide as the room and made the cached
 /// indirect light 4-5 % too bright (here +4.1 %); the curvature weighs each sample by its
-/// radiance (here +2.7 %); records checked against their neighbours in the prepass
-/// (`irradiance::validation`: shrunk where they miss, their overshoot fitted) here +1.6 %.
+/// radiance (here +2.7 % at one seed); records checked against their neighbours in the
+/// prepass (`irradiance::validation`: shrunk where they miss, their overshoot fitted) here
+/// +1.3 % over three seeds (+0.1 .. +2.2 %).
 #[test]
 fn the_conference_rooms_cached_light_agrees_with_brute_force() {
     let bias = indirect_bias(&shared_scene("conference_room/conference.gltf"), ["168", "128"]);

@@ -9,6 +9,7 @@ use serde_json::json;
 pub fn run(args: &InfoArgs) -> CommandResult {
     let options = LoadOptions {
         allow_outside_refs: args.allow_outside_refs,
+        flatten: args.flatten,
         ..LoadOptions::default()
     };
     let scene = Scene::load(&args.scene, &options)?;
@@ -33,7 +34,14 @@ pub fn run(args: &InfoArgs) -> CommandResult {
         "scene": args.scene.display().to_string(),
         "triangles": scene.triangle_count(),
         "dropped_triangles": scene.dropped_triangles,
-        "placed_meshes": scene.meshes.len(),
+        "placed_meshes": scene.placed_mesh_count(),
+        "instancing": {
+            "shared_meshes": scene.instancing.meshes.len(),
+            "placements": scene.instancing.placements.len(),
+            "prototypes": scene.instancing.prototypes.len(),
+            "instances": scene.instancing.instances.len(),
+            "stored_triangles": scene.stored_triangle_count(),
+        },
         "materials": scene.materials.len() - 1,
         "textures": scene.textures.len(),
         "lights": {
@@ -64,6 +72,17 @@ pub fn run(args: &InfoArgs) -> CommandResult {
         "triangles    {} ({} dropped), {} placed meshes",
         d["triangles"], d["dropped_triangles"], d["placed_meshes"]
     );
+    let shared = &d["instancing"];
+    if shared["placements"].as_u64().is_some_and(|p| p > 0) {
+        println!(
+            "instancing   {} shared meshes in {} placements, as {} Embree instances of {} prototypes; {} triangles stored",
+            shared["shared_meshes"],
+            shared["placements"],
+            shared["instances"],
+            shared["prototypes"],
+            shared["stored_triangles"]
+        );
+    }
     println!("materials    {}, textures {}", d["materials"], d["textures"]);
     println!(
         "lights       {} emissive triangles, {} point, {} spot, {} directional",

@@ -114,7 +114,7 @@ pub fn options_line(args: &RenderArgs) -> String {
     let av = args.ambient_value.as_deref().unwrap_or(&[0.0, 0.0, 0.0]);
     format!(
         "-x {} -y {} -ab {} -aa {} -ad {} -as {} -ar {} -av {} {} {} -st {} -lr {} -lw {} --ic-metric {:?} \
-         --light-samples {} --direct {} --spp {} --seed {} --ic-build {} --ic-deep {}{}{}",
+         --light-samples {} --direct {} --spp {} --seed {} --ic-build {} --ic-deep {}{}{}{}",
         args.width,
         args.height,
         args.ambient_bounces,
@@ -145,7 +145,8 @@ pub fn options_line(args: &RenderArgs) -> String {
             crate::cli::DeepArg::Records => "records",
         },
         args.overture.map(|n| format!(" --overture {n}")).unwrap_or_default(),
-        if args.lambertian { " --lambertian" } else { "" }
+        if args.lambertian { " --lambertian" } else { "" },
+        if args.flatten { " --flatten" } else { "" }
     )
 }
 
@@ -427,8 +428,7 @@ pub fn data_attributes(aovs: &[Aov], scene: &Scene) -> Vec<(String, String)> {
     }
     if aovs.contains(&Aov::CryptoMaterial) {
         // The materials some mesh uses (not glTF's default material when none does).
-        let mut used = vec![false; names.materials.len()];
-        scene.meshes.iter().for_each(|m| used[m.material as usize] = true);
+        let used = scene.used_materials();
         out.extend(cryptomatte::header_attributes(
             output::CRYPTO_MATERIAL,
             names

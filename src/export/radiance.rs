@@ -45,11 +45,11 @@
 //!   - glTF's `range` (a smooth cut-off icrender applies) has no Radiance equivalent: dropped.
 
 use crate::image::output::write_atomically;
-use crate::scene::Scene;
 use crate::scene::light::{PunctualLight, luminance};
 use crate::scene::material::{Material, SurfacePoint};
 use crate::scene::texture::Texture;
 use crate::scene::view::world_coordinate;
+use crate::scene::{Scene, WorldMesh};
 use crate::sys::scene_io::LightType;
 use glam::{DVec3, Vec3};
 use std::f64::consts::PI;
@@ -381,25 +381,52 @@ pub fn write_scene(scene: &Scene, out: &mut impl Write) -> io::Result<ExportSumm
         }
     }
 
-    for (mesh_index, mesh) in scene.meshes.iter().enumerate() {
-        let material = &names[mesh.material as usize];
-        writeln!(out, "# mesh {mesh_index}: {} triangles", mesh.indices.len())?;
-        for (tri, &[a, b, c]) in mesh.indices.iter().enumerate() {
-            let [pa, pb, pc] = [a, b, c].map(|i| {
-                scene
-                    .to_world(Vec3::from(mesh.positions[i as usize]))
-                    .to_array()
-                    .map(world_coordinate)
-            });
-            writeln!(
+    // Radiance gets every placement of a shared mesh as its own polygons (its `instance`
+    // primitive needs octree files): the same triangles the renderer traces.
+    let mut mesh_index = 0usize;
+    let mut written: std::io::Result<()> = Ok(());
+    scene.each_placed_mesh(|mesh| {
+        if written.is_ok() {
+            written = write_mesh(
                 out,
-                "{material} polygon t{mesh_index}.{tri}\n0\n0\n9 {} {} {}\n  {} {} {}\n  {} {} {}",
-                pa[0], pa[1], pa[2], pb[0], pb[1], pb[2], pc[0], pc[1], pc[2]
-            )?;
-            summary.polygons += 1;
+                mesh_index,
+                mesh,
+                &names[mesh.material as usize],
+                scene,
+                &mut summary,
+            );
         }
-    }
+        mesh_index += 1;
+    });
+    written?;
     Ok(summary)
+}
+
+/// One placed mesh's triangles as Radiance polygons of `material`.
+fn write_mesh(
+    out: &mut impl Write,
+    mesh_index: usize,
+    mesh: &WorldMesh,
+    material: &str,
+    scene: &Scene,
+    summary: &mut ExportSummary,
+) -> std::io::Result<()> {
+    writeln!(out, "# mesh {mesh_index}: {} triangles", mesh.indices.len())?;
+    for (tri, &[a, b, c]) in mesh.indices.iter().enumerate() {
+        let [pa, pb, pc] = [a, b, c].map(|i| {
+            scene
+                .to_world(Vec3::from(mesh.positions[i as usize]))
+                .to_array()
+                .map(world_coordinate)
+        });
+        writeln!(
+            out,
+            "{material} polygon t{mesh_index}.{tri}\n0\n0\n9 {} {} {}\n  {} {} {}\n  {} {} {}",
+            pa[0], pa[1], pa[2], pb[0], pb[1], pb[2], pc[0], pc[1], pc[2]
+        )?;
+        summary.polygons += 1;
+    }
+    Ok(())
 }
 
 /// Writes the scene to `path` through a temporary file beside it (renamed when complete).
@@ -418,7 +445,6 @@ pub fn export(scene: &Scene, path: &Path) -> Result<ExportSummary, String> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::scene::WorldMesh;
     use crate::scene::light::EmitterSet;
     use crate::scene::material::DEFAULT_SPECULAR_THRESHOLD;
     use crate::sys::scene_io::{AlphaMode, GltfMaterial};
@@ -452,6 +478,7 @@ mod tests {
             texcoords: None,
             indices: vec![[0, 1, 2], [0, 2, 3]],
             material,
+            object: 0,
         }
     }
 
@@ -463,6 +490,7 @@ mod tests {
         Scene {
             path: "test.gltf".into(),
             meshes,
+            instancing: Default::default(),
             materials,
             textures: Vec::new(),
             punctual_lights: lights,

@@ -12,9 +12,9 @@
 //! Other records inside a record's reach measure what the tangent misses, at no cost, and the
 //! prepass uses them twice:
 //! - **Shrinking** (after each round but the finest level's): a record whose extrapolation
-//!   misses a neighbour's value by more than `SHRINK_TOLERANCE` shrinks so that the miss at
-//!   its new edge, growing with the squared distance, stays within it; the gaps this opens
-//!   are filled by the finer rounds that follow.
+//!   misses a neighbour's value by so much that, growing with the squared distance, the miss
+//!   would pass `SHRINK_TOLERANCE` before its edge shrinks to where it reaches it; the gaps
+//!   this opens are filled by the finer rounds that follow.
 //! - **Curvature** (once the record set is complete): the overshoot measured at a record's
 //!   neighbours, fitted by least squares as a multiple of `t2` (the squared distance in units
 //!   of the radii), is subtracted from its extrapolation (`Record::curvature`).
@@ -26,11 +26,13 @@ use super::index::FrozenIndex;
 use super::record::Metric;
 use crate::scene::light::luminance;
 
-/// The largest miss of a record's extrapolation at a neighbour's position, relative to the
-/// larger of the two values, that leaves it its size. Measured at -ab 1 over three seeds
-/// (indirect relMSE against brute force; records): Cornell box 9.6e-5 -> 7.3e-5 with 17 %
-/// more records, corridor 9.4e-5 -> 6.6e-5 (+17 %), conference room 1.15e-2 -> 1.03e-2
-/// (+19 %); 0.05 gained a little more for 50 % more records.
+/// The largest miss of a record's extrapolation at its edge, relative to the larger of the
+/// two values, that leaves it its size (from a neighbour's miss, growing with the squared
+/// distance). Measured at -ab 1 over three seeds, with the fitted curvature (indirect relMSE
+/// against brute force; records): Cornell box 9.6e-5 -> 6.8e-5 with 20 % more records,
+/// corridor 9.4e-5 -> 6.2e-5 (+17 %), conference room 1.15e-2 -> 1.01e-2 (+22 %); 0.05
+/// gained a little more for 50 % more records (measured with a shrink that started at the
+/// neighbour, not at the edge).
 pub const SHRINK_TOLERANCE: f32 = 0.1;
 /// A record shrinks to no less than this share of its radii in one step.
 const SMALLEST_SHRINK: f32 = 0.25;
@@ -93,9 +95,12 @@ pub fn shrink_factors(
     let wanted = |i: usize, j: usize| revisable[i] && (fresh[i] || fresh[j]);
     for_each_pair(frozen, metric, accuracy, wanted, |i, n| {
         let miss = (n.predicted - n.actual).abs() / n.predicted.max(n.actual).max(f32::MIN_POSITIVE);
-        if miss > SHRINK_TOLERANCE {
-            // The miss grows with the squared distance: at the new edge it is the tolerance.
-            let factor = n.t2.sqrt() * (SHRINK_TOLERANCE / miss).sqrt();
+        // The miss grows with the squared distance: where it would pass the tolerance before
+        // the record's edge, the record shrinks to where it reaches it. The factor is 1 exactly
+        // where shrinking starts, so a miss that rounding moves across the threshold moves
+        // the radius by a rounding too, not by a step.
+        let factor = (n.t2 * SHRINK_TOLERANCE / miss.max(f32::MIN_POSITIVE)).sqrt();
+        if factor < 1.0 {
             factors[i] = factors[i].min(factor.max(SMALLEST_SHRINK));
         }
     });
@@ -220,6 +225,16 @@ mod tests {
             factors[at(&a)]
         );
         assert_eq!(factors[at(&b)], 1.0, "b's reach does not hold a");
+        // Just past where shrinking starts (a miss whose growth reaches the tolerance just
+        // inside the edge), the record shrinks by as little: no step at the threshold.
+        let mut slight = a.clone();
+        slight.translation_gradient = Vec3::new(0.09 / 0.9, 0.0, 0.0);
+        let frozen = super::tests::frozen(&[slight.clone(), b.clone()]);
+        let factors = shrink_factors(&frozen, Metric::Hessian, 0.2, &all, &all);
+        let i = frozen.records().iter().position(|x| *x == slight).unwrap();
+        let expected = (0.81 * SHRINK_TOLERANCE / (0.09f32 / 1.09)).sqrt();
+        assert!(expected > 0.98 && expected < 1.0);
+        assert!((factors[i] - expected).abs() < 1e-4, "{} vs {expected}", factors[i]);
         // Not revisable, or no fresh record in the pair: left alone.
         let none = vec![false; 2];
         assert!(

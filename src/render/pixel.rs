@@ -123,7 +123,7 @@ fn sample_hit(integrator: &Integrator<'_>, camera: &Camera, data: &SampleData) -
         position: scene.to_world(hit.position).as_vec3(),
         depth: camera.view_depth(hit.position),
         normal: hit.normal,
-        object: scene.names.object_id(hit.geom_id),
+        object: scene.names.object_id(hit.object),
         material: scene.names.material_id(hit.material),
     })
 }

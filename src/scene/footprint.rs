@@ -78,7 +78,7 @@ mod tests {
             normal: Vec3::Z,
             area: 0.5 * e1.cross(e2).length(),
             radiance: Vec3::ONE,
-            geom_id: 0,
+            object: 0,
             prim_id: 0,
         }])
     }

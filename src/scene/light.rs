@@ -118,8 +118,8 @@ pub struct EmitterTriangle {
     pub normal: Vec3,
     pub area: f32,
     pub radiance: Vec3,
-    /// Embree geometry and primitive that this triangle is.
-    pub geom_id: u32,
+    /// The object (placed mesh) and its triangle that this is.
+    pub object: u32,
     pub prim_id: u32,
 }
 
@@ -244,7 +244,7 @@ mod tests {
             normal: Vec3::Z,
             area: 0.5 * scale * scale,
             radiance: Vec3::splat(radiance),
-            geom_id: 0,
+            object: 0,
             prim_id: 0,
         }
     }
@@ -325,7 +325,7 @@ mod tests {
                 normal: e1.cross(e2).normalize(),
                 area: 0.5 * e1.cross(e2).length(),
                 radiance: Vec3::splat(radiance),
-                geom_id: 0,
+                object: 0,
                 prim_id: k,
             });
         }
@@ -380,7 +380,7 @@ mod tests {
                 normal: e1.cross(e2).normalize(),
                 area: 0.5 * size * size,
                 radiance: Vec3::splat(1.0 + 4.0 * rng.next_f32()),
-                geom_id: 0,
+                object: 0,
                 prim_id: k,
             };
             if k % 3 == 0 {

@@ -1,9 +1,11 @@
-//! The scene as the renderer sees it: world-space triangle meshes with their materials,
-//! textures, light sources, cameras and bounds, built from a loaded glTF file.
+//! The scene as the renderer sees it: world-space triangle meshes (meshes used once) and
+//! placements of shared meshes (meshes used more than once, see `instancing`), with their
+//! materials, textures, light sources, cameras and bounds, built from a loaded glTF file.
 
 pub mod animation;
 pub mod auto_view;
 pub mod footprint;
+pub mod instancing;
 pub mod lambert;
 pub mod light;
 pub mod light_tree;
@@ -43,6 +45,9 @@ pub struct LoadOptions {
     pub allow_outside_refs: bool,
     /// Bytes the loaded scene may take (--max-memory); None: the machine's memory.
     pub max_memory: Option<u64>,
+    /// Copy every placement of a mesh used more than once into world space, as meshes used
+    /// once are, instead of instancing it (`--flatten`: for comparison).
+    pub flatten: bool,
 }
 
 impl Default for LoadOptions {
@@ -52,6 +57,7 @@ impl Default for LoadOptions {
             lambertian: false,
             allow_outside_refs: false,
             max_memory: None,
+            flatten: false,
         }
     }
 }
@@ -64,11 +70,16 @@ pub struct WorldMesh {
     pub texcoords: Option<Vec<[f32; 2]>>,
     pub indices: Vec<[u32; 3]>,
     pub material: u32,
+    /// The object (Cryptomatte, `SurfaceHit::object`) it is.
+    pub object: u32,
 }
 
 pub struct Scene {
     pub path: PathBuf,
+    /// Meshes copied into world space (every mesh used once; all with `--flatten`).
     pub meshes: Vec<WorldMesh>,
+    /// Meshes used more than once, stored once, and their placements.
+    pub instancing: instancing::Instancing,
     pub materials: Vec<Material>,
     pub textures: Vec<Texture>,
     pub punctual_lights: Vec<PunctualLight>,
@@ -110,7 +121,8 @@ impl Scene {
         if path.is_dir() {
             return Err(fail("is a directory, not a glTF file".into()));
         }
-        let gltf = scene_io::load_gltf(path, options.allow_outside_refs, options.max_memory).map_err(fail)?;
+        let gltf =
+            scene_io::load_gltf(path, options.allow_outside_refs, options.max_memory, options.flatten).map_err(fail)?;
         Scene::from_gltf(path, gltf, options).map_err(fail)
     }
 
@@ -133,22 +145,53 @@ impl Scene {
         let textures: Vec<Texture> = gltf.textures.iter().map(Texture::from_gltf).collect();
         let mut warnings = gltf.warnings.clone();
 
+        let surveys = instancing::Surveys::of(&gltf, options.flatten);
+        let origin = placement::tracing_origin(&gltf, &surveys.used_bounds());
+        let plan = instancing::plan(&gltf, &surveys, origin, default_material);
+        drop(surveys);
+        let mut shared = plan.instancing;
         let mut meshes = Vec::new();
-        let mut dropped = 0usize;
+        // What every placement of a shared mesh drops counts once per placement, as copies do.
+        let mut dropped = (shared.placements.iter())
+            .map(|p| shared.meshes[p.mesh as usize].dropped)
+            .sum::<usize>();
         let mut emitter_triangles = Vec::new();
         let mut bounds_min = Vec3::splat(f32::INFINITY);
         let mut bounds_max = Vec3::splat(f32::NEG_INFINITY);
-        let origin = placement::tracing_origin(&gltf);
-        for instance in &gltf.instances {
-            let source = &gltf.meshes[instance.mesh];
-            let material = source.material.map_or(default_material, |m| m as u32);
-            let world = DMat4::from_cols_array(&instance.world);
-            let (mesh, dropped_here) = placement::place_mesh(source, world, origin, material);
-            dropped += dropped_here;
+        // Objects, bounds and emitters in the file's order whether a mesh is copied or shared,
+        // so that the light tree and the names are those of the flattened scene.
+        for (instance, role) in gltf.instances.iter().zip(&plan.roles) {
+            let object = object_names.len() as u32;
+            let mesh = match *role {
+                instancing::Role::Placed(p) => {
+                    let placement = &mut shared.placements[p as usize];
+                    placement.object = object;
+                    let (lo, hi) = plan.bounds[p as usize];
+                    bounds_min = bounds_min.min(lo);
+                    bounds_max = bounds_max.max(hi);
+                    let material = shared.meshes[placement.mesh as usize].material;
+                    if materials[material as usize].is_emissive() {
+                        // One light per placement: its triangles in world space (few; the
+                        // geometry traced is not copied).
+                        let copy = shared.flattened(p, origin);
+                        collect_emitters(&copy, materials[material as usize].emission, &mut emitter_triangles);
+                    }
+                    object_names.push(names::node_name(&instance.node_name, instance.node));
+                    continue;
+                }
+                instancing::Role::Flatten => {
+                    let source = &gltf.meshes[instance.mesh];
+                    let material = source.material.map_or(default_material, |m| m as u32);
+                    let world = DMat4::from_cols_array(&instance.world);
+                    let (mut mesh, dropped_here) = placement::place_mesh(source, world, origin, material);
+                    dropped += dropped_here;
+                    mesh.object = object;
+                    mesh
+                }
+            };
             if mesh.indices.is_empty() {
                 continue;
             }
-            let geom_id = meshes.len() as u32;
             object_names.push(names::node_name(&instance.node_name, instance.node));
             for tri in &mesh.indices {
                 for &i in tri {
@@ -157,9 +200,9 @@ impl Scene {
                     bounds_max = bounds_max.max(p);
                 }
             }
-            let m = &materials[material as usize];
+            let m = &materials[mesh.material as usize];
             if m.is_emissive() {
-                collect_emitters(&mesh, m.emission, geom_id, &mut emitter_triangles);
+                collect_emitters(&mesh, m.emission, &mut emitter_triangles);
             }
             meshes.push(mesh);
         }
@@ -168,7 +211,7 @@ impl Scene {
                 "dropped {dropped} triangle(s) with zero area or non-finite or out-of-range coordinates"
             ));
         }
-        if meshes.is_empty() {
+        if meshes.is_empty() && shared.is_empty() {
             return Err(if dropped > 0 {
                 format!(
                     "no valid triangles: all {dropped} were degenerate or had non-finite or out-of-range coordinates"
@@ -187,6 +230,7 @@ impl Scene {
         Ok(Scene {
             path: path.to_path_buf(),
             meshes,
+            instancing: shared,
             materials,
             textures,
             punctual_lights,
@@ -214,8 +258,43 @@ impl Scene {
         camera
     }
 
+    /// Triangles in the scene, each placement of a shared mesh counting its own.
     pub fn triangle_count(&self) -> usize {
-        self.meshes.iter().map(|m| m.indices.len()).sum()
+        self.meshes.iter().map(|m| m.indices.len()).sum::<usize>() + self.instancing.placed_triangles()
+    }
+
+    /// Triangles stored and built into BVHs: a shared mesh's once.
+    pub fn stored_triangle_count(&self) -> usize {
+        self.meshes.iter().map(|m| m.indices.len()).sum::<usize>() + self.instancing.stored_triangles()
+    }
+
+    /// Placed meshes (objects): the copied meshes and the placements of shared ones.
+    pub fn placed_mesh_count(&self) -> usize {
+        self.meshes.len() + self.instancing.placements.len()
+    }
+
+    /// Every placed mesh in world space, in object order: the copied ones as they are, the
+    /// placements of shared meshes copied one at a time (for writing the scene out).
+    pub fn each_placed_mesh(&self, mut f: impl FnMut(&WorldMesh)) {
+        let mut shared = (0..self.instancing.placements.len() as u32).peekable();
+        for mesh in &self.meshes {
+            while let Some(p) = shared.next_if(|&p| self.instancing.placements[p as usize].object < mesh.object) {
+                f(&self.instancing.flattened(p, self.origin));
+            }
+            f(mesh);
+        }
+        for p in shared {
+            f(&self.instancing.flattened(p, self.origin));
+        }
+    }
+
+    /// Which materials some placed mesh uses, by material index.
+    pub fn used_materials(&self) -> Vec<bool> {
+        let mut used = vec![false; self.materials.len()];
+        self.meshes.iter().for_each(|m| used[m.material as usize] = true);
+        (self.instancing.placements.iter())
+            .for_each(|p| used[self.instancing.meshes[p.mesh as usize].material as usize] = true);
+        used
     }
 
     /// Bytes the scene's geometry and textures take in memory.
@@ -227,6 +306,7 @@ impl Scene {
                 + m.indices.len() * 12
         };
         self.meshes.iter().map(|m| mesh(m) as u64).sum::<u64>()
+            + self.instancing.memory_bytes()
             + self.textures.iter().map(Texture::memory_bytes).sum::<u64>()
     }
 
@@ -257,8 +337,7 @@ impl Scene {
 
     pub fn needs(&self) -> SceneNeeds {
         let used: Vec<&Material> = {
-            let mut seen = vec![false; self.materials.len()];
-            self.meshes.iter().for_each(|m| seen[m.material as usize] = true);
+            let seen = self.used_materials();
             self.materials
                 .iter()
                 .zip(seen)
@@ -285,7 +364,7 @@ impl Scene {
     }
 }
 
-fn collect_emitters(mesh: &WorldMesh, radiance: Vec3, geom_id: u32, out: &mut Vec<EmitterTriangle>) {
+fn collect_emitters(mesh: &WorldMesh, radiance: Vec3, out: &mut Vec<EmitterTriangle>) {
     for (prim_id, &[a, b, c]) in mesh.indices.iter().enumerate() {
         let p0 = Vec3::from(mesh.positions[a as usize]);
         let e1 = Vec3::from(mesh.positions[b as usize]) - p0;
@@ -300,7 +379,7 @@ fn collect_emitters(mesh: &WorldMesh, radiance: Vec3, geom_id: u32, out: &mut Ve
                 normal,
                 area,
                 radiance,
-                geom_id,
+                object: mesh.object,
                 prim_id: prim_id as u32,
             });
         }
@@ -342,7 +421,7 @@ mod tests {
         let mirror = DMat4::from_scale(DVec3::new(-1.0, 1.0, 1.0));
         let (mesh, _) = place_mesh(&quad_mesh(), mirror, DVec3::ZERO, 0);
         let mut emitters = Vec::new();
-        collect_emitters(&mesh, Vec3::ONE, 0, &mut emitters);
+        collect_emitters(&mesh, Vec3::ONE, &mut emitters);
         // The unmirrored quad faces +Z by winding; mirroring in X must not turn it to -Z.
         assert!(emitters.iter().all(|e| e.normal.z > 0.99));
     }

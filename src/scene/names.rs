@@ -32,7 +32,8 @@ pub fn material_name(name: &str, index: usize) -> String {
 /// Object and material names with their Cryptomatte IDs.
 #[derive(Clone, Debug, Default)]
 pub struct Names {
-    /// Per mesh (Embree geometry id): the node's name and its ID.
+    /// Per object (a placed mesh, copied or instanced: `SurfaceHit::object`): the node's name
+    /// and its ID.
     pub objects: Vec<String>,
     pub object_ids: Vec<u32>,
     /// Per material (the scene's material index): its name and ID.
@@ -50,9 +51,9 @@ impl Names {
         }
     }
 
-    /// The object ID of a mesh (0, "nothing", for an index out of range).
-    pub fn object_id(&self, mesh: u32) -> u32 {
-        self.object_ids.get(mesh as usize).copied().unwrap_or(0)
+    /// The object ID of an object (0, "nothing", for an index out of range).
+    pub fn object_id(&self, object: u32) -> u32 {
+        self.object_ids.get(object as usize).copied().unwrap_or(0)
     }
 
     pub fn material_id(&self, material: u32) -> u32 {

@@ -32,9 +32,21 @@ fn world_points(source: &GltfMesh, world: &DMat4) -> Vec<DVec3> {
 /// Where the renderer's coordinates start: glTF's origin for a scene around it (its images
 /// are then exactly what they were before scenes were re-centred), else the centre of the
 /// bounds of every vertex a triangle uses, once that centre is farther from glTF's origin than
-/// the scene is large.
-pub fn tracing_origin(gltf: &GltfScene) -> DVec3 {
-    let (lo, hi) = world_bounds(gltf);
+/// the scene is large. `surveyed[i]`, when there, is glTF instance i's bounds (`Survey::used`)
+/// already computed.
+pub fn tracing_origin(gltf: &GltfScene, surveyed: &[Option<Bounds>]) -> DVec3 {
+    let (mut lo, mut hi) = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
+    for (i, instance) in gltf.instances.iter().enumerate() {
+        let (l, h) = match surveyed.get(i).copied().flatten() {
+            Some(b) => b,
+            None => {
+                let source = &gltf.meshes[instance.mesh];
+                used_bounds(source, &world_points(source, &DMat4::from_cols_array(&instance.world)))
+            }
+        };
+        lo = lo.min(l);
+        hi = hi.max(h);
+    }
     if lo.x > hi.x {
         return DVec3::ZERO;
     }
@@ -46,21 +58,144 @@ pub fn tracing_origin(gltf: &GltfScene) -> DVec3 {
     }
 }
 
-fn world_bounds(gltf: &GltfScene) -> (DVec3, DVec3) {
-    let (mut lo, mut hi) = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
-    for instance in &gltf.instances {
-        let source = &gltf.meshes[instance.mesh];
-        let world = DMat4::from_cols_array(&instance.world);
-        let points = world_points(source, &world);
-        for i in source.indices.iter().flatten() {
-            let p = points[*i as usize];
-            if valid_world_point(p) {
-                lo = lo.min(p);
-                hi = hi.max(p);
-            }
+/// World-space bounds, lowest and highest corner (empty: +inf, -inf).
+pub type Bounds = (DVec3, DVec3);
+
+const EMPTY: Bounds = (DVec3::INFINITY, DVec3::NEG_INFINITY);
+
+/// Bounds of the valid points any triangle uses (what the tracing origin is the centre of).
+fn used_bounds(source: &GltfMesh, points: &[DVec3]) -> Bounds {
+    let (mut lo, mut hi) = EMPTY;
+    for i in source.indices.iter().flatten() {
+        let p = points[*i as usize];
+        if valid_world_point(p) {
+            lo = lo.min(p);
+            hi = hi.max(p);
         }
     }
     (lo, hi)
+}
+
+/// Whether a placed triangle can be traced: finite, in-range corners and an area in world
+/// space (f64, before any rounding to f32).
+fn triangle_kept(pa: DVec3, pb: DVec3, pc: DVec3) -> bool {
+    let area2 = (pb - pa).cross(pc - pa).length_squared();
+    let valid = [pa, pb, pc].into_iter().all(valid_world_point);
+    valid && area2 > 0.0 && area2.is_finite()
+}
+
+/// A world point in the renderer's coordinates: relative to `origin`, rounded to f32. Zero for
+/// a point no kept triangle can use (non-finite or out of range).
+pub fn tracing_point(p: DVec3, origin: DVec3) -> [f32; 3] {
+    let local = (p - origin).as_vec3();
+    if valid_world_point(p) && local.is_finite() {
+        local.to_array()
+    } else {
+        [0.0; 3]
+    }
+}
+
+/// What placing a mesh by a transform keeps, found without copying it (the survey
+/// `instancing` decides by): the bounds of the points its triangles use (for the tracing
+/// origin), whether it keeps exactly the triangles the mesh's first placement keeps, and if so
+/// the bounds of their corners, from which a copy's f32 bounds follow (`tracing_bounds`). It
+/// does not depend on the tracing origin.
+#[derive(Clone, Copy, Debug)]
+pub struct PlacementSurvey {
+    pub used: Bounds,
+    /// It keeps the first placement's triangles (the first one always does).
+    pub regular: bool,
+    /// The bounds of the kept triangles' corners (of a regular placement; else empty).
+    pub kept_bounds: Bounds,
+}
+
+/// A mesh's first placement, which the others are compared with: the triangles it keeps, the
+/// vertices any triangle uses and those its kept triangles use.
+pub struct Reference {
+    pub kept: Vec<bool>,
+    referenced: Vec<bool>,
+    corner: Vec<bool>,
+}
+
+/// Surveys the first placement of `source`, by `world`.
+pub fn survey_first(source: &GltfMesh, world: &DMat4) -> (Reference, PlacementSurvey) {
+    let mut points = Vec::new();
+    placed_points(source, world, &mut points);
+    let kept: Vec<bool> = source.indices.iter().map(|t| area_kept(&points, t)).collect();
+    let mut referenced = vec![false; source.positions.len()];
+    let mut corner = vec![false; source.positions.len()];
+    for (tri, &k) in source.indices.iter().zip(&kept) {
+        for &i in tri {
+            referenced[i as usize] = true;
+            corner[i as usize] |= k;
+        }
+    }
+    let reference = Reference {
+        kept,
+        referenced,
+        corner,
+    };
+    let survey = bounds_of(&points, &reference, true);
+    (reference, survey)
+}
+
+/// Surveys a further placement of `source`, by `world`, against the first one's `reference`
+/// (`points`: a buffer to reuse). One pass over the vertices and one over the triangles, with
+/// the test `place_mesh` makes.
+pub fn survey_next(
+    source: &GltfMesh,
+    world: &DMat4,
+    reference: &Reference,
+    points: &mut Vec<DVec3>,
+) -> PlacementSurvey {
+    placed_points(source, world, points);
+    let regular = (source.indices.iter().zip(&reference.kept)).all(|(t, &k)| area_kept(points, t) == k);
+    bounds_of(points, reference, regular)
+}
+
+/// The mesh's points placed in world space (f64). Points no triangle may use become NaN: a
+/// triangle with one has a NaN area, and is dropped by the area test alone (`area_kept`), as
+/// `triangle_kept` drops it.
+fn placed_points(source: &GltfMesh, world: &DMat4, points: &mut Vec<DVec3>) {
+    points.clear();
+    points.extend(source.positions.iter().map(|p| {
+        let w = world.transform_point3(DVec3::new(p[0] as f64, p[1] as f64, p[2] as f64));
+        if valid_world_point(w) { w } else { DVec3::NAN }
+    }));
+}
+
+fn area_kept(points: &[DVec3], &[a, b, c]: &[u32; 3]) -> bool {
+    let (pa, pb, pc) = (points[a as usize], points[b as usize], points[c as usize]);
+    let area2 = (pb - pa).cross(pc - pa).length_squared();
+    area2 > 0.0 && area2.is_finite()
+}
+
+fn bounds_of(points: &[DVec3], reference: &Reference, regular: bool) -> PlacementSurvey {
+    let (mut used, mut kept_bounds) = (EMPTY, EMPTY);
+    for ((p, &r), &c) in points.iter().zip(&reference.referenced).zip(&reference.corner) {
+        if r && !p.is_nan() {
+            used = (used.0.min(*p), used.1.max(*p));
+            if regular && c {
+                kept_bounds = (kept_bounds.0.min(*p), kept_bounds.1.max(*p));
+            }
+        }
+    }
+    PlacementSurvey {
+        used,
+        regular,
+        kept_bounds,
+    }
+}
+
+/// The f32 bounds, in tracing coordinates, of points whose world bounds are `bounds`: rounding
+/// (p - origin) to f32 never reverses an order, so the rounded bounds are the bounds of the
+/// rounded points, exactly as the copy's are computed from its f32 corners.
+pub fn tracing_bounds(bounds: Bounds, origin: DVec3) -> (Vec3, Vec3) {
+    let round = |p: DVec3| Vec3::from(tracing_point(p, origin));
+    if bounds.0.x > bounds.1.x {
+        return (Vec3::INFINITY, Vec3::NEG_INFINITY);
+    }
+    (round(bounds.0), round(bounds.1))
 }
 
 /// Transforms a mesh into world space (f64), then to coordinates relative to `origin` (f32),
@@ -79,33 +214,21 @@ pub fn place_mesh(source: &GltfMesh, world: DMat4, origin: DVec3, material: u32)
     let mut indices = Vec::with_capacity(source.indices.len());
     let mut dropped = 0;
     for &[a, b, c] in &source.indices {
-        let (pa, pb, pc) = (points[a as usize], points[b as usize], points[c as usize]);
-        let area2 = (pb - pa).cross(pc - pa).length_squared();
-        let valid = [pa, pb, pc].into_iter().all(valid_world_point);
-        if valid && area2 > 0.0 && area2.is_finite() {
+        if triangle_kept(points[a as usize], points[b as usize], points[c as usize]) {
             indices.push(if mirrored { [a, c, b] } else { [a, b, c] });
         } else {
             dropped += 1;
         }
     }
     // Unreferenced vertices may hold NaN; Embree never reads them, but keep the buffer clean.
-    let positions = points
-        .into_iter()
-        .map(|p| {
-            let local = (p - origin).as_vec3();
-            if valid_world_point(p) && local.is_finite() {
-                local.to_array()
-            } else {
-                [0.0; 3]
-            }
-        })
-        .collect();
+    let positions = points.into_iter().map(|p| tracing_point(p, origin)).collect();
     let mesh = WorldMesh {
         positions,
         normals,
         texcoords: source.texcoords.clone(),
         indices,
         material,
+        object: 0,
     };
     (mesh, dropped)
 }
@@ -152,8 +275,11 @@ mod tests {
             ..Default::default()
         };
         // Around glTF's origin: unchanged, so such scenes render exactly as before.
-        assert_eq!(tracing_origin(&scene([-1.0, -0.5, 0.0])), DVec3::ZERO);
+        assert_eq!(tracing_origin(&scene([-1.0, -0.5, 0.0]), &[]), DVec3::ZERO);
         // Far out: the bounds' centre.
-        assert_eq!(tracing_origin(&scene([1e6, 0.0, 0.0])), DVec3::new(1e6 + 1.0, 1.0, 0.0));
+        assert_eq!(
+            tracing_origin(&scene([1e6, 0.0, 0.0]), &[]),
+            DVec3::new(1e6 + 1.0, 1.0, 0.0)
+        );
     }
 }

@@ -636,7 +636,7 @@ impl<'a> Integrator<'a> {
             facing_normal: request.facing_normal,
             uv: None,
             material: request.material,
-            geom_id: 0,
+            object: 0,
             prim_id: 0,
         };
         let state = PathState {

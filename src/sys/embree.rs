@@ -1,5 +1,8 @@
-//! Safe wrapper over Embree: a device, a scene of triangle meshes, closest-hit and occlusion
-//! queries. Works with Embree 3 and Embree 4 (the build script sets `cfg(embree4)`).
+//! Safe wrapper over Embree: a device, a scene of triangle meshes and of instances of other
+//! scenes (one level: a prototype scene holds triangle meshes only), closest-hit and occlusion
+//! queries. Works with Embree 3 and Embree 4 (the build script sets `cfg(embree4)`); both take
+//! instances the same way (an instance geometry naming its scene and a 3x4 transform), and
+//! both report the instance a hit went through in `instID[0]`.
 //!
 //! Errors reported through Embree's error callback are collected per device and returned as
 //! Rust errors from the call that caused them.
@@ -97,10 +100,21 @@ pub struct TriangleMeshData<'a> {
     pub indices: &'a [[u32; 3]],
 }
 
-/// A committed (immutable) scene. Geometry ids equal the order of the meshes given to `build`.
+/// An instance to place in a scene: a committed prototype scene and the affine transform from
+/// its space to the scene's, 3x4 column-major (the images of the x, y and z axes, then the
+/// translation).
+pub struct InstanceData<'a> {
+    pub prototype: &'a Arc<Scene>,
+    pub transform: [f32; 12],
+}
+
+/// A committed (immutable) scene. Geometry ids equal the order of the meshes given to `build`,
+/// then of the instances given to `build_with_instances`.
 pub struct Scene {
     device: Arc<Device>,
     raw: rtc::RTCScene,
+    /// The prototypes its instances refer to, kept alive as long as it is.
+    prototypes: Vec<Arc<Scene>>,
 }
 
 // SAFETY: a committed Embree scene may be queried from many threads at once.
@@ -109,9 +123,12 @@ unsafe impl Sync for Scene {}
 
 /// A ray hit: distance, geometry (mesh) id, primitive (triangle) id, barycentrics, and the
 /// unnormalised geometric normal Embree computed (orientation follows the triangle's winding).
+/// A hit through an instance names the instance (its geometry id in the scene queried), and
+/// `geom_id` is then the mesh's id in the instance's prototype, `ng` in the prototype's space.
 #[derive(Clone, Copy, Debug)]
 pub struct RayHit {
     pub t: f32,
+    pub instance: Option<u32>,
     pub geom_id: u32,
     pub prim_id: u32,
     pub u: f32,
@@ -147,15 +164,26 @@ impl Scene {
     /// Builds and commits a scene from triangle meshes. Robust traversal is asked for, since
     /// rays start on surfaces and must not slip through shared edges.
     pub fn build(device: &Arc<Device>, meshes: &[TriangleMeshData<'_>]) -> Result<Scene, EmbreeError> {
+        Scene::build_with_instances(device, meshes, &[])
+    }
+
+    /// Builds and commits a scene of triangle meshes (geometry ids 0..meshes.len()) and
+    /// instances of prototype scenes (the ids after them).
+    pub fn build_with_instances(
+        device: &Arc<Device>,
+        meshes: &[TriangleMeshData<'_>],
+        instances: &[InstanceData<'_>],
+    ) -> Result<Scene, EmbreeError> {
         // SAFETY: creating a scene on a live device.
         let raw = unsafe { rtc::rtcNewScene(device.raw) };
         if raw.is_null() {
             device.check("creating a scene")?;
             return Err(EmbreeError("could not create a scene".into()));
         }
-        let scene = Scene {
+        let mut scene = Scene {
             device: Arc::clone(device),
             raw,
+            prototypes: Vec::new(),
         };
         // SAFETY: flags and quality on a scene not yet committed.
         unsafe {
@@ -164,6 +192,9 @@ impl Scene {
         }
         for (index, mesh) in meshes.iter().enumerate() {
             scene.attach_mesh(index, mesh)?;
+        }
+        for (k, instance) in instances.iter().enumerate() {
+            scene.attach_instance(meshes.len() + k, instance)?;
         }
         // SAFETY: all geometries are committed and attached.
         unsafe { rtc::rtcCommitScene(raw) };
@@ -206,6 +237,49 @@ impl Scene {
         self.device.check("adding a triangle mesh")
     }
 
+    fn attach_instance(&mut self, index: usize, instance: &InstanceData<'_>) -> Result<(), EmbreeError> {
+        if !Arc::ptr_eq(&instance.prototype.device, &self.device) {
+            return Err(EmbreeError(format!(
+                "instance {index}: its prototype belongs to another device"
+            )));
+        }
+        if !instance.prototype.prototypes.is_empty() {
+            return Err(EmbreeError(format!(
+                "instance {index}: its prototype holds instances itself (one level only)"
+            )));
+        }
+        if !instance.transform.iter().all(|v| v.is_finite()) {
+            return Err(EmbreeError(format!("instance {index}: non-finite transform")));
+        }
+        // SAFETY: new geometry on a live device; the prototype is a committed scene of the same
+        // device, kept alive by `self.prototypes` for as long as this scene lives; the transform
+        // is 12 floats, read by Embree during the call.
+        unsafe {
+            let geom = rtc::rtcNewGeometry(self.device.raw, rtc::RTC_GEOMETRY_TYPE_INSTANCE);
+            if geom.is_null() {
+                self.device.check("creating an instance geometry")?;
+                return Err(EmbreeError("could not create an instance geometry".into()));
+            }
+            rtc::rtcSetGeometryInstancedScene(geom, instance.prototype.raw);
+            rtc::rtcSetGeometryTransform(
+                geom,
+                0,
+                rtc::RTC_FORMAT_FLOAT3X4_COLUMN_MAJOR,
+                instance.transform.as_ptr() as *const c_void,
+            );
+            rtc::rtcCommitGeometry(geom);
+            let id = rtc::rtcAttachGeometry(self.raw, geom);
+            rtc::rtcReleaseGeometry(geom);
+            if id as usize != index {
+                return Err(EmbreeError(format!("instance {index} got id {id}")));
+            }
+        }
+        if !self.prototypes.iter().any(|p| Arc::ptr_eq(p, instance.prototype)) {
+            self.prototypes.push(Arc::clone(instance.prototype));
+        }
+        self.device.check("adding an instance")
+    }
+
     /// Closest hit along the ray within (tnear, tfar), or None.
     #[inline]
     pub fn intersect(
@@ -220,6 +294,7 @@ impl Scene {
             ray: make_ray(org, dir, tnear, tfar),
             hit: rtc::RTCHit {
                 geomID: INVALID_GEOMETRY_ID,
+                instID: [INVALID_GEOMETRY_ID; rtc::RTC_MAX_INSTANCE_LEVEL_COUNT as usize],
                 ..Default::default()
             },
         };
@@ -227,6 +302,7 @@ impl Scene {
         let hit = &rayhit.hit;
         (hit.geomID != INVALID_GEOMETRY_ID).then_some(RayHit {
             t: rayhit.ray.tfar,
+            instance: (hit.instID[0] != INVALID_GEOMETRY_ID).then_some(hit.instID[0]),
             geom_id: hit.geomID,
             prim_id: hit.primID,
             u: hit.u,
@@ -354,5 +430,59 @@ mod tests {
         );
         assert!(scene.occluded([0.25, 0.25, 1.0], [0.0, 0.0, -1.0], 0.0, 2.0));
         assert!(!scene.occluded([0.25, 0.25, 1.0], [0.0, 0.0, -1.0], 0.0, 0.5));
+    }
+
+    #[test]
+    fn hits_through_instances_name_the_instance_and_the_prototype_mesh() {
+        let device = Arc::new(Device::new().unwrap());
+        let positions = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
+        let indices = [[0u32, 1, 2]];
+        let mesh = TriangleMeshData {
+            positions: &positions,
+            indices: &indices,
+        };
+        let prototype = Arc::new(Scene::build(&device, &[mesh]).unwrap());
+        // Instance 0 moved by +10 in x; instance 1 mirrored in x (x -> -x) and moved by -10.
+        let moved = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 10.0, 0.0, 0.0];
+        let mirrored = [-1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, -10.0, 0.0, 0.0];
+        let flat_positions = [[0.0, 0.0, 5.0], [1.0, 0.0, 5.0], [0.0, 1.0, 5.0]];
+        let flat = TriangleMeshData {
+            positions: &flat_positions,
+            indices: &indices,
+        };
+        let scene = Scene::build_with_instances(
+            &device,
+            &[flat],
+            &[
+                InstanceData {
+                    prototype: &prototype,
+                    transform: moved,
+                },
+                InstanceData {
+                    prototype: &prototype,
+                    transform: mirrored,
+                },
+            ],
+        )
+        .unwrap();
+        let down = [0.0, 0.0, -1.0];
+        let hit = |x: f32, y: f32| scene.intersect([x, y, 1.0], down, 0.0, f32::INFINITY, Coherence::Incoherent);
+        let a = hit(10.25, 0.5).unwrap();
+        assert_eq!((a.instance, a.geom_id, a.prim_id), (Some(1), 0, 0));
+        assert!((a.t - 1.0).abs() < 1e-6);
+        // Barycentrics are those of the prototype's triangle.
+        assert!((a.u - 0.25).abs() < 1e-6 && (a.v - 0.5).abs() < 1e-6, "{a:?}");
+        let b = hit(-10.25, 0.5).unwrap();
+        assert_eq!((b.instance, b.geom_id), (Some(2), 0));
+        assert!((b.u - 0.25).abs() < 1e-6 && (b.v - 0.5).abs() < 1e-6, "{b:?}");
+        // Where the prototype itself lies there is nothing: only its instances are in the scene.
+        assert!(hit(0.25, 0.5).is_none());
+        // The plain mesh above it: no instance.
+        let c = scene
+            .intersect([0.25, 0.25, 9.0], down, 0.0, f32::INFINITY, Coherence::Incoherent)
+            .unwrap();
+        assert_eq!((c.instance, c.geom_id), (None, 0));
+        assert!(scene.occluded([10.25, 0.5, 1.0], down, 0.0, 2.0));
+        assert!(!scene.occluded([10.25, 0.5, 1.0], down, 0.0, 0.5));
     }
 }

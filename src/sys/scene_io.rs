@@ -191,7 +191,13 @@ impl Drop for Handle {
 /// Loads a glTF 2.0 file (.gltf or .glb). The error is the loader's one-line message; the caller
 /// adds the file name.
 /// `memory_limit`: bytes the loaded scene may take (None: only the machine's memory).
-pub fn load_gltf(path: &Path, allow_outside_refs: bool, memory_limit: Option<u64>) -> Result<GltfScene, String> {
+/// `flatten`: the caller will copy every placement of a mesh (the loader's memory estimate).
+pub fn load_gltf(
+    path: &Path,
+    allow_outside_refs: bool,
+    memory_limit: Option<u64>,
+    flatten: bool,
+) -> Result<GltfScene, String> {
     let c_path =
         CString::new(path.as_os_str().as_encoded_bytes()).map_err(|_| "path contains a NUL byte".to_string())?;
     let mut err = vec![0 as std::os::raw::c_char; ERR_LEN];
@@ -199,7 +205,7 @@ pub fn load_gltf(path: &Path, allow_outside_refs: bool, memory_limit: Option<u64
         abi::ICR_LOAD_ALLOW_OUTSIDE_REFS
     } else {
         0
-    };
+    } | if flatten { abi::ICR_LOAD_FLATTEN } else { 0 };
     // SAFETY: valid C string and error buffer of the stated length.
     let raw = unsafe {
         abi::icr_scene_load(

@@ -186,6 +186,64 @@ impl GltfBuilder {
         self.meshes.len() - 1
     }
 
+    /// Adds a mesh with optional NORMAL and TEXCOORD_0 attributes; returns the mesh index.
+    pub fn mesh_with(
+        &mut self,
+        positions: &[[f32; 3]],
+        normals: Option<&[[f32; 3]]>,
+        texcoords: Option<&[[f32; 2]]>,
+        indices: &[[u32; 3]],
+        material: Option<usize>,
+    ) -> usize {
+        let mesh = self.mesh(positions, indices, material);
+        let mut extra = Vec::new();
+        if let Some(n) = normals {
+            extra.push(("NORMAL", n.iter().flatten().copied().collect::<Vec<f32>>(), "VEC3"));
+        }
+        if let Some(t) = texcoords {
+            extra.push(("TEXCOORD_0", t.iter().flatten().copied().collect(), "VEC2"));
+        }
+        for (name, values, kind) in extra {
+            let a = self.float_accessor(&values, kind);
+            self.meshes[mesh]["primitives"][0]["attributes"][name] = json!(a);
+        }
+        mesh
+    }
+
+    /// A float accessor of `kind` ("SCALAR", "VEC2", "VEC3", "VEC4") over `values`.
+    pub fn float_accessor(&mut self, values: &[f32], kind: &str) -> usize {
+        let bytes: Vec<u8> = values.iter().flat_map(|v| v.to_le_bytes()).collect();
+        let view = self.push_view(&bytes, None);
+        let per = match kind {
+            "SCALAR" => 1,
+            "VEC2" => 2,
+            "VEC3" => 3,
+            _ => 4,
+        };
+        let mut accessor =
+            json!({"bufferView": view, "componentType": 5126, "count": values.len() / per, "type": kind});
+        // glTF requires the bounds of an animation's key times (a SCALAR input).
+        if per == 1 {
+            let lo = values.iter().cloned().fold(f32::INFINITY, f32::min);
+            let hi = values.iter().cloned().fold(f32::NEG_INFINITY, f32::max);
+            accessor["min"] = json!([lo]);
+            accessor["max"] = json!([hi]);
+        }
+        self.accessors.push(accessor);
+        self.accessors.len() - 1
+    }
+
+    /// A normalized signed short VEC4 accessor (a quaternion per element, as
+    /// EXT_mesh_gpu_instancing allows for ROTATION).
+    pub fn normalized_short_vec4(&mut self, values: &[[f32; 4]]) -> usize {
+        let bytes: Vec<u8> = (values.iter().flatten())
+            .flat_map(|v| ((v * 32767.0).round() as i16).to_le_bytes())
+            .collect();
+        let view = self.push_view(&bytes, None);
+        self.accessors.push(json!({"bufferView": view, "componentType": 5122, "normalized": true, "count": values.len(), "type": "VEC4"}));
+        self.accessors.len() - 1
+    }
+
     /// Adds a quad (two triangles, counter-clockwise a-b-c-d seen from its front).
     pub fn quad(&mut self, corners: [[f32; 3]; 4], material: Option<usize>) -> usize {
         let mesh = self.mesh(&corners, &[[0, 1, 2], [0, 2, 3]], material);
@@ -213,35 +271,14 @@ impl GltfBuilder {
         self.cameras.len() - 1
     }
 
-    /// A float accessor of `components`-vectors (1: SCALAR) over `values`.
-    fn float_accessor(&mut self, values: &[f32], components: usize) -> usize {
-        let bytes: Vec<u8> = values.iter().flat_map(|v| v.to_le_bytes()).collect();
-        let view = self.push_view(&bytes, None);
-        let kind = match components {
-            1 => "SCALAR",
-            3 => "VEC3",
-            _ => "VEC4",
-        };
-        let mut accessor =
-            json!({"bufferView": view, "componentType": 5126, "count": values.len() / components, "type": kind});
-        if components == 1 {
-            let lo = values.iter().cloned().fold(f32::INFINITY, f32::min);
-            let hi = values.iter().cloned().fold(f32::NEG_INFINITY, f32::max);
-            accessor["min"] = json!([lo]);
-            accessor["max"] = json!([hi]);
-        }
-        self.accessors.push(accessor);
-        self.accessors.len() - 1
-    }
-
     /// An animation: one channel per entry, each with its own sampler.
     pub fn animation(&mut self, name: &str, channels: &[Channel<'_>]) -> usize {
         let mut samplers = Vec::new();
         let mut out = Vec::new();
         for (i, (node, path, interpolation, times, values)) in channels.iter().enumerate() {
-            let components = if *path == "rotation" { 4 } else { 3 };
-            let input = self.float_accessor(times, 1);
-            let output = self.float_accessor(values, components);
+            let kind = if *path == "rotation" { "VEC4" } else { "VEC3" };
+            let input = self.float_accessor(times, "SCALAR");
+            let output = self.float_accessor(values, kind);
             samplers.push(json!({"input": input, "output": output, "interpolation": interpolation}));
             out.push(json!({"sampler": i, "target": {"node": node, "path": path}}));
         }
@@ -319,10 +356,17 @@ impl GltfBuilder {
 
     /// Writes `name.gltf` and `name.bin` into `dir`; returns the .gltf path.
     pub fn write(&self, dir: &Path, name: &str) -> PathBuf {
+        self.write_edited(dir, name, |_| {})
+    }
+
+    /// As `write`, with the glTF JSON changed by `edit` first.
+    pub fn write_edited(&self, dir: &Path, name: &str, edit: impl FnOnce(&mut Value)) -> PathBuf {
         let bin_name = format!("{name}.bin");
         std::fs::write(dir.join(&bin_name), &self.bin).unwrap();
         let path = dir.join(format!("{name}.gltf"));
-        std::fs::write(&path, serde_json::to_string_pretty(&self.to_json(&bin_name)).unwrap()).unwrap();
+        let mut doc = self.to_json(&bin_name);
+        edit(&mut doc);
+        std::fs::write(&path, serde_json::to_string_pretty(&doc).unwrap()).unwrap();
         path
     }
 }
