@@ -48,6 +48,7 @@ pub struct Estimate {
 /// What the estimate needs to know about the job beyond the scene.
 #[derive(Clone, Copy)]
 pub struct Job {
+    /// The pixels rendered: the image's, or a --region task's region's (its frame holds no more).
     pub width: u32,
     pub height: u32,
     pub spp: u32,
