@@ -225,6 +225,7 @@ pub fn job_stats(args: &RenderArgs, job: &Job, mode: &'static str, ranks: usize,
         records_loaded: cache.map_or(0, |c| c.load_report.loaded as u64),
         cache_records: cache.map_or(0, |c| c.len() as u64),
         lock_contention: cache.map_or(0, |c| c.contention()),
+        peak_memory_bytes: crate::memory::peak_resident_bytes(),
         ..Default::default()
     }
 }
