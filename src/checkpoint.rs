@@ -20,6 +20,7 @@
 
 use crate::image::framebuffer::FrameBuffer;
 use crate::image::framebuffer::PixelValue;
+use crate::image::window::PixelWindow;
 use crate::irradiance::codec::checksum;
 use crate::parallel::protocol::wire::Reader;
 use crate::parallel::protocol::{PIXEL_FLOATS, RESULT_BYTES, decode_pixels, encode_pixels, put_results, take_results};
@@ -161,23 +162,26 @@ fn read_entries(bytes: &[u8], mut at: usize) -> (Vec<Entry>, usize) {
     (entries, at)
 }
 
-/// The tile each pixel belongs to.
-fn tile_of_pixel(tiles: &[Tile], width: u32, height: u32) -> Vec<u32> {
-    let mut owner = vec![u32::MAX; width as usize * height as usize];
+/// The tile each pixel of `window` belongs to (the window's pixels, row-major).
+fn tile_of_pixel(tiles: &[Tile], window: PixelWindow) -> Vec<u32> {
+    let mut owner = vec![u32::MAX; window.pixels()];
     for (index, t) in tiles.iter().enumerate() {
         for y in t.y0..t.y1 {
             for x in t.x0..t.x1 {
-                owner[y as usize * width as usize + x as usize] = index as u32;
+                if let Some(i) = window.index(x, y) {
+                    owner[i] = index as u32;
+                }
             }
         }
     }
     owner
 }
 
-/// Rebuilds the finished tiles from the entries.
-fn restore(entries: Vec<Entry>, tiles: &[Tile], width: u32, height: u32) -> (FrameBuffer, Vec<bool>) {
+/// Rebuilds the finished tiles from the entries, in a frame of `window` (the area the tiles
+/// cover: a region task's region, or the whole image).
+fn restore(entries: Vec<Entry>, tiles: &[Tile], window: PixelWindow) -> (FrameBuffer, Vec<bool>) {
     use std::collections::HashMap;
-    let owner = tile_of_pixel(tiles, width, height);
+    let owner = tile_of_pixel(tiles, window);
     // Per (attempt, tile): the tile's pixels and request count, and the results for it.
     type Part = (u32, Vec<PixelValue>);
     let mut parts: HashMap<(u32, u32), Part> = HashMap::new();
@@ -200,14 +204,17 @@ fn restore(entries: Vec<Entry>, tiles: &[Tile], width: u32, height: u32) -> (Fra
             }
             Entry::Results { attempt, results: r } => {
                 for result in r {
-                    if let Some(&tile) = owner.get(result.pixel as usize) {
+                    let tile = window
+                        .index_of_pixel(result.pixel as usize)
+                        .and_then(|i| owner.get(i).copied());
+                    if let Some(tile) = tile.filter(|&t| t != u32::MAX) {
                         results.entry((attempt, tile)).or_default().push(result);
                     }
                 }
             }
         }
     }
-    let mut frame = FrameBuffer::new(width, height);
+    let mut frame = FrameBuffer::windowed(window);
     let mut done = vec![false; tiles.len()];
     let mut finished: Vec<(&(u32, u32), &Part)> = parts.iter().collect();
     finished.sort_by_key(|(key, _)| **key);
@@ -234,14 +241,9 @@ fn restore(entries: Vec<Entry>, tiles: &[Tile], width: u32, height: u32) -> (Fra
 
 impl Checkpoint {
     /// Opens (or starts) the journal in `dir` for the job `key` and returns what earlier runs
-    /// finished. A journal of another job is refused, not overwritten.
-    pub fn open(
-        dir: &Path,
-        key: &str,
-        tiles: &[Tile],
-        width: u32,
-        height: u32,
-    ) -> Result<(Checkpoint, Restored), String> {
+    /// finished, in a frame of `window` (the area `tiles` cover). A journal of another job is
+    /// refused, not overwritten.
+    pub fn open(dir: &Path, key: &str, tiles: &[Tile], window: PixelWindow) -> Result<(Checkpoint, Restored), String> {
         std::fs::create_dir_all(dir).map_err(|e| format!("{}: cannot create the directory: {e}", dir.display()))?;
         let path = dir.join("tiles.journal");
         let context = |e: std::io::Error| format!("{}: {e}", path.display());
@@ -289,7 +291,7 @@ impl Checkpoint {
             })
             .max()
             .unwrap_or(0);
-        let (frame, done) = restore(entries, tiles, width, height);
+        let (frame, done) = restore(entries, tiles, window);
         let file = OpenOptions::new().write(true).open(&path).map_err(context)?;
         // Cut a torn tail so that appended entries follow the last intact one.
         file.set_len(intact as u64).map_err(context)?;
@@ -351,7 +353,7 @@ impl Checkpoint {
 
 /// How many tiles the journal in `dir` holds as finished, read without changing it (a journal
 /// being written is read up to its last whole entry). For watching a render's progress.
-pub fn finished_tiles(dir: &Path, tiles: &[Tile], width: u32, height: u32) -> usize {
+pub fn finished_tiles(dir: &Path, tiles: &[Tile], window: PixelWindow) -> usize {
     let Ok(bytes) = std::fs::read(dir.join("tiles.journal")) else {
         return 0;
     };
@@ -360,7 +362,7 @@ pub fn finished_tiles(dir: &Path, tiles: &[Tile], width: u32, height: u32) -> us
         return 0;
     }
     let (entries, _) = read_entries(&bytes, header);
-    restore(entries, tiles, width, height).1.iter().filter(|d| **d).count()
+    restore(entries, tiles, window).1.iter().filter(|d| **d).count()
 }
 
 /// Results as bytes (the journal's form; the `Results` message adds a count).
@@ -408,7 +410,7 @@ mod tests {
     fn finished_tiles_come_back_and_unfinished_ones_do_not() {
         let dir = tempfile::tempdir().unwrap();
         let all = tiles(8, 4, 4, 4);
-        let (journal, restored) = Checkpoint::open(dir.path(), "job", &all, 8, 4).unwrap();
+        let (journal, restored) = Checkpoint::open(dir.path(), "job", &all, PixelWindow::whole(8, 4)).unwrap();
         assert_eq!(restored.count(), 0);
         journal.tile(0, 0, &pixels(&all[0], 2.0));
         // Tile 1 sent two requests; only one result arrives before the "kill".
@@ -420,9 +422,9 @@ mod tests {
             value: Vec3::ONE,
         }]);
         drop(journal);
-        let (journal, restored) = Checkpoint::open(dir.path(), "job", &all, 8, 4).unwrap();
+        let (journal, restored) = Checkpoint::open(dir.path(), "job", &all, PixelWindow::whole(8, 4)).unwrap();
         assert_eq!(restored.done, vec![true, false]);
-        assert_eq!(finished_tiles(dir.path(), &all, 8, 4), 1);
+        assert_eq!(finished_tiles(dir.path(), &all, PixelWindow::whole(8, 4)), 1);
         assert_eq!(restored.frame.layer(Layer::Emission)[0], Vec3::splat(2.0));
         assert_eq!(
             restored.frame.layer(Layer::Emission)[pixel_of_tile1 as usize],
@@ -440,30 +442,75 @@ mod tests {
             .collect();
         journal.results(&results);
         drop(journal);
-        let (_, restored) = Checkpoint::open(dir.path(), "job", &all, 8, 4).unwrap();
+        let (_, restored) = Checkpoint::open(dir.path(), "job", &all, PixelWindow::whole(8, 4)).unwrap();
         assert_eq!(restored.done, vec![true, true]);
         assert_eq!(restored.frame.layer(Layer::Specular)[4], Vec3::splat(0.5));
         assert_eq!(restored.frame.layer(Layer::Indirect)[4], Vec3::splat(0.25));
         assert_eq!(restored.frame.layer(Layer::Emission)[5], Vec3::splat(3.0));
     }
 
+    /// A region's journal restores into a frame of the region only: its tiles' pixels and the
+    /// results for them (named by the full image's pixel numbers) land where they belong.
+    #[test]
+    fn a_region_s_tiles_come_back_in_a_frame_of_the_region() {
+        let dir = tempfile::tempdir().unwrap();
+        let region = crate::image::region::Region {
+            x0: 3,
+            y0: 2,
+            x1: 9,
+            y1: 6,
+        };
+        let window = PixelWindow::new(region, 12, 8);
+        let all = crate::tiles::tiles_in(12, 8, 4, 4, Some(region));
+        assert_eq!(all.len(), 6);
+        let (journal, _) = Checkpoint::open(dir.path(), "job", &all, window).unwrap();
+        for (i, t) in all.iter().enumerate() {
+            // Tile 1 (x 4..8, y 2..4) waits for one result; the others for none.
+            journal.tile(i as u32, (i == 1) as u32, &pixels(t, i as f32));
+        }
+        let (x, y) = (5u32, 3u32);
+        journal.results(&[RequestResult {
+            pixel: y * 12 + x,
+            layer: Layer::Specular,
+            value: Vec3::ONE,
+        }]);
+        drop(journal);
+        let (_, restored) = Checkpoint::open(dir.path(), "job", &all, window).unwrap();
+        assert_eq!(restored.done, vec![true; 6]);
+        assert_eq!(finished_tiles(dir.path(), &all, window), 6);
+        let frame = &restored.frame;
+        assert_eq!((frame.width, frame.height, frame.window()), (6, 4, window));
+        for (i, t) in all.iter().enumerate() {
+            for y in t.y0..t.y1 {
+                for x in t.x0..t.x1 {
+                    let at = window.index(x, y).unwrap();
+                    assert_eq!(frame.layer(Layer::Emission)[at], Vec3::splat(i as f32), "({x}, {y})");
+                }
+            }
+        }
+        let specular: Vec<usize> = (0..window.pixels())
+            .filter(|&i| frame.layer(Layer::Specular)[i] != Vec3::ZERO)
+            .collect();
+        assert_eq!(specular, vec![window.index(x, y).unwrap()]);
+    }
+
     #[test]
     fn a_torn_last_entry_is_cut_and_later_entries_stay_readable() {
         let dir = tempfile::tempdir().unwrap();
         let all = tiles(8, 8, 4, 4);
-        let (journal, _) = Checkpoint::open(dir.path(), "job", &all, 8, 8).unwrap();
+        let (journal, _) = Checkpoint::open(dir.path(), "job", &all, PixelWindow::whole(8, 8)).unwrap();
         journal.tile(0, 0, &pixels(&all[0], 1.0));
         journal.tile(1, 0, &pixels(&all[1], 1.0));
         drop(journal);
         let path = dir.path().join("tiles.journal");
         let bytes = std::fs::read(&path).unwrap();
         std::fs::write(&path, &bytes[..bytes.len() - 7]).unwrap();
-        let (journal, restored) = Checkpoint::open(dir.path(), "job", &all, 8, 8).unwrap();
+        let (journal, restored) = Checkpoint::open(dir.path(), "job", &all, PixelWindow::whole(8, 8)).unwrap();
         assert_eq!(restored.done, vec![true, false, false, false]);
         assert!(restored.torn_bytes > 0);
         journal.tile(2, 0, &pixels(&all[2], 1.0));
         drop(journal);
-        let (_, restored) = Checkpoint::open(dir.path(), "job", &all, 8, 8).unwrap();
+        let (_, restored) = Checkpoint::open(dir.path(), "job", &all, PixelWindow::whole(8, 8)).unwrap();
         assert_eq!(restored.done, vec![true, false, true, false]);
         assert_eq!(restored.torn_bytes, 0);
     }
@@ -472,7 +519,7 @@ mod tests {
     fn every_cut_of_a_journal_opens() {
         let dir = tempfile::tempdir().unwrap();
         let all = tiles(4, 4, 2, 2);
-        let (journal, _) = Checkpoint::open(dir.path(), "job", &all, 4, 4).unwrap();
+        let (journal, _) = Checkpoint::open(dir.path(), "job", &all, PixelWindow::whole(4, 4)).unwrap();
         for (i, t) in all.iter().enumerate() {
             journal.tile(i as u32, 0, &pixels(t, i as f32));
         }
@@ -482,7 +529,7 @@ mod tests {
         let mut last = 0;
         for cut in 0..=whole.len() {
             std::fs::write(&path, &whole[..cut]).unwrap();
-            let (_, restored) = Checkpoint::open(dir.path(), "job", &all, 4, 4).unwrap();
+            let (_, restored) = Checkpoint::open(dir.path(), "job", &all, PixelWindow::whole(4, 4)).unwrap();
             assert!(restored.count() >= last, "a longer journal restored fewer tiles");
             last = restored.count();
         }
@@ -493,20 +540,24 @@ mod tests {
     fn another_jobs_journal_is_refused() {
         let dir = tempfile::tempdir().unwrap();
         let all = tiles(4, 4, 4, 4);
-        Checkpoint::open(dir.path(), "-x 4 -y 4", &all, 4, 4).unwrap();
-        let err = Checkpoint::open(dir.path(), "-x 4 -y 4 -ab 2", &all, 4, 4)
+        Checkpoint::open(dir.path(), "-x 4 -y 4", &all, PixelWindow::whole(4, 4)).unwrap();
+        let err = Checkpoint::open(dir.path(), "-x 4 -y 4 -ab 2", &all, PixelWindow::whole(4, 4))
             .err()
             .unwrap();
         assert!(err.contains("another job"), "{err}");
         std::fs::write(dir.path().join("tiles.journal"), b"garbage that is long enough").unwrap();
-        let err = Checkpoint::open(dir.path(), "job", &all, 4, 4).err().unwrap();
+        let err = Checkpoint::open(dir.path(), "job", &all, PixelWindow::whole(4, 4))
+            .err()
+            .unwrap();
         assert!(err.contains("not an icrender checkpoint"), "{err}");
         // A journal of the format before the data layers: refused, saying why.
         let mut old = b"ICRJRNL1".to_vec();
         old.extend_from_slice(&3u32.to_le_bytes());
         old.extend_from_slice(b"job");
         std::fs::write(dir.path().join("tiles.journal"), &old).unwrap();
-        let err = Checkpoint::open(dir.path(), "job", &all, 4, 4).err().unwrap();
+        let err = Checkpoint::open(dir.path(), "job", &all, PixelWindow::whole(4, 4))
+            .err()
+            .unwrap();
         assert!(err.contains("older icrender") && err.contains("format 1"), "{err}");
     }
 
@@ -514,7 +565,7 @@ mod tests {
     fn data_layers_come_back_from_the_journal() {
         let dir = tempfile::tempdir().unwrap();
         let all = tiles(4, 4, 4, 4);
-        let (journal, _) = Checkpoint::open(dir.path(), "job", &all, 4, 4).unwrap();
+        let (journal, _) = Checkpoint::open(dir.path(), "job", &all, PixelWindow::whole(4, 4)).unwrap();
         let mut tile = pixels(&all[0], 1.0);
         let mut sum = crate::image::data::PixelDataSum::new(1);
         let hit = crate::image::data::SampleHit {
@@ -528,7 +579,7 @@ mod tests {
         tile[5].data = sum.finish();
         journal.tile(0, 0, &tile);
         drop(journal);
-        let (_, restored) = Checkpoint::open(dir.path(), "job", &all, 4, 4).unwrap();
+        let (_, restored) = Checkpoint::open(dir.path(), "job", &all, PixelWindow::whole(4, 4)).unwrap();
         assert_eq!(restored.frame.data()[5], tile[5].data);
         assert_eq!(restored.frame.data()[4], tile[4].data);
     }

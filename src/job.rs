@@ -160,11 +160,19 @@ fn uses_cache(args: &RenderArgs, scene: &Scene) -> bool {
 /// Refuses a job whose estimated memory exceeds --max-memory, before the BVH and the render.
 fn check_memory(args: &RenderArgs, scene: &Scene, role: memory::Role, limit: u64) -> Result<(), CommandError> {
     let component = matches!(args.mode, Some(crate::cli::ModeArg::Component) | None);
+    // A region task holds and renders its region's pixels only.
+    let (width, height) = match args.region.as_deref() {
+        Some(v) => {
+            let r = crate::image::region::Region::from_option(v, args.width, args.height)?;
+            (r.width(), r.height())
+        }
+        None => (args.width, args.height),
+    };
     let estimate = memory::Estimate::of(
         scene,
         &memory::Job {
-            width: args.width,
-            height: args.height,
+            width,
+            height,
             spp: args.spp,
             ambient_bounces: args.ambient_bounces,
             cache: uses_cache(args, scene),
@@ -231,6 +239,16 @@ impl Job {
             .threads
             .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
         let prepass = cache_build(args) == CacheBuildArg::Prepass;
+        let region = args
+            .region
+            .as_deref()
+            .map(|v| crate::image::region::Region::from_option(v, args.width, args.height))
+            .transpose()?;
+        let window = crate::image::window::PixelWindow::new(
+            region.unwrap_or_else(|| crate::image::region::Region::whole(args.width, args.height)),
+            args.width,
+            args.height,
+        );
         let settings = RenderSettings {
             spp: args.spp,
             seed: args.seed,
@@ -248,13 +266,9 @@ impl Job {
                 args.overture.unwrap_or(DEFAULT_OVERTURE)
             },
             prepass,
-            region: args
-                .region
-                .as_deref()
-                .map(|v| crate::image::region::Region::from_option(v, args.width, args.height))
-                .transpose()?,
+            region,
             emission_footprint: (args.emission_samples > 0 && !scene.emitters.is_empty())
-                .then(|| std::sync::Arc::new(EmitterFootprint::new(&scene.emitters, &camera))),
+                .then(|| std::sync::Arc::new(EmitterFootprint::new(&scene.emitters, &camera, window))),
         };
         let cache = if uses_cache(args, &scene) {
             let metric = match args.ic_metric {
@@ -333,6 +347,7 @@ impl Job {
             self.settings.emission_footprint = Some(std::sync::Arc::new(EmitterFootprint::new(
                 &self.scene.emitters,
                 &self.camera,
+                self.settings.window(&self.camera),
             )));
         }
         Ok(())

@@ -48,6 +48,7 @@ pub struct Estimate {
 /// What the estimate needs to know about the job beyond the scene.
 #[derive(Clone, Copy)]
 pub struct Job {
+    /// The pixels rendered: the image's, or a --region task's region's (its frame holds no more).
     pub width: u32,
     pub height: u32,
     pub spp: u32,
@@ -128,6 +129,15 @@ impl Estimate {
     }
 }
 
+/// The process's peak resident memory so far (Linux's `VmHWM` in /proc/self/status): what a
+/// farm task needs to be given. None where the system does not say.
+pub fn peak_resident_bytes() -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find_map(|l| l.strip_prefix("VmHWM:"))?;
+    let kib: u64 = line.trim().strip_suffix("kB")?.trim().parse().ok()?;
+    Some(kib * 1024)
+}
+
 /// Bytes in binary units with one decimal.
 pub fn human(bytes: u64) -> String {
     let units = ["bytes", "KiB", "MiB", "GiB", "TiB"];
@@ -154,6 +164,15 @@ mod tests {
         assert!((records_per_sample(1) - 0.03).abs() < 1e-12);
         assert!((records_per_sample(2) - 0.18).abs() < 1e-12);
         assert!(records_per_sample(8) <= 8.0);
+    }
+
+    #[test]
+    fn the_peak_resident_memory_holds_what_was_touched() {
+        // 64 MiB written, so resident; the peak can only be at least that while it is held.
+        let held = vec![1u8; 64 << 20];
+        let peak = peak_resident_bytes().expect("Linux reports VmHWM");
+        assert!(peak >= 64 << 20, "peak {peak} bytes while 64 MiB are resident");
+        assert_eq!(held.iter().map(|&b| b as usize).sum::<usize>(), 64 << 20);
     }
 
     #[test]

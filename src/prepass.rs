@@ -20,6 +20,7 @@
 //! overshoot fitted once the set is complete; both depend on the record set alone.
 
 use crate::image::region::Region;
+use crate::image::window::PixelWindow;
 use crate::irradiance::IrradianceCache;
 use crate::irradiance::index::FrozenIndex;
 use crate::irradiance::record::{Record, RecordIdentity};
@@ -53,8 +54,10 @@ pub struct Site {
 /// What the prepass did.
 #[derive(Debug, Default)]
 pub struct PrepassOutcome {
-    /// Records made, per pixel (row-major), for the `ic_records` layer.
-    pub records_per_pixel: Vec<u32>,
+    /// The pixel (x, y in the full image) of each record made, in the order they were made:
+    /// for the `ic_records` layer (a list of the records, not a plane of the image, so that a
+    /// region's prepass holds nothing per pixel of the whole frame).
+    pub record_pixels: Vec<(u32, u32)>,
     /// Work per thread (thread i of every round adds to entry i).
     pub threads: Vec<ThreadStats>,
     pub rounds: usize,
@@ -63,6 +66,22 @@ pub struct PrepassOutcome {
     pub pixels_sampled: u64,
     pub records: u64,
     pub seconds: f64,
+}
+
+impl PrepassOutcome {
+    /// Each pixel a record was made for, with how many, in scanline order.
+    pub fn records_per_pixel(&self) -> Vec<((u32, u32), u32)> {
+        let mut pixels = self.record_pixels.clone();
+        pixels.sort_unstable_by_key(|&(x, y)| (y, x));
+        let mut out: Vec<((u32, u32), u32)> = Vec::new();
+        for pixel in pixels {
+            match out.last_mut() {
+                Some((last, count)) if *last == pixel => *count += 1,
+                _ => out.push((pixel, 1)),
+            }
+        }
+        out
+    }
 }
 
 /// The coarsest stride for an image: `COARSEST_STRIDE`, or less so that the first lattice
@@ -158,19 +177,23 @@ fn last_records(snapshot: &FrozenIndex, count: usize) -> std::collections::HashS
         .collect()
 }
 
-/// Rounds of the sample positions of the pixels `needs` marks (row-major), after the centres:
-/// one round per sample number and pixel parity. Neighbouring samples (of one pixel, or of
-/// adjacent pixels along an edge) would otherwise all lack a record at once and each make one
-/// (conference room 320x240 at 16 samples: 16,780 duplicates of 20,450 records in one round;
-/// records made as pixels render: 4,800).
-pub fn sample_rounds(width: u32, height: u32, samples: u32, needs: &[bool]) -> Vec<Vec<Site>> {
+/// Rounds of the sample positions of the pixels `needs` marks (the pixels of `window`,
+/// row-major), after the centres: one round per sample number and pixel parity (the parity of
+/// the full image's coordinates). Neighbouring samples (of one pixel, or of adjacent pixels
+/// along an edge) would otherwise all lack a record at once and each make one (conference room
+/// 320x240 at 16 samples: 16,780 duplicates of 20,450 records in one round; records made as
+/// pixels render: 4,800).
+pub fn sample_rounds(window: PixelWindow, samples: u32, needs: &[bool]) -> Vec<Vec<Site>> {
+    let a = window.area;
+    // The first coordinate at or after `from` whose parity is `parity`.
+    let first = |from: u32, parity: u32| from + (from % 2 != parity) as u32;
     let mut out = Vec::new();
     for s in 0..samples {
         for (px, py) in [(0, 0), (1, 1), (1, 0), (0, 1)] {
             let mut sites = Vec::new();
-            for y in (py..height).step_by(2) {
-                for x in (px..width).step_by(2) {
-                    if needs.get((y * width + x) as usize).copied().unwrap_or(false) {
+            for y in (first(a.y0, py)..a.y1).step_by(2) {
+                for x in (first(a.x0, px)..a.x1).step_by(2) {
+                    if window.index(x, y).and_then(|i| needs.get(i)).copied().unwrap_or(false) {
                         sites.push(Site { x, y, sample: Some(s) });
                     }
                 }
@@ -213,6 +236,7 @@ fn same_plane(a: &SurfaceHit, b: &SurfaceHit) -> bool {
 /// a covered surface a pixel's samples land between its covered corners, where the records
 /// serve them. Every process computes it alike from the geometry and the cache it holds (five
 /// eye paths a pixel, a lookup at each corner).
+/// The answer holds the pixels of the area rendered (`RenderSettings::window`), row-major.
 fn pixels_needing_samples(pass: Pass<'_, '_>, snapshot: &FrozenIndex, stats: &mut [ThreadStats]) -> Vec<bool> {
     let Pass {
         integrator,
@@ -220,8 +244,8 @@ fn pixels_needing_samples(pass: Pass<'_, '_>, snapshot: &FrozenIndex, stats: &mu
         camera,
         ..
     } = pass;
-    let width = camera.width;
-    let area = pass.settings.area(camera);
+    let window = pass.settings.window(camera);
+    let area = window.area;
     let sites_at = |x: f32, y: f32, counts: &mut RayCounts| {
         let (origin, dir) = camera.ray(x, y);
         // Glossy directions from a fixed stream: the same rays on every process.
@@ -230,7 +254,7 @@ fn pixels_needing_samples(pass: Pass<'_, '_>, snapshot: &FrozenIndex, stats: &mu
     };
     let covered = |hits: &[SurfaceHit]| hits.iter().all(|h| cache.covered_in(snapshot, h.position, h.normal, 0));
     let rows = AtomicUsize::new(area.y0 as usize);
-    let needs = Mutex::new(vec![false; (width * camera.height) as usize]);
+    let needs = Mutex::new(vec![false; window.pixels()]);
     on_threads(stats, |counts| {
         loop {
             let y = rows.fetch_add(1, Ordering::Relaxed) as u32;
@@ -259,7 +283,7 @@ fn pixels_needing_samples(pass: Pass<'_, '_>, snapshot: &FrozenIndex, stats: &mu
                     })
                 })
                 .collect();
-            let start = (y * width + area.x0) as usize;
+            let start = window.index(area.x0, y).expect("a row of the area");
             needs.lock().unwrap_or_else(|e| e.into_inner())[start..start + row.len()].copy_from_slice(&row);
         }
     });
@@ -418,7 +442,6 @@ fn run_watched<E>(
 ) -> Result<PrepassOutcome, E> {
     let start = Instant::now();
     let mut outcome = PrepassOutcome {
-        records_per_pixel: vec![0; (camera.width * camera.height) as usize],
         threads: vec![ThreadStats::default(); settings.threads.max(1)],
         ..Default::default()
     };
@@ -451,7 +474,7 @@ fn run_watched<E>(
                 outcome.threads[0].rays.duplicates += 1;
             }
             snapshot.push(record.clone());
-            outcome.records_per_pixel[(site.y * camera.width + site.x) as usize] += 1;
+            outcome.record_pixels.push((site.x, site.y));
             outcome.records += 1;
             cache.insert(record);
         }
@@ -484,7 +507,7 @@ fn run_watched<E>(
     if go_on && (settings.spp > 1 || settings.jitter) {
         let needs = pixels_needing_samples(pass, &snapshot, &mut outcome.threads);
         outcome.pixels_sampled = needs.iter().filter(|&&n| n).count() as u64;
-        let more = sample_rounds(camera.width, camera.height, settings.spp, &needs);
+        let more = sample_rounds(settings.window(camera), settings.spp, &needs);
         total += more.len();
         for sites in more {
             run(sites, &mut snapshot, &mut outcome)?;
@@ -571,11 +594,50 @@ mod tests {
         }
     }
 
+    /// A window's rounds, with its own mask, are the whole image's rounds with the same pixels
+    /// marked in a whole-image mask: the same sites in the same order (parities of the full
+    /// image's coordinates), for windows at even and odd corners.
+    #[test]
+    fn a_window_s_sample_rounds_are_the_whole_image_s_for_its_pixels() {
+        let (w, h, samples) = (11u32, 9u32, 3u32);
+        let marked = |x: u32, y: u32| !(x * 7 + y * 3).is_multiple_of(5);
+        for (x0, y0, x1, y1) in [(0, 0, 11, 9), (3, 2, 8, 9), (2, 1, 7, 6), (5, 5, 6, 6)] {
+            let area = Region { x0, y0, x1, y1 };
+            let window = PixelWindow::new(area, w, h);
+            let whole: Vec<bool> = (0..w * h)
+                .map(|i| {
+                    let (x, y) = (i % w, i / w);
+                    (x0..x1).contains(&x) && (y0..y1).contains(&y) && marked(x, y)
+                })
+                .collect();
+            let own: Vec<bool> = (0..window.pixels())
+                .map(|i| {
+                    let (x, y) = window.position(i);
+                    marked(x, y)
+                })
+                .collect();
+            assert_eq!(
+                sample_rounds(window, samples, &own),
+                sample_rounds(PixelWindow::whole(w, h), samples, &whole),
+                "{area:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn records_are_counted_per_pixel_in_scanline_order() {
+        let outcome = PrepassOutcome {
+            record_pixels: vec![(5, 2), (1, 3), (5, 2), (0, 2), (5, 2), (1, 3)],
+            ..Default::default()
+        };
+        assert_eq!(outcome.records_per_pixel(), vec![((0, 2), 1), ((5, 2), 3), ((1, 3), 2)]);
+    }
+
     #[test]
     fn the_samples_of_marked_pixels_get_rounds_of_their_own() {
         let (w, h, samples) = (5u32, 4u32, 4u32);
         let needs: Vec<bool> = (0..w * h).map(|i| i % 3 != 0).collect();
-        let rounds = sample_rounds(w, h, samples, &needs);
+        let rounds = sample_rounds(PixelWindow::whole(w, h), samples, &needs);
         // Every sample of every marked pixel once, and nothing else.
         let marked = needs.iter().filter(|&&n| n).count() as u32;
         assert_eq!(

@@ -225,6 +225,10 @@ pub struct RenderStats {
     pub frame_time_s: Option<f64>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub records_before: Option<u64>,
+    /// The process's peak resident memory when the render ended, before the files were written
+    /// (rank 0's under mpirun; Linux's VmHWM, absent where the system does not report it).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub peak_memory_bytes: Option<u64>,
     pub per_thread: Vec<ThreadReport>,
     pub per_rank: Vec<RankReport>,
 }

@@ -28,7 +28,9 @@ pub fn tiles(width: u32, height: u32, tile_width: u32, tile_height: u32) -> Vec<
 }
 
 /// The tiles of the whole image's grid cut to `region` (those outside it dropped), so that a
-/// region's tile borders fall where the whole image's do.
+/// region's tile borders fall where the whole image's do. Only the grid's rows and columns that
+/// reach the region are visited: a small region of a huge image lists a few tiles, not the
+/// image's.
 pub fn tiles_in(
     width: u32,
     height: u32,
@@ -36,21 +38,24 @@ pub fn tiles_in(
     tile_height: u32,
     region: Option<crate::image::region::Region>,
 ) -> Vec<Tile> {
-    let all = tiles(width, height, tile_width, tile_height);
     let Some(r) = region else {
-        return all;
+        return tiles(width, height, tile_width, tile_height);
     };
-    all.into_iter()
-        .filter_map(|t| {
-            let cut = Tile {
-                x0: t.x0.max(r.x0),
-                y0: t.y0.max(r.y0),
-                x1: t.x1.min(r.x1),
-                y1: t.y1.min(r.y1),
-            };
-            (cut.x0 < cut.x1 && cut.y0 < cut.y1).then_some(cut)
-        })
-        .collect()
+    let (tw, th) = (tile_width.max(1), tile_height.max(1));
+    let (x1, y1) = (r.x1.min(width), r.y1.min(height));
+    let mut out = Vec::new();
+    // The grid's lines at or before the region's corner, stepping by whole tiles.
+    for gy in (r.y0 - r.y0 % th..y1).step_by(th as usize) {
+        for gx in (r.x0 - r.x0 % tw..x1).step_by(tw as usize) {
+            out.push(Tile {
+                x0: gx.max(r.x0),
+                y0: gy.max(r.y0),
+                x1: (gx + tw).min(x1),
+                y1: (gy + th).min(y1),
+            });
+        }
+    }
+    out
 }
 
 /// Stores a rendered tile's pixels in the frame.
@@ -83,6 +88,34 @@ mod tests {
             }
         }
         assert!(seen.iter().all(|&c| c == 1));
+    }
+
+    /// The region's tiles are exactly the whole grid's tiles cut to it, in the same order
+    /// (brute force over many regions and tile sizes).
+    #[test]
+    fn a_region_s_tiles_are_the_whole_grid_s_cut_to_it() {
+        let (w, h) = (23u32, 17u32);
+        for (tw, th) in [(4, 4), (5, 3), (1, 1), (23, 17), (64, 64)] {
+            for (x0, y0, x1, y1) in [
+                (0, 0, 23, 17),
+                (3, 2, 9, 6),
+                (4, 3, 5, 4),
+                (7, 0, 23, 1),
+                (22, 16, 23, 17),
+            ] {
+                let r = crate::image::region::Region { x0, y0, x1, y1 };
+                let expected: Vec<(u32, u32, u32, u32)> = tiles(w, h, tw, th)
+                    .into_iter()
+                    .map(|t| (t.x0.max(x0), t.y0.max(y0), t.x1.min(x1), t.y1.min(y1)))
+                    .filter(|&(a, b, c, d)| a < c && b < d)
+                    .collect();
+                let got: Vec<(u32, u32, u32, u32)> = tiles_in(w, h, tw, th, Some(r))
+                    .into_iter()
+                    .map(|t| (t.x0, t.y0, t.x1, t.y1))
+                    .collect();
+                assert_eq!(got, expected, "{tw}x{th} tiles, region {r:?}");
+            }
+        }
     }
 
     #[test]

@@ -203,7 +203,12 @@ fn kill_and_resume(
         let target = ((fraction * all_tiles.len() as f64).ceil() as usize).max(1);
         let pid = victim_pid(&child, &marker, *rank, launch);
         let waiting = Instant::now();
-        while checkpoint::finished_tiles(&checkpoint, &all_tiles, size, size) < target {
+        while checkpoint::finished_tiles(
+            &checkpoint,
+            &all_tiles,
+            icrender::image::window::PixelWindow::whole(size, size),
+        ) < target
+        {
             assert!(
                 waiting.elapsed() < Duration::from_secs(60),
                 "run {i}: the render does not progress"

@@ -365,3 +365,194 @@ fn the_cache_command_and_read_only_files_check_their_input() {
     );
     assert!(records_in(&stats).0 > 0, "{stats}");
 }
+
+/// The peak resident memory a render reports in its statistics (Linux's VmHWM).
+fn peak_of(stats: &Value) -> u64 {
+    stats["peak_memory_bytes"]
+        .as_u64()
+        .expect("peak_memory_bytes in the statistics")
+}
+
+/// A 32x32 region of a 20000x20000 image costs what a 32x32 image costs. Holding the whole
+/// frame's buffers, as region tasks once did, would take 20000 x 20000 pixels at 188 bytes
+/// (four RGB float layers, the records plane and the data layers: `memory.rs`) = 75 GB; before
+/// this task held only its region, a 6000x6000 image's 32x32 region peaked at 6.6 GB and this
+/// one ran out of memory. Run under a 1 GiB data limit (as a farm's task limit would set), so
+/// that holding the frame again fails at once instead of filling the machine.
+#[test]
+fn a_small_region_of_a_huge_image_holds_only_its_own_pixels() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let scene = cornell();
+    let low = ["-ab", "1", "-aa", "0.2", "--threads", "2"];
+    // The same task's cost for a whole image of the region's size.
+    let (_, small) = render_to(d, &scene, "small", &[&["-x", "32", "-y", "32"][..], &low].concat());
+    let stats_path = d.join("huge.json");
+    let out = d.join("huge.exr");
+    let output = std::process::Command::new("prlimit")
+        .arg(format!("--data={}", 1u64 << 30))
+        .arg(binary())
+        .args([
+            "render",
+            s(&scene),
+            "-o",
+            s(&out),
+            "--stats",
+            s(&stats_path),
+            "-q",
+            "--no-preview",
+        ])
+        .args([
+            "-x", "20000", "-y", "20000", "--region", "9984", "9984", "10016", "10016",
+        ])
+        // The estimate counts the region's pixels too (the whole frame's would be refused).
+        .args(["--max-memory", "1G"])
+        .args(low)
+        .output()
+        .expect("prlimit (util-linux) is installed");
+    assert!(output.status.success(), "{}", stderr(&output));
+    let huge: Value = serde_json::from_str(&std::fs::read_to_string(&stats_path).unwrap()).unwrap();
+    let (part_peak, small_peak) = (peak_of(&huge), peak_of(&small));
+    eprintln!(
+        "peak resident memory: 32x32 region of 20000x20000 {:.1} MiB, 32x32 image {:.1} MiB",
+        part_peak as f64 / 1048576.0,
+        small_peak as f64 / 1048576.0
+    );
+    assert!(
+        part_peak < small_peak + (32 << 20),
+        "the region task peaked at {part_peak} bytes, a 32x32 image at {small_peak}"
+    );
+    // It is the region, in the whole image's display window, and it saw the lit room.
+    let part = read_image_with_header(&out).unwrap();
+    assert_eq!((part.width, part.height), (32, 32));
+    assert_eq!(
+        (
+            part.window.x,
+            part.window.y,
+            part.window.full_width,
+            part.window.full_height
+        ),
+        (9984, 9984, 20000, 20000)
+    );
+    let composite = &part.channels.iter().find(|(n, _)| n == "R").unwrap().1;
+    assert!(composite.iter().all(|v| v.is_finite()) && composite.iter().any(|&v| v > 0.0));
+}
+
+/// A region task killed mid-render and started again with the same command resumes from its
+/// checkpoint: the finished tiles come back from the journal into the region's frame, the rest
+/// are rendered, and the part is bit for bit the one an uninterrupted task makes (both read the
+/// prepass's records only, so nothing depends on when the kill came). The checkpoint is tied to
+/// its region: another region's task refuses it.
+#[test]
+fn a_killed_region_task_resumes_from_its_checkpoint_into_the_same_part() {
+    use icrender::image::region::Region;
+    use icrender::image::window::PixelWindow;
+    use std::process::{Command, Stdio};
+    use std::time::{Duration, Instant};
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let scene = cornell();
+    let cache = d.join("cache.icc");
+    let options = [
+        "-x", "160", "-y", "120", "-ab", "1", "-aa", "0.2", "--tile", "8x8", "--spp", "32",
+    ];
+    run_ok(&[&["cache", s(&scene), "-af", s(&cache), "-q"][..], &options].concat());
+    let region = Region {
+        x0: 20,
+        y0: 10,
+        x1: 140,
+        y1: 110,
+    };
+    let r: Vec<String> = [region.x0, region.y0, region.x1, region.y1]
+        .iter()
+        .map(u32::to_string)
+        .collect();
+    let task = |name: &str, checkpoint: Option<&Path>| -> Vec<String> {
+        let mut args: Vec<String> = ["render", s(&scene), "-q", "--no-preview", "--threads", "1"]
+            .iter()
+            .map(|a| a.to_string())
+            .collect();
+        args.extend(options.iter().map(|a| a.to_string()));
+        args.extend(["--region", &r[0], &r[1], &r[2], &r[3]].iter().map(|a| a.to_string()));
+        args.extend(["-af", s(&cache), "--af-read-only"].iter().map(|a| a.to_string()));
+        args.extend(["-o".to_string(), s(&d.join(format!("{name}.exr"))).to_string()]);
+        args.extend(["--stats".to_string(), s(&d.join(format!("{name}.json"))).to_string()]);
+        if let Some(dir) = checkpoint {
+            args.extend(["--checkpoint".to_string(), s(dir).to_string()]);
+        }
+        args
+    };
+    fn as_str(args: &[String]) -> Vec<&str> {
+        args.iter().map(String::as_str).collect()
+    }
+    run_ok(&as_str(&task("whole", None)));
+
+    let checkpoint = d.join("ck");
+    let killed = task("part", Some(&checkpoint));
+    let tiles = icrender::tiles::tiles_in(160, 120, 8, 8, Some(region));
+    let window = PixelWindow::new(region, 160, 120);
+    let mut child = Command::new(binary())
+        .args(&killed)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let target = tiles.len() / 4;
+    let waiting = Instant::now();
+    while icrender::checkpoint::finished_tiles(&checkpoint, &tiles, window) < target {
+        assert!(
+            waiting.elapsed() < Duration::from_secs(60),
+            "the region task does not progress"
+        );
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    child.kill().unwrap();
+    let status = child.wait().unwrap();
+    assert!(
+        !status.success(),
+        "the task finished before it was killed: make it longer"
+    );
+    assert!(!d.join("part.exr").exists(), "a killed task left its part");
+
+    run_ok(&as_str(&killed));
+    let stats: Value = serde_json::from_str(&std::fs::read_to_string(d.join("part.json")).unwrap()).unwrap();
+    let restored = stats["tiles_restored"].as_u64().unwrap();
+    let rendered: u64 = stats["per_thread"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|t| t["tiles"].as_u64().unwrap())
+        .sum();
+    assert!(
+        restored >= target as u64 && restored < tiles.len() as u64,
+        "{restored} of {} restored",
+        tiles.len()
+    );
+    assert_eq!(
+        restored + rendered,
+        tiles.len() as u64,
+        "a tile was rendered twice or missed"
+    );
+    let (part, whole) = (
+        read_image_with_header(&d.join("part.exr")).unwrap(),
+        read_image_with_header(&d.join("whole.exr")).unwrap(),
+    );
+    same_bits(&part, &whole).unwrap();
+    assert_eq!(
+        (part.width, part.height, part.window.x, part.window.y),
+        (120, 100, 20, 10)
+    );
+
+    // Another region's task refuses this region's checkpoint.
+    let mut other = killed.clone();
+    let at = other.iter().position(|a| a == "--region").unwrap();
+    other[at + 1] = "0".into();
+    let o = other.iter().position(|a| a == "-o").unwrap();
+    other[o + 1] = s(&d.join("other.exr")).to_string();
+    let j = other.iter().position(|a| a == "--stats").unwrap();
+    other[j + 1] = s(&d.join("other.json")).to_string();
+    let out = run(&as_str(&other));
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    assert!(stderr(&out).contains("another job"), "{}", stderr(&out));
+    assert!(!d.join("other.exr").exists());
+}

@@ -13,7 +13,7 @@
 //! resumes the first unfinished one from its journal and goes on.
 
 use super::render::{
-    Outputs, check_denoiser, checkpoint_key, job_stats, kept_after_stop, output_name, render_tiles,
+    Outputs, check_denoiser, checkpoint_key, job_stats, kept_after_stop, output_name, render_tiles, render_window,
     with_checkpoint_cache,
 };
 use super::{CommandError, CommandResult, warn};
@@ -123,9 +123,8 @@ pub fn run(args: &RenderArgs, frames: Frames) -> CommandResult {
         let (journal, restored) = match &args.checkpoint {
             Some(dir) => {
                 let key = format!("{}; frame {n} at {time} s", checkpoint_key(args));
-                let (journal, restored) =
-                    Checkpoint::open(&frame_dir(dir, n), &key, &all_tiles, args.width, args.height)
-                        .map_err(CommandError::input)?;
+                let (journal, restored) = Checkpoint::open(&frame_dir(dir, n), &key, &all_tiles, render_window(args)?)
+                    .map_err(CommandError::input)?;
                 if !args.quiet && restored.count() > 0 {
                     eprintln!(
                         "icrender: frame {n}: resuming: {} of {} tiles are already finished",

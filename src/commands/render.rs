@@ -11,6 +11,7 @@ use crate::image::denoise;
 use crate::image::denoise::Quality;
 use crate::image::framebuffer::{FrameBuffer, Layer};
 use crate::image::region::{REGION_ATTRIBUTE, Region, SETTINGS_ATTRIBUTE};
+use crate::image::window::PixelWindow;
 use crate::image::{cryptomatte, metrics, output};
 use crate::job::{Job, validate};
 use crate::parallel::{JobHost, Mode, ParallelJob, under_mpirun};
@@ -225,6 +226,7 @@ pub fn job_stats(args: &RenderArgs, job: &Job, mode: &'static str, ranks: usize,
         records_loaded: cache.map_or(0, |c| c.load_report.loaded as u64),
         cache_records: cache.map_or(0, |c| c.len() as u64),
         lock_contention: cache.map_or(0, |c| c.contention()),
+        peak_memory_bytes: crate::memory::peak_resident_bytes(),
         ..Default::default()
     }
 }
@@ -286,23 +288,15 @@ impl Outputs {
         stats: &RenderStats,
     ) -> Result<(), CommandError> {
         let layers = producible_layers(job.scene.needs(), &job.shading);
-        // A part (--region) keeps only its pixels, placed in the whole image's window.
+        // The frame holds the pixels rendered: a part (--region) its region's only, written as
+        // the data window inside the whole image's display window.
         let region = job.settings.region;
-        let part;
-        let (frame, window) = match region {
-            Some(r) => {
-                part = frame.crop(r);
-                (
-                    &part,
-                    Window {
-                        x: r.x0,
-                        y: r.y0,
-                        full_width: args.width,
-                        full_height: args.height,
-                    },
-                )
-            }
-            None => (frame, Window::whole(frame.width, frame.height)),
+        let held = frame.window();
+        let window = Window {
+            x: held.area.x0,
+            y: held.area.y0,
+            full_width: held.full_width,
+            full_height: held.full_height,
         };
         let denoised = if args.denoise {
             let quality = denoise_quality(args);
@@ -532,16 +526,31 @@ pub fn checkpoint_key(args: &RenderArgs) -> String {
     }
 }
 
-/// The tiles this render makes: the whole image's, or those of its --region.
-pub fn render_tiles(args: &RenderArgs) -> Result<Vec<Tile>, CommandError> {
-    let (tile_width, tile_height) = crate::cli::parse_tile(&args.tile).map_err(CommandError::input)?;
-    let region = args
-        .region
+/// The --region option's rectangle, if given.
+fn region_of(args: &RenderArgs) -> Result<Option<Region>, CommandError> {
+    args.region
         .as_deref()
         .map(|v| Region::from_option(v, args.width, args.height))
         .transpose()
-        .map_err(CommandError::input)?;
-    Ok(tiles_in(args.width, args.height, tile_width, tile_height, region))
+        .map_err(CommandError::input)
+}
+
+/// The tiles this render makes: the whole image's, or those of its --region.
+pub fn render_tiles(args: &RenderArgs) -> Result<Vec<Tile>, CommandError> {
+    let (tile_width, tile_height) = crate::cli::parse_tile(&args.tile).map_err(CommandError::input)?;
+    Ok(tiles_in(
+        args.width,
+        args.height,
+        tile_width,
+        tile_height,
+        region_of(args)?,
+    ))
+}
+
+/// The pixels this render's frame holds: its --region, or the whole image.
+pub fn render_window(args: &RenderArgs) -> Result<PixelWindow, CommandError> {
+    let area = region_of(args)?.unwrap_or_else(|| Region::whole(args.width, args.height));
+    Ok(PixelWindow::new(area, args.width, args.height))
 }
 
 /// Opens the --checkpoint journal (if asked for) and says what an earlier run left.
@@ -550,8 +559,8 @@ pub fn open_checkpoint(args: &RenderArgs, all_tiles: &[Tile]) -> Result<Option<(
     let Some(dir) = &args.checkpoint else {
         return Ok(None);
     };
-    let (journal, restored) = Checkpoint::open(dir, &checkpoint_key(args), all_tiles, args.width, args.height)
-        .map_err(CommandError::input)?;
+    let (journal, restored) =
+        Checkpoint::open(dir, &checkpoint_key(args), all_tiles, render_window(args)?).map_err(CommandError::input)?;
     if restored.torn_bytes > 0 {
         warn(&format!(
             "{}: dropped {} bytes of a torn last journal entry",

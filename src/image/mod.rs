@@ -11,3 +11,4 @@ pub mod output;
 pub mod preview;
 pub mod region;
 pub mod seams;
+pub mod window;

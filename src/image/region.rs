@@ -76,16 +76,6 @@ impl Region {
         }
         Ok(Region { x0, y0, x1, y1 })
     }
-
-    /// The region's values of a plane of the whole image (`width` wide, row-major).
-    pub fn crop<T: Copy>(&self, plane: &[T], width: u32) -> Vec<T> {
-        let mut out = Vec::with_capacity(self.pixels());
-        for y in self.y0..self.y1 {
-            let start = y as usize * width as usize;
-            out.extend_from_slice(&plane[start + self.x0 as usize..start + self.x1 as usize]);
-        }
-        out
-    }
 }
 
 /// Why a set of parts does not make one image.
@@ -167,13 +157,6 @@ mod tests {
         assert_eq!(Region::parse(&r(1, 2, 3, 4).text()), Some(r(1, 2, 3, 4)));
         assert_eq!(Region::parse("1 2 1 4"), None);
         assert_eq!(Region::parse("1 2 3"), None);
-    }
-
-    #[test]
-    fn crop_takes_the_rows_of_the_region() {
-        let plane: Vec<u32> = (0..20).collect(); // 5 wide, 4 high
-        assert_eq!(r(1, 1, 3, 3).crop(&plane, 5), vec![6, 7, 11, 12]);
-        assert_eq!(r(0, 0, 5, 4).crop(&plane, 5), plane);
     }
 
     #[test]

@@ -61,13 +61,18 @@ pub fn render_resumable(
         settings.tile_height,
         settings.region,
     );
+    // The frame holds the area rendered only: a region task's memory grows with its region.
+    let window = settings.window(camera);
     let (journal, todo, start) = match checkpoint {
-        Some((journal, restored)) => (Some(journal), restored.unfinished(), restored.frame),
-        None => (
-            None,
-            (0..all.len()).collect(),
-            FrameBuffer::new(camera.width, camera.height),
-        ),
+        Some((journal, restored)) => {
+            assert_eq!(
+                restored.frame.window(),
+                window,
+                "the journal was opened for another area"
+            );
+            (Some(journal), restored.unfinished(), restored.frame)
+        }
+        None => (None, (0..all.len()).collect(), FrameBuffer::windowed(window)),
     };
     progress.advance(all.len() - todo.len());
     let queue = TileQueue::new(if stopped() { Vec::new() } else { todo });
@@ -130,15 +135,8 @@ fn add_prepass(frame: &mut FrameBuffer, threads: &mut Vec<ThreadStats>, prepass:
 
 /// Counts the records the prepass made for each pixel in the frame's `ic_records` layer.
 pub fn add_prepass_records(frame: &mut FrameBuffer, prepass: &PrepassOutcome) {
-    for (pixel, &count) in prepass.records_per_pixel.iter().enumerate() {
-        if count > 0 {
-            let (x, y) = (
-                (pixel % frame.width as usize) as u32,
-                (pixel / frame.width as usize) as u32,
-            );
-            let before = frame.records()[pixel];
-            frame.set_records(x, y, before + count as f32);
-        }
+    for ((x, y), count) in prepass.records_per_pixel() {
+        frame.add_records(x, y, count as f32);
     }
 }
 

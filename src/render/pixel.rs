@@ -44,6 +44,11 @@ impl RenderSettings {
         self.region
             .unwrap_or_else(|| crate::image::region::Region::whole(camera.width, camera.height))
     }
+
+    /// The area to render inside the full image: what a frame of this render holds.
+    pub fn window(&self, camera: &Camera) -> crate::image::window::PixelWindow {
+        crate::image::window::PixelWindow::new(self.area(camera), camera.width, camera.height)
+    }
 }
 
 /// What one thread did.

@@ -4,17 +4,21 @@
 
 use super::light::EmitterSet;
 use super::view::Camera;
+use crate::image::window::PixelWindow;
 
 #[derive(Clone, Debug)]
 pub struct EmitterFootprint {
-    width: u32,
+    /// The pixels asked about (a region task's region, or the whole image).
+    window: PixelWindow,
+    /// The window's pixels, row-major.
     covered: Vec<bool>,
 }
 
 impl EmitterFootprint {
-    pub fn new(emitters: &EmitterSet, camera: &Camera) -> EmitterFootprint {
-        let (width, height) = (camera.width, camera.height);
-        let mut covered = vec![false; width as usize * height as usize];
+    /// The footprint within `window` of the camera's image (only the pixels rendered are held).
+    pub fn new(emitters: &EmitterSet, camera: &Camera, window: PixelWindow) -> EmitterFootprint {
+        let area = window.area;
+        let mut covered = vec![false; window.pixels()];
         for t in &emitters.triangles {
             let corners = [t.p0, t.p0 + t.e1, t.p0 + t.e2].map(|p| camera.project(p));
             let Some(points) = corners.into_iter().collect::<Option<Vec<_>>>() else {
@@ -28,21 +32,28 @@ impl EmitterFootprint {
                 hi = (hi.0.max(x), hi.1.max(y));
             }
             // One pixel of margin for rounding; the projection is convex, so its box holds it.
-            let clamp = |v: f32, n: u32| v.clamp(0.0, n as f32) as u32;
-            let (x0, x1) = (clamp(lo.0.floor() - 1.0, width), clamp(hi.0.ceil() + 1.0, width));
-            let (y0, y1) = (clamp(lo.1.floor() - 1.0, height), clamp(hi.1.ceil() + 1.0, height));
+            let clamp = |v: f32, from: u32, to: u32| (v.clamp(from as f32, to as f32) as u32).clamp(from, to);
+            let (x0, x1) = (
+                clamp(lo.0.floor() - 1.0, area.x0, area.x1),
+                clamp(hi.0.ceil() + 1.0, area.x0, area.x1),
+            );
+            let (y0, y1) = (
+                clamp(lo.1.floor() - 1.0, area.y0, area.y1),
+                clamp(hi.1.ceil() + 1.0, area.y0, area.y1),
+            );
+            if x0 >= x1 {
+                continue;
+            }
             for y in y0..y1 {
-                covered[(y * width) as usize + x0 as usize..(y * width) as usize + x1 as usize].fill(true);
+                let start = window.index(x0, y).expect("inside the window");
+                covered[start..start + (x1 - x0) as usize].fill(true);
             }
         }
-        EmitterFootprint { width, covered }
+        EmitterFootprint { window, covered }
     }
 
     pub fn covers(&self, x: u32, y: u32) -> bool {
-        self.covered
-            .get(y as usize * self.width as usize + x as usize)
-            .copied()
-            .unwrap_or(false)
+        self.window.index(x, y).is_some_and(|i| self.covered[i])
     }
 
     /// How many pixels are covered (for statistics and tests).
@@ -92,7 +103,7 @@ mod tests {
             Vec3::new(0.1, 0.0, 0.0),
             Vec3::new(0.0, 0.1, 0.0),
         );
-        let footprint = EmitterFootprint::new(&set, &cam);
+        let footprint = EmitterFootprint::new(&set, &cam, PixelWindow::whole(100, 100));
         // Every pixel whose sampled rays hit the triangle is covered.
         let t = &set.triangles[0];
         for y in 0..100 {
@@ -117,6 +128,33 @@ mod tests {
         assert!(!footprint.covers(10, 90));
     }
 
+    /// A window's footprint is the whole image's within the window (brute force, for windows
+    /// holding all, part or none of the emitter's box).
+    #[test]
+    fn a_window_s_footprint_is_the_whole_one_s_within_it() {
+        let cam = camera();
+        let set = emitter(
+            Vec3::new(0.2, 0.1, -1.0),
+            Vec3::new(0.1, 0.0, 0.0),
+            Vec3::new(0.0, 0.1, 0.0),
+        );
+        let whole = EmitterFootprint::new(&set, &cam, PixelWindow::whole(100, 100));
+        for (x0, y0, x1, y1) in [(0, 0, 100, 100), (55, 30, 70, 45), (60, 0, 100, 40), (0, 60, 30, 100)] {
+            let area = crate::image::region::Region { x0, y0, x1, y1 };
+            let part = EmitterFootprint::new(&set, &cam, PixelWindow::new(area, 100, 100));
+            let mut inside = 0;
+            for y in 0..100 {
+                for x in 0..100 {
+                    let held = (x0..x1).contains(&x) && (y0..y1).contains(&y);
+                    assert_eq!(part.covers(x, y), held && whole.covers(x, y), "{area:?}: ({x}, {y})");
+                    inside += (held && whole.covers(x, y)) as usize;
+                }
+            }
+            assert_eq!(part.count(), inside, "{area:?}");
+        }
+        assert!(whole.count() > 0);
+    }
+
     #[test]
     fn an_emitter_reaching_behind_the_eye_covers_everything() {
         let set = emitter(
@@ -124,7 +162,13 @@ mod tests {
             Vec3::new(0.0, 0.0, -3.0),
             Vec3::new(1.0, 0.0, 0.0),
         );
-        assert_eq!(EmitterFootprint::new(&set, &camera()).count(), 100 * 100);
-        assert_eq!(EmitterFootprint::new(&EmitterSet::new(vec![]), &camera()).count(), 0);
+        assert_eq!(
+            EmitterFootprint::new(&set, &camera(), PixelWindow::whole(100, 100)).count(),
+            100 * 100
+        );
+        assert_eq!(
+            EmitterFootprint::new(&EmitterSet::new(vec![]), &camera(), PixelWindow::whole(100, 100)).count(),
+            0
+        );
     }
 }
