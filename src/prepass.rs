@@ -16,8 +16,9 @@
 //! same whatever the number of threads and the tile size.
 //!
 //! Between rounds and at the end the records are checked against their neighbours
-//! (`irradiance::validation`): shrunk where their extrapolation misses a neighbour, and their
-//! overshoot fitted once the set is complete; both depend on the record set alone.
+//! (`irradiance::validation`): this prepass's own records shrunk where their extrapolation
+//! misses a neighbour, and every record's overshoot fitted once the set is complete; both
+//! depend on the record set alone.
 
 use crate::image::region::Region;
 use crate::image::window::PixelWindow;
@@ -489,13 +490,18 @@ fn run_watched<E>(
     // Records shrink where their neighbours disagree (`irradiance::validation`) after every
     // round but the finest level's, whose rounds fill the gaps shrinking opens.
     let coarse = lattice.len().saturating_sub(finest_rounds(area.width(), area.height()));
+    // Only this prepass's records shrink: those it found (a cache file's, an earlier frame's)
+    // are final, so the views they were made for stay covered.
+    let mut made_here = std::collections::HashSet::new();
     let mut go_on = true;
     for (k, sites) in lattice.into_iter().enumerate() {
         let before = outcome.records;
         run(sites, &mut snapshot, &mut outcome)?;
         if k < coarse && outcome.records > before {
             let fresh = last_records(&snapshot, (outcome.records - before) as usize);
-            if cache.shrink_where_neighbours_disagree(|_| true, |r| fresh.contains(&r.identity())) > 0 {
+            made_here.extend(fresh.iter().copied());
+            let revisable = |r: &Record| made_here.contains(&r.identity());
+            if cache.shrink_where_neighbours_disagree(revisable, |r| fresh.contains(&r.identity())) > 0 {
                 snapshot = cache.snapshot();
             }
         }

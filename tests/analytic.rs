@@ -170,6 +170,19 @@ fn diffuse_plane_under_a_point_light_matches_the_analytic_radiance() {
 /// rendered through a tiny parallel view of the point under the light's centre, seen from below
 /// the light and from under the blocker, with the given extra options. Returns the direct layer's 64 pixel values.
 fn plane_under_square_light(rho: f32, radiance: f32, a: f32, h: f32, blocker: Option<f32>, extra: &[&str]) -> Vec<f32> {
+    plane_beside_square_light(rho, radiance, a, h, blocker, 0.0, extra)
+}
+
+/// `plane_under_square_light` with the view moved `at` along x (0: under the light's centre).
+fn plane_beside_square_light(
+    rho: f32,
+    radiance: f32,
+    a: f32,
+    h: f32,
+    blocker: Option<f32>,
+    at: f32,
+    extra: &[&str],
+) -> Vec<f32> {
     let dir = tempfile::tempdir().unwrap();
     let mut b = GltfBuilder::new();
     let plane = b.material(lambertian("plane", [rho; 3]));
@@ -196,9 +209,11 @@ fn plane_under_square_light(rho: f32, radiance: f32, a: f32, h: f32, blocker: Op
     let scene = b.write(dir.path(), "area");
     let out = dir.path().join("area.exr");
     let (scene, out) = (scene.to_str().unwrap(), out.to_str().unwrap());
+    let at_text = at.to_string();
     let mut args = vec!["render", scene, "-o", out, "-q", "-x", "8", "-y", "8", "-ab", "0"];
     args.extend_from_slice(&[
-        "-vtl", "-vp", "0", "0.1", "0", "-vd", "0", "-1", "0", "-vu", "0", "0", "-1", "-vh", "0.001", "-vv", "0.001",
+        "-vtl", "-vp", &at_text, "0.1", "0", "-vd", "0", "-1", "0", "-vu", "0", "0", "-1", "-vh", "0.001", "-vv",
+        "0.001",
     ]);
     args.extend_from_slice(extra);
     run_ok(&args);
@@ -230,6 +245,32 @@ fn area_light_irradiance_matches_the_closed_form() {
     let got = mean(&direct);
     assert!(
         (got - expected).abs() / expected < 0.01,
+        "got {got}, expected {expected}"
+    );
+}
+
+/// A point far to the side of the light sees it edge-on: its shadow rays reach the emitter
+/// 84 degrees from its normal. Raised off the surface, such a ray aimed along the direction
+/// from the point itself ran beside the true one and crossed the emitter's plane before the
+/// light's point: the emitter shadowed itself and the point got 0.3 % of its light (this test
+/// before the fix). Nothing blocks the light here, so sampling must find Lambert's formula.
+#[test]
+fn an_area_light_seen_edge_on_does_not_shadow_itself() {
+    let (rho, radiance, a, h, at) = (0.5f64, 2.0f64, 0.25f64, 0.3f64, 3.0f64);
+    let direct = plane_beside_square_light(
+        rho as f32,
+        radiance as f32,
+        a as f32,
+        h as f32,
+        None,
+        at as f32,
+        &["--direct", "sampled", "--light-samples", "64", "--spp", "4"],
+    );
+    let corners = [[-a, h, -a], [a, h, -a], [a, h, a], [-a, h, a]];
+    let expected = rho / std::f64::consts::PI * polygon_irradiance(&corners, [at, 0.0, 0.0], radiance);
+    let got = mean(&direct);
+    assert!(
+        (got - expected).abs() / expected < 0.02,
         "got {got}, expected {expected}"
     );
 }

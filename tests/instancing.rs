@@ -347,32 +347,6 @@ impl LampPlacement {
     }
 }
 
-/// Irradiance at `point` (normal +y) from a uniformly emitting polygon of radiance `radiance`
-/// that faces it, by Lambert's contour formula: E = L/2 * sum over edges of angle_i * (g_i . n)
-/// with g_i the unit normal of the plane through the point and the edge.
-fn polygon_irradiance(corners: &[[f64; 3]], point: [f64; 3], radiance: f64) -> f64 {
-    let v: Vec<[f64; 3]> = (corners.iter())
-        .map(|c| {
-            let d = [c[0] - point[0], c[1] - point[1], c[2] - point[2]];
-            let l = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
-            d.map(|x| x / l)
-        })
-        .collect();
-    let mut sum = 0.0;
-    for i in 0..v.len() {
-        let (a, b) = (v[i], v[(i + 1) % v.len()]);
-        let cross = [
-            a[1] * b[2] - a[2] * b[1],
-            a[2] * b[0] - a[0] * b[2],
-            a[0] * b[1] - a[1] * b[0],
-        ];
-        let l = (cross[0] * cross[0] + cross[1] * cross[1] + cross[2] * cross[2]).sqrt();
-        let angle = (a[0] * b[0] + a[1] * b[1] + a[2] * b[2]).clamp(-1.0, 1.0).acos();
-        sum += angle * cross[1] / l;
-    }
-    0.5 * sum.abs() * radiance
-}
-
 /// A floor lit only by one lamp mesh placed three times (moved; turned and stretched; mirrored):
 /// three lights, two triangles each, each where its node puts it. Its direct light matches
 /// Lambert's formula over the three placed quads at every pixel, with the exact (analytic)

@@ -132,13 +132,20 @@ pub fn direct_light(
                 continue;
             }
             let origin = tracer.spawn_point(hit, wi);
-            // Stop short of the emitter so its own surface does not count as a blocker.
-            let reach = (light.position - origin).length() - tracer.epsilon_at(light.position) * 2.0;
-            if reach <= 0.0 {
+            // Aimed from the raised origin at the light's point itself: along `wi` from there the
+            // ray runs beside the true one, a hair off, and when it meets the emitter at a
+            // grazing angle it crosses the emitter's plane before the point, outside the margin
+            // below (the emitter shadowed itself for rays within about 66 degrees of grazing,
+            // darkening surfaces far from the lamps). Stops short of the emitter so its own
+            // surface does not count as a blocker.
+            let to_light = light.position - origin;
+            let length = to_light.length();
+            let reach = length - tracer.epsilon_at(light.position) * 2.0;
+            if reach <= 0.0 || !reach.is_finite() {
                 continue;
             }
             counts.shadow += 1;
-            let visible = tracer.transmittance(scene, origin, wi, reach);
+            let visible = tracer.transmittance(scene, origin, to_light / length, reach);
             if visible > 0.0 {
                 sum += contribution * visible;
             }
