@@ -30,7 +30,7 @@ use crate::scene::light::luminance;
 /// two values, that leaves it its size (from a neighbour's miss, growing with the squared
 /// distance). Measured at -ab 1 over three seeds, with the fitted curvature (indirect relMSE
 /// against brute force; records): Cornell box 9.6e-5 -> 6.8e-5 with 20 % more records,
-/// corridor 9.4e-5 -> 6.2e-5 (+17 %), conference room 1.15e-2 -> 1.01e-2 (+22 %); 0.05
+/// corridor 9.4e-5 -> 6.6e-5 (+16 %), conference room 1.15e-2 -> 9.9e-3 (+23 %); 0.05
 /// gained a little more for 50 % more records (measured with a shrink that started at the
 /// neighbour, not at the edge).
 pub const SHRINK_TOLERANCE: f32 = 0.1;
