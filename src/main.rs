@@ -48,7 +48,8 @@ fn main() -> ExitCode {
 
 fn run(cli: &cli::Cli) -> commands::CommandResult {
     match &cli.command {
-        cli::Command::Render(args) => commands::render::run(args),
+        // One image, or a frame sequence rendered frame by frame through it.
+        cli::Command::Render(args) => commands::render::run(args, commands::frames::run),
         cli::Command::Info(args) => commands::info::run(args),
         cli::Command::Compare(args) => commands::compare::run(args),
         cli::Command::Seams(args) => commands::seams::run(args),

@@ -706,7 +706,12 @@ pub(crate) fn kept_after_stop(args: &RenderArgs) -> String {
     }
 }
 
-pub fn run(args: &RenderArgs) -> CommandResult {
+/// Renders a frame sequence (`--frames`, `--frame`) once the checks common to every render have
+/// passed: `commands::frames::run`, handed in by `main`, so that this module, which
+/// the sequence renders each frame through, does not depend on it in turn.
+pub type SequenceRenderer = fn(&RenderArgs, crate::frames::Frames) -> CommandResult;
+
+pub fn run(args: &RenderArgs, sequence: SequenceRenderer) -> CommandResult {
     let mode = match args.mode {
         Some(m) => mode_of(m),
         None if under_mpirun() => Mode::Component,
@@ -741,7 +746,7 @@ pub fn run(args: &RenderArgs) -> CommandResult {
         ));
     }
     if let Some(frames) = args.frames()? {
-        return super::frames::run(args, frames);
+        return sequence(args, frames);
     }
     let outputs = Outputs::check(args)?;
     image_io::open_in_background();
