@@ -161,6 +161,8 @@ fn default_accuracy_is_close_to_brute_force_and_cheaper() {
 /// on one side of it, which on the Cornell box biases the indirect light upwards by ~5 %. The
 /// overture makes the records on a sparse grid first, so pixels interpolate between records
 /// all around them: the bias against brute force must shrink, and the records must not grow.
+/// Measured over three seeds: one seed's bias moves by a point or two with its records' noise
+/// (the overture's share of the plain bias read 0.58 to 0.76 across four seeds).
 #[test]
 fn overture_reduces_the_cache_bias_and_its_records() {
     let dir = tempfile::tempdir().unwrap();
@@ -183,11 +185,28 @@ fn overture_reduces_the_cache_bias_and_its_records() {
         [common, extra].concat()
     }
     let (brute, _) = render_to(dir.path(), &scene, "brute", &with(&common, &["-aa", "0"]));
-    let (plain, plain_stats) = render_to(dir.path(), &scene, "plain", &with(&common, &["--overture", "0"]));
-    let (overture, overture_stats) = render_to(dir.path(), &scene, "overture", &with(&common, &["--overture", "3"]));
     let indirect = |image: &ImageData| mean(&rgb(image, "indirect").concat());
     let truth = indirect(&brute);
-    let (plain_bias, overture_bias) = (indirect(&plain) / truth - 1.0, indirect(&overture) / truth - 1.0);
+    let (mut plain_bias, mut overture_bias) = (0.0, 0.0);
+    let (mut plain_stats, mut overture_stats) = (Value::Null, Value::Null);
+    for seed in ["1", "2", "3"] {
+        let (plain, stats) = render_to(
+            dir.path(),
+            &scene,
+            &format!("plain-{seed}"),
+            &with(&common, &["--overture", "0", "--seed", seed]),
+        );
+        plain_bias += (indirect(&plain) / truth - 1.0) / 3.0;
+        plain_stats = stats;
+        let (overture, stats) = render_to(
+            dir.path(),
+            &scene,
+            &format!("overture-{seed}"),
+            &with(&common, &["--overture", "3", "--seed", seed]),
+        );
+        overture_bias += (indirect(&overture) / truth - 1.0) / 3.0;
+        overture_stats = stats;
+    }
     assert!(
         overture_bias.abs() < 0.7 * plain_bias.abs(),
         "indirect bias: {:.2} % without the overture, {:.2} % with it",

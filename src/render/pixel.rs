@@ -179,6 +179,8 @@ pub fn render_pixel(
         data.add(work.data.albedo, sample_hit(integrator, camera, &work.data));
     }
     let mut pixel = sum * (1.0 / samples as f32);
+    // The direct light's ratio estimate with its share taken over all the pixel's rays.
+    pixel.direct += work.pixel_shadow_ratio.estimate() / samples as f32;
     if split_emission {
         // The first-hit emission over the pixel's area by its own stratified rays (own streams,
         // after the pixel samples'): the two parts are estimated apart and add up to the pixel.

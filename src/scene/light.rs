@@ -210,25 +210,94 @@ impl EmitterSet {
     }
 
     /// Chooses a triangle for a shading point at `point` with unit shading normal `normal`
-    /// through the light tree with `u1`, and a uniform point on it with `u2`, `u3`. None where
-    /// no emitter can light the point (all behind its tangent plane or facing away).
+    /// through the light tree with `u1`, and a uniform point on the part of it above the point's
+    /// tangent plane with `u2`, `u3`. None where no emitter can light the point (all behind its
+    /// tangent plane or facing away).
+    ///
+    /// Only the part above the tangent plane is sampled because a point below it brings nothing:
+    /// a ray spent there is wasted in the plain estimate, and in the ratio estimate (the exact
+    /// unshadowed irradiance times the share of the rays' light that got through) a pixel whose
+    /// few rays all land below has no share to measure and reads black. On the Cornell box the
+    /// tall box's front face, whose plane cuts the lamp, read 12 % dark at 4 rays a point and
+    /// 38 % at one that way.
     pub fn sample(&self, point: Vec3, normal: Vec3, u1: f32, u2: f32, u3: f32) -> Option<EmitterPoint> {
         if self.triangles.is_empty() || self.total_power.is_nan() || self.total_power <= 0.0 {
             return None;
         }
         let (index, probability) = self.tree.pick(Receiver { point, normal }, u1 as f64)?;
         let t = &self.triangles[index];
-        // Uniform point on a triangle by the square-root warp.
-        let su = u2.sqrt();
-        let (b1, b2) = (1.0 - su, u3 * su);
-        let position = t.p0 + b1 * t.e1 + b2 * t.e2;
-        let pdf_area = (probability / t.area as f64) as f32;
+        let (position, area) = t.sample_above(point, normal, u2, u3)?;
+        let pdf_area = (probability / area as f64) as f32;
         (pdf_area.is_finite() && pdf_area > 0.0).then_some(EmitterPoint {
             position,
             normal: t.normal,
             radiance: t.radiance,
             pdf_area,
         })
+    }
+}
+
+/// A uniform point on triangle `a b c` by the square-root warp.
+fn point_on_triangle(a: Vec3, b: Vec3, c: Vec3, u: f32, v: f32) -> Vec3 {
+    let su = u.sqrt();
+    a + (1.0 - su) * (b - a) + (v * su) * (c - a)
+}
+
+impl EmitterTriangle {
+    /// A uniform point on the part of the triangle above the tangent plane of `point` with unit
+    /// normal `normal` (the triangle clipped to that half-space: three or four corners), and
+    /// that part's area. None where no part of finite, positive area lies above.
+    pub fn sample_above(&self, point: Vec3, normal: Vec3, u: f32, v: f32) -> Option<(Vec3, f32)> {
+        let corners = [self.p0, self.p0 + self.e1, self.p0 + self.e2];
+        let heights = corners.map(|c| normal.dot(c - point));
+        if heights.iter().all(|&h| h >= 0.0) {
+            return Some((point_on_triangle(corners[0], corners[1], corners[2], u, v), self.area));
+        }
+        // Clipped (Sutherland-Hodgman against one plane): the corners above and the crossings.
+        let mut kept = [Vec3::ZERO; 4];
+        let mut count = 0;
+        for i in 0..3 {
+            let j = (i + 1) % 3;
+            let (hi, hj) = (heights[i], heights[j]);
+            if hi >= 0.0 {
+                kept[count] = corners[i];
+                count += 1;
+            }
+            if (hi >= 0.0) != (hj >= 0.0) {
+                kept[count] = corners[i] + (corners[j] - corners[i]) * (hi / (hi - hj));
+                count += 1;
+            }
+        }
+        let area_of = |a: Vec3, b: Vec3, c: Vec3| 0.5 * (b - a).cross(c - a).length();
+        let first = if count >= 3 {
+            area_of(kept[0], kept[1], kept[2])
+        } else {
+            0.0
+        };
+        let second = if count == 4 {
+            area_of(kept[0], kept[2], kept[3])
+        } else {
+            0.0
+        };
+        let area = first + second;
+        if !(area.is_finite() && area > 0.0) {
+            return None;
+        }
+        // A quadrilateral is two triangles of the fan from its first corner, chosen in
+        // proportion to their areas with `u`, which is then rescaled to stay uniform.
+        let share = first / area;
+        let position = if u < share || count == 3 {
+            point_on_triangle(kept[0], kept[1], kept[2], (u / share).min(1.0), v)
+        } else {
+            point_on_triangle(
+                kept[0],
+                kept[2],
+                kept[3],
+                ((u - share) / (1.0 - share)).clamp(0.0, 1.0),
+                v,
+            )
+        };
+        Some((position, area))
     }
 }
 
@@ -271,6 +340,57 @@ mod tests {
         let picked =
             (0..3).find(|&i| (p.pdf_area as f64 * set.triangles[i].area as f64 - set.pick_probability(i)).abs() < 1e-5);
         assert!(picked.is_some(), "pdf_area {} matches no triangle", p.pdf_area);
+    }
+
+    /// A wall at the origin whose plane cuts a ceiling emitter: facing +x it sees one corner of
+    /// the triangle (a clipped triangle), facing -x the other two (a quadrilateral). Every point
+    /// sampled lies on the wall's side and the estimate is Lambert's exact, clipped value.
+    #[test]
+    fn samples_only_the_part_above_the_tangent_plane_and_stays_unbiased() {
+        let (e1, e2) = (Vec3::new(2.0, 0.0, 0.0), Vec3::new(0.0, 0.0, 2.0));
+        let t = EmitterTriangle {
+            p0: Vec3::new(-1.0, 2.0, -1.0),
+            e1,
+            e2,
+            normal: e1.cross(e2).normalize(),
+            area: 0.5 * e1.cross(e2).length(),
+            radiance: Vec3::splat(3.0),
+            object: 0,
+            prim_id: 0,
+        };
+        assert!(t.normal.y < -0.99);
+        let corners = [t.p0, t.p0 + t.e1, t.p0 + t.e2].map(|c| c.as_dvec3());
+        let set = EmitterSet::new(vec![t.clone()]);
+        let mut rng = crate::sampling::Rng::new(3, 0);
+        for normal in [Vec3::X, -Vec3::X] {
+            let point = Vec3::new(0.0, 0.5, 0.0);
+            let exact = 3.0
+                * super::super::lambert::projected_solid_angle(
+                    point.as_dvec3(),
+                    normal.as_dvec3(),
+                    corners,
+                    t.normal.as_dvec3(),
+                )
+                .unwrap();
+            let samples = 200_000;
+            let mut sum = 0.0f64;
+            for _ in 0..samples {
+                let p = set
+                    .sample(point, normal, rng.next_f32(), rng.next_f32(), rng.next_f32())
+                    .unwrap();
+                let offset = p.position - point;
+                assert!(offset.dot(normal) >= -1e-6, "sampled below the plane: {offset}");
+                let d2 = offset.length_squared();
+                let wi = offset / d2.sqrt();
+                let geometry = (normal.dot(wi) * -p.normal.dot(wi)).max(0.0) / d2;
+                sum += (p.radiance.x * geometry / p.pdf_area) as f64;
+            }
+            let mean = sum / samples as f64;
+            assert!(
+                (mean - exact).abs() < 0.005 * exact,
+                "normal {normal}: estimate {mean}, exact {exact}"
+            );
+        }
     }
 
     #[test]

@@ -123,6 +123,9 @@ pub struct Work<'a> {
     pub counts: &'a mut RayCounts,
     pub sample: SampleContext,
     pub data: SampleData,
+    /// The ratio estimates' parts of the direct light at the pixel's camera-ray hits, pooled
+    /// over its samples (`direct::ShadowRatio`), scaled by the hits' opacity.
+    pub pixel_shadow_ratio: direct::ShadowRatio,
 }
 
 impl<'a> Work<'a> {
@@ -131,6 +134,7 @@ impl<'a> Work<'a> {
             counts,
             sample: SampleContext::default(),
             data: SampleData::default(),
+            pixel_shadow_ratio: direct::ShadowRatio::default(),
         }
     }
 }
@@ -518,7 +522,22 @@ impl<'a> Integrator<'a> {
                     }
                 }
             };
-            c.direct = direct::direct_light(self, hit, wo, surface, strata, rng, counts);
+            let light = direct::direct_light(self, hit, wo, surface, strata, rng, counts);
+            // The camera ray's own hit in a pixel's sample: its ratio estimate's parts go to the
+            // pixel's pool (`render_pixel` adds the pooled estimate; `direct::ShadowRatio`).
+            let pooled =
+                state.level == 0 && state.specular_depth == 0 && counts.sample.index < counts.sample.pixel_samples;
+            c.direct = match light.ratio {
+                Some(parts) if pooled => {
+                    if parts.is_finite() {
+                        counts.pixel_shadow_ratio += parts.scaled(surface.opacity);
+                    } else {
+                        counts.nonfinite += 1;
+                    }
+                    light.sampled
+                }
+                _ => light.total(),
+            };
         }
         if has_specular {
             c.specular = self.specular(hit, wo, surface, state, rng, counts);
