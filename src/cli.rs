@@ -210,8 +210,9 @@ pub struct RenderArgs {
     pub light_samples: u32,
     /// How area lights are integrated. analytic: their unshadowed irradiance exactly (Lambert's
     /// formula, in scenes with few emitting triangles) and the shadow rays only for how much of
-    /// it gets through, so fully lit and fully shadowed points have no noise (slightly biased
-    /// in penumbrae); sampled: plain shadow-ray sampling, unbiased (what `reference` uses).
+    /// it gets through (that share pooled over a pixel's samples), so fully lit and fully
+    /// shadowed points have no noise (in penumbrae consistent: its bias falls with the pixel's
+    /// shadow rays); sampled: plain shadow-ray sampling, unbiased (what `reference` uses).
     #[arg(long = "direct", value_enum, default_value_t = DirectArg::Analytic)]
     pub direct: DirectArg,
     /// Samples per pixel (stratified over the pixel's area).
