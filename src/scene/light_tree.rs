@@ -1,8 +1,13 @@
-//! A light tree: a binary hierarchy over emissive triangles that picks one for a shading point
-//! in proportion to an estimate of what each part of the tree gives there (its power over its
+//! A light tree: a hierarchy over emissive triangles that picks one for a shading point in
+//! proportion to an estimate of what each part of the tree gives there (its power over its
 //! squared distance). With hundreds of emitters spread over many rooms, picking by power alone
 //! sends most shadow rays to lights behind walls; the tree sends them to the near ones, at a
-//! cost of one importance test per level.
+//! cost of one importance test per candidate. It is built as a binary tree (split at the middle
+//! of the widest extent) and walked four-wide (`Wide`): each step weighs a node's four
+//! grandchildren by their own bounds. Against the binary walk, on the conference room at -ab 2
+//! (one thread, same settings): the whole render 0.94x the time (farm runs of 5, 0.91-0.98), and
+//! the indirect error lower (4x4 relMSE 1.21e-3 against 1.43e-3, three seeds), the tighter
+//! bounds' estimates being the better ones.
 //!
 //! Parts of the tree that cannot light the point at all get no picks: a node whose bounds lie
 //! wholly behind the shading point's tangent plane, and an emitter whose front the point is
@@ -12,7 +17,7 @@
 //! divides by exactly that. On the conference room at -ab 2 a third of the hemisphere rays end
 //! on the ceiling, beside and behind its lamps, where every pick used to be a wasted ray.
 
-use glam::Vec3;
+use glam::{Vec3, Vec4};
 
 #[derive(Clone, Debug)]
 struct Node {
@@ -32,9 +37,83 @@ struct Node {
     leaf: bool,
 }
 
+/// One child of a wide node as `pick` reads it: a node of the binary tree's bounds, power and
+/// (for an emitter) front, and where it leads.
+#[derive(Clone, Copy, Debug)]
+struct Slot {
+    centre: Vec3,
+    half: Vec3,
+    radius2: f32,
+    power: f64,
+    anchor: Vec3,
+    front: Vec3,
+    /// Leaf: the emitter's index; otherwise the wide node the slot leads to.
+    target: u32,
+    leaf: bool,
+}
+
+/// Up to `WIDTH` slots: the binary tree two levels at a time, so that a pick weighs four
+/// candidates at once and takes half the dependent steps. The slots' numbers are kept lane by
+/// lane (`Lanes`), so that one pass of four-wide arithmetic tests and weighs all four: measured
+/// on the conference room at -ab 2 (48 emitting triangles, one thread), `pick` was 16 % of the
+/// render in the binary tree, and as much in a four-wide tree of slot-by-slot arithmetic.
+#[derive(Clone, Debug)]
+struct Wide {
+    slots: [Slot; WIDTH],
+    count: usize,
+    lanes: Lanes,
+}
+
+/// The four slots' bounds, emitter fronts and powers, one Vec4 a coordinate (unused slots:
+/// zero power, so never lit).
+#[derive(Clone, Debug, Default)]
+struct Lanes {
+    centre: [Vec4; 3],
+    half: [Vec4; 3],
+    radius2: Vec4,
+    power: Vec4,
+    anchor: [Vec4; 3],
+    front: [Vec4; 3],
+    /// 1 for an emitter (its front is tested), 0 for an inner slot.
+    leaf: Vec4,
+}
+
+impl Lanes {
+    fn new(slots: &[Slot]) -> Lanes {
+        let lane = |f: &dyn Fn(&Slot) -> f32| {
+            let mut v = [0.0f32; WIDTH];
+            for (k, s) in slots.iter().enumerate() {
+                v[k] = f(s);
+            }
+            Vec4::from_array(v)
+        };
+        let axes = |f: &dyn Fn(&Slot) -> Vec3| [0, 1, 2].map(|a| lane(&|s| f(s)[a]));
+        Lanes {
+            centre: axes(&|s| s.centre),
+            half: axes(&|s| s.half),
+            radius2: lane(&|s| s.radius2),
+            // Power as f32 for the comparison of estimates only; a slot's power underflowing
+            // to zero there would lose its picks, so it is kept at least the smallest normal.
+            power: lane(&|s| {
+                if s.power > 0.0 {
+                    (s.power as f32).max(f32::MIN_POSITIVE)
+                } else {
+                    0.0
+                }
+            }),
+            anchor: axes(&|s| s.anchor),
+            front: axes(&|s| s.front),
+            leaf: lane(&|s| if s.leaf { 1.0 } else { 0.0 }),
+        }
+    }
+}
+
+const WIDTH: usize = 4;
+
 #[derive(Clone, Debug, Default)]
 pub struct LightTree {
     nodes: Vec<Node>,
+    wide: Vec<Wide>,
 }
 
 /// What the tree is built from: each emitter's bounds, power, a point of it and the normal of
@@ -57,12 +136,73 @@ pub struct Receiver {
 
 impl LightTree {
     pub fn new(items: &[Item]) -> LightTree {
-        let mut tree = LightTree { nodes: Vec::new() };
+        let mut tree = LightTree::default();
         if !items.is_empty() {
             let mut order: Vec<u32> = (0..items.len() as u32).collect();
             tree.build(items, &mut order);
+            tree.collapse(0);
+            tree.nodes = Vec::new();
         }
         tree
+    }
+
+    /// The slot for binary node `node` (its subtree collapsed first when it is inner).
+    fn slot(&mut self, node: usize) -> Slot {
+        let n = self.nodes[node].clone();
+        let target = if n.leaf { n.triangle } else { self.collapse(node) as u32 };
+        Slot {
+            centre: n.centre,
+            half: n.half,
+            radius2: n.radius2,
+            power: n.power,
+            anchor: n.anchor,
+            front: n.front,
+            target,
+            leaf: n.leaf,
+        }
+    }
+
+    /// Makes the wide node for binary node `node` (a leaf root becomes a wide node of one slot):
+    /// its children, each inner one replaced by its own two children while there is room.
+    fn collapse(&mut self, node: usize) -> usize {
+        let children = |n: usize, nodes: &[Node]| [n + 1, nodes[n].second as usize];
+        let mut members: Vec<usize> = if self.nodes[node].leaf {
+            vec![node]
+        } else {
+            children(node, &self.nodes).to_vec()
+        };
+        let mut k = 0;
+        while k < members.len() && members.len() < WIDTH {
+            let m = members[k];
+            if self.nodes[m].leaf {
+                k += 1;
+            } else {
+                members.splice(k..=k, children(m, &self.nodes));
+            }
+        }
+        let index = self.wide.len();
+        let empty = Slot {
+            centre: Vec3::ZERO,
+            half: Vec3::ZERO,
+            radius2: 0.0,
+            power: 0.0,
+            anchor: Vec3::ZERO,
+            front: Vec3::ZERO,
+            target: 0,
+            leaf: true,
+        };
+        self.wide.push(Wide {
+            slots: [empty; WIDTH],
+            count: members.len(),
+            lanes: Lanes::default(),
+        });
+        for (i, m) in members.into_iter().enumerate() {
+            let slot = self.slot(m);
+            self.wide[index].slots[i] = slot;
+        }
+        let wide = &mut self.wide[index];
+        wide.lanes = Lanes::new(&wide.slots[..wide.count]);
+        index
     }
 
     fn build(&mut self, items: &[Item], order: &mut [u32]) -> usize {
@@ -122,96 +262,116 @@ impl LightTree {
     }
 
     pub fn is_empty(&self) -> bool {
-        self.nodes.is_empty()
+        self.wide.is_empty()
     }
 
-    /// Whether nothing in `node` can light the receiver: its bounds lie wholly behind the
-    /// receiver's tangent plane (no point of them makes a positive cosine there), or, for an
-    /// emitter, the receiver is behind its front. Either way the node's light there is zero (up
-    /// to the rounding of the points sampled on it: a cosine of 1e-7), so no pick goes to it.
-    /// An inner node whose emitters all face away still gets picks, which then end in no emitter:
-    /// the estimate loses no light by that, only the ray.
-    fn dark_at(&self, node: usize, at: Receiver) -> bool {
-        let n = &self.nodes[node];
-        let nearest_front = (n.centre - at.point).dot(at.normal) + n.half.dot(at.normal.abs());
-        nearest_front <= 0.0 || (n.leaf && (at.point - n.anchor).dot(n.front) <= 0.0)
-    }
-
-    /// What a node is estimated to give at the receiver, power over squared distance (the
-    /// distance kept at least the node's half-diagonal), as the pair (power, squared distance)
-    /// so that comparing two nodes takes one division, not three (`first_child_probability`:
-    /// the divisions' latency was most of `pick`'s time, 18 % of an -ab 2 render's).
-    fn importance(&self, node: usize, at: Receiver) -> (f64, f64) {
-        let n = &self.nodes[node];
-        let d2 = (n.centre - at.point).length_squared().max(n.radius2) as f64;
-        (n.power, if d2 > 0.0 && d2.is_finite() { d2 } else { 1.0 })
-    }
-
-    /// The probability of going to the first child of inner node `node`; None where neither
-    /// child can light the receiver. A child that is dark there or has no power gets nothing.
-    fn first_child_probability(&self, node: usize, at: Receiver) -> Option<f64> {
-        let (left, right) = (node + 1, self.nodes[node].second as usize);
-        let lit = |child: usize| {
-            (self.nodes[child].power > 0.0 && !self.dark_at(child, at)).then(|| self.importance(child, at))
-        };
-        match (lit(left), lit(right)) {
-            (None, None) => None,
-            (Some(_), None) => Some(1.0),
-            (None, Some(_)) => Some(0.0),
-            (Some((pl, dl)), Some((pr, dr))) => {
-                // (pl / dl) / (pl / dl + pr / dr), multiplied through by dl dr.
-                let (wl, wr) = (pl * dr, pr * dl);
-                let p = wl / (wl + wr);
-                // Estimates that overflow or vanish: an even split.
-                Some(if p.is_finite() && p > 0.0 && p < 1.0 { p } else { 0.5 })
-            }
+    /// The weights of the slots of wide node `node` for the receiver, and their total: a slot's
+    /// share of the picks is its weight over the total (zero for the slots that cannot light
+    /// the receiver). None where none can.
+    ///
+    /// A slot is dark when its bounds lie wholly behind the receiver's tangent plane (no point
+    /// of them makes a positive cosine there), or, for an emitter, when the receiver is behind
+    /// its front: its light there is zero (up to the rounding of the points sampled on it: a
+    /// cosine of 1e-7), so no pick goes to it. An inner slot whose emitters all face away still
+    /// gets picks, which then end in no emitter: the estimate loses no light by that, only the
+    /// ray. The others share the picks in proportion to power over squared distance (the
+    /// distance kept at least the slot's half-diagonal); estimates that overflow or vanish
+    /// share them evenly.
+    #[inline(always)]
+    fn shares(&self, node: usize, at: Receiver) -> Option<([f64; WIDTH], f64)> {
+        let l = &self.wide[node].lanes;
+        let (p, n) = (at.point, at.normal);
+        let offset = [l.centre[0] - p.x, l.centre[1] - p.y, l.centre[2] - p.z];
+        let nearest_front = offset[0] * n.x
+            + offset[1] * n.y
+            + offset[2] * n.z
+            + l.half[0] * n.x.abs()
+            + l.half[1] * n.y.abs()
+            + l.half[2] * n.z.abs();
+        let behind_front =
+            (p.x - l.anchor[0]) * l.front[0] + (p.y - l.anchor[1]) * l.front[1] + (p.z - l.anchor[2]) * l.front[2];
+        // Lit: some power, bounds reaching above the tangent plane, and for an emitter the
+        // receiver on its front side.
+        let lit = l.power.cmpgt(Vec4::ZERO)
+            & nearest_front.cmpgt(Vec4::ZERO)
+            & (behind_front.cmpgt(Vec4::ZERO) | l.leaf.cmpeq(Vec4::ZERO));
+        if !lit.any() {
+            return None;
         }
+        let d2 = (offset[0] * offset[0] + offset[1] * offset[1] + offset[2] * offset[2]).max(l.radius2);
+        let weight = Vec4::select(lit, l.power / d2, Vec4::ZERO);
+        // An estimate that is not a positive number (an overflow, a vanishing distance) makes
+        // the node's picks even, so no lit slot goes without.
+        let sound = (weight.cmpgt(Vec4::ZERO) & weight.is_finite_mask()) == lit;
+        let weights = if sound {
+            weight
+        } else {
+            Vec4::select(lit, Vec4::ONE, Vec4::ZERO)
+        };
+        // Summed in f64, so that the shares (weight over total) add up to one to f64's rounding.
+        let weights = weights.to_array().map(|w| w as f64);
+        let total = weights[0] + weights[1] + weights[2] + weights[3];
+        (total.is_finite() && total > 0.0).then_some((weights, total))
     }
 
     /// Picks an emitter for the receiver with the uniform `u` (stratified `u` stay stratified:
-    /// each level splits the interval of `u` left to it in the ratio of the children's
-    /// probabilities, the usual rescaling of `u` without its divisions); returns its index and
-    /// the probability of having picked it. None where nothing can light the receiver.
+    /// each level splits the interval of `u` left to it in the ratio of the slots' weights, and
+    /// `u` is rescaled to the chosen one's); returns its index and the probability of having
+    /// picked it. None where nothing can light the receiver.
     pub fn pick(&self, at: Receiver, u: f64) -> Option<(usize, f64)> {
-        if self.nodes.is_empty() || self.dark_at(0, at) {
+        if self.wide.is_empty() {
             return None;
         }
-        let mut node = 0usize;
-        let mut probability = 1.0f64;
-        let (mut lo, mut width) = (0.0f64, 1.0f64);
-        while !self.nodes[node].leaf {
-            let p_left = self.first_child_probability(node, at)?;
-            let split = lo + width * p_left;
-            if u < split {
-                width = split - lo;
-                probability *= p_left;
-                node += 1;
-            } else {
-                width = lo + width - split;
-                lo = split;
-                probability *= 1.0 - p_left;
-                node = self.nodes[node].second as usize;
+        let (mut node, mut u, mut probability) = (0usize, u, 1.0f64);
+        loop {
+            let (weights, total) = self.shares(node, at)?;
+            let wide = &self.wide[node];
+            // The slot whose interval holds u (the last lit one should rounding leave u past
+            // every interval's end).
+            let target = u * total;
+            let mut start = 0.0f64;
+            let mut chosen = 0;
+            for (k, &w) in weights[..wide.count].iter().enumerate() {
+                if w > 0.0 {
+                    chosen = k;
+                    if target < start + w {
+                        break;
+                    }
+                    start += w;
+                }
             }
+            let w = weights[chosen];
+            probability *= w / total;
+            u = ((target - start) / w).clamp(0.0, 1.0 - f64::EPSILON);
+            let slot = &wide.slots[chosen];
+            if slot.leaf {
+                return (probability > 0.0).then_some((slot.target as usize, probability));
+            }
+            node = slot.target as usize;
         }
-        // A dark or powerless leaf is only reached with probability zero (its parent gives it
-        // none); the root, a leaf itself for one emitter, was tested above.
-        (probability > 0.0).then_some((self.nodes[node].triangle as usize, probability))
     }
 
     /// The probability that `pick` at the receiver returns emitter `target` (walks every path:
     /// for tests and checks, not for rendering).
     pub fn probability(&self, at: Receiver, target: usize) -> f64 {
         fn walk(tree: &LightTree, node: usize, at: Receiver, target: usize, p: f64) -> f64 {
-            let n = &tree.nodes[node];
-            if n.leaf {
-                return if n.triangle as usize == target { p } else { 0.0 };
-            }
-            let Some(p_left) = tree.first_child_probability(node, at) else {
+            let Some((weights, total)) = tree.shares(node, at) else {
                 return 0.0;
             };
-            walk(tree, node + 1, at, target, p * p_left) + walk(tree, n.second as usize, at, target, p * (1.0 - p_left))
+            let wide = &tree.wide[node];
+            (0..wide.count)
+                .filter(|&k| weights[k] > 0.0)
+                .map(|k| {
+                    let (slot, share) = (&wide.slots[k], weights[k] / total);
+                    if slot.leaf {
+                        if slot.target as usize == target { p * share } else { 0.0 }
+                    } else {
+                        walk(tree, slot.target as usize, at, target, p * share)
+                    }
+                })
+                .sum()
         }
-        if self.nodes.is_empty() || self.dark_at(0, at) {
+        if self.wide.is_empty() {
             0.0
         } else {
             walk(self, 0, at, target, 1.0)
@@ -329,6 +489,26 @@ mod tests {
             normal: -Vec3::Z,
         };
         assert!(tree.pick(flush, 0.3).is_none());
+    }
+
+    /// Estimates beyond f32's range (a power of 1e39 beside ordinary ones) or vanishing ones
+    /// must not take every pick from a lit emitter: such a node's picks are shared evenly, and
+    /// the probabilities still add up to one and match the picks.
+    #[test]
+    fn estimates_out_of_range_share_the_picks_evenly() {
+        let mut items: Vec<Item> = (0..9).map(|i| item(i as f32 * 0.3, 1.0)).collect();
+        items[4].power = 1e39;
+        items[7].power = 1e-300;
+        let tree = LightTree::new(&items);
+        let at = above(1.0, 0.0);
+        let probabilities: Vec<f64> = (0..items.len()).map(|i| tree.probability(at, i)).collect();
+        let total: f64 = probabilities.iter().sum();
+        assert!((total - 1.0).abs() < 1e-9, "total {total}");
+        assert!(probabilities.iter().all(|&p| p > 0.0), "{probabilities:?}");
+        for k in 0..1000 {
+            let (i, p) = tree.pick(at, (k as f64 + 0.5) / 1000.0).unwrap();
+            assert!((p - probabilities[i]).abs() < 1e-9);
+        }
     }
 
     #[test]
