@@ -70,7 +70,7 @@ pub fn projected_solid_angle(point: DVec3, normal: DVec3, [a, b, c]: [DVec3; 3],
 
 /// Sutherland-Hodgman clipping of a triangle (vertices relative to the point) to the half-space
 /// `normal . v >= 0`; writes the 0, 3 or 4 corners that remain and returns their count.
-fn clip_above(corners: [DVec3; 3], normal: DVec3, out: &mut [DVec3; 4]) -> usize {
+pub(crate) fn clip_above(corners: [DVec3; 3], normal: DVec3, out: &mut [DVec3; 4]) -> usize {
     let heights = corners.map(|v| normal.dot(v));
     if heights.iter().all(|&h| h >= 0.0) {
         out[..3].copy_from_slice(&corners);

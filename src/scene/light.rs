@@ -253,21 +253,12 @@ impl EmitterTriangle {
         if heights.iter().all(|&h| h >= 0.0) {
             return Some((point_on_triangle(corners[0], corners[1], corners[2], u, v), self.area));
         }
-        // Clipped (Sutherland-Hodgman against one plane): the corners above and the crossings.
-        let mut kept = [Vec3::ZERO; 4];
-        let mut count = 0;
-        for i in 0..3 {
-            let j = (i + 1) % 3;
-            let (hi, hj) = (heights[i], heights[j]);
-            if hi >= 0.0 {
-                kept[count] = corners[i];
-                count += 1;
-            }
-            if (hi >= 0.0) != (hj >= 0.0) {
-                kept[count] = corners[i] + (corners[j] - corners[i]) * (hi / (hi - hj));
-                count += 1;
-            }
-        }
+        // Clipped to the half-space above the plane (as Lambert's formula clips, in f64 around
+        // the point): three or four corners.
+        let mut clipped = [glam::DVec3::ZERO; 4];
+        let count =
+            super::lambert::clip_above(corners.map(|c| (c - point).as_dvec3()), normal.as_dvec3(), &mut clipped);
+        let kept = clipped.map(|v| point + v.as_vec3());
         let area_of = |a: Vec3, b: Vec3, c: Vec3| 0.5 * (b - a).cross(c - a).length();
         let first = if count >= 3 {
             area_of(kept[0], kept[1], kept[2])
