@@ -3,6 +3,17 @@
 mod common;
 use common::*;
 
+/// A parallel view straight down (-y) from (x, y, 0), `size` wide and tall, the image's up
+/// along -z: each pixel centre's world position on a plane below is known exactly.
+fn view_down(x: f64, y: f64, size: f64) -> Vec<String> {
+    let (x, y, size) = (x.to_string(), y.to_string(), size.to_string());
+    [
+        "-vtl", "-vp", &x, &y, "0", "-vd", "0", "-1", "0", "-vu", "0", "0", "-1", "-vh", &size, "-vv", &size,
+    ]
+    .map(String::from)
+    .to_vec()
+}
+
 /// A white furnace: a closed box whose walls all have albedo rho and all emit radiance E from
 /// their inner side. Every point then sees radiance E / (1 - rho) in every direction.
 #[test]
@@ -112,36 +123,24 @@ fn diffuse_plane_under_a_point_light_matches_the_analytic_radiance() {
     let scene = b.write(dir.path(), "plane");
     let out = dir.path().join("plane.exr");
     let n = 32u32;
-    run_ok(&[
-        "render",
-        scene.to_str().unwrap(),
-        "-o",
-        out.to_str().unwrap(),
-        "-q",
-        "-x",
-        "32",
-        "-y",
-        "32",
-        "-ab",
-        "0",
-        "-vtl",
-        "-vp",
-        "0",
-        "5",
-        "0",
-        "-vd",
-        "0",
-        "-1",
-        "0",
-        "-vu",
-        "0",
-        "0",
-        "-1",
-        "-vh",
-        "2",
-        "-vv",
-        "2",
-    ]);
+    run_ok(
+        &[
+            "render",
+            scene.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+            "-q",
+            "-x",
+            "32",
+            "-y",
+            "32",
+            "-ab",
+            "0",
+        ]
+        .into_iter()
+        .chain(view_down(0.0, 5.0, 2.0).iter().map(String::as_str))
+        .collect::<Vec<_>>(),
+    );
     let image = read_exr(&out);
     // -ab 0 and no ambient value: the scene cannot produce indirect light, emission or specular.
     for absent in ["indirect.R", "emission.R", "specular.R"] {
@@ -209,12 +208,9 @@ fn plane_beside_square_light(
     let scene = b.write(dir.path(), "area");
     let out = dir.path().join("area.exr");
     let (scene, out) = (scene.to_str().unwrap(), out.to_str().unwrap());
-    let at_text = at.to_string();
+    let view = view_down(at as f64, 0.1, 0.001);
     let mut args = vec!["render", scene, "-o", out, "-q", "-x", "8", "-y", "8", "-ab", "0"];
-    args.extend_from_slice(&[
-        "-vtl", "-vp", &at_text, "0.1", "0", "-vd", "0", "-1", "0", "-vu", "0", "0", "-1", "-vh", "0.001", "-vv",
-        "0.001",
-    ]);
+    args.extend(view.iter().map(String::as_str));
     args.extend_from_slice(extra);
     run_ok(&args);
     rgb(&read_exr(std::path::Path::new(out)), "direct")[0].clone()
@@ -368,40 +364,11 @@ fn analytic_direct_is_exact_where_the_surface_cuts_the_light() {
     let scene = b.write(dir.path(), "cut");
     let out = dir.path().join("cut.exr");
     let (scene, out) = (scene.to_str().unwrap(), out.to_str().unwrap());
-    run_ok(&[
-        "render",
-        scene,
-        "-o",
-        out,
-        "-q",
-        "-x",
-        "8",
-        "-y",
-        "8",
-        "-ab",
-        "0",
-        "-vtl",
-        "-vp",
-        "0",
-        "0.1",
-        "0",
-        "-vd",
-        "0",
-        "-1",
-        "0",
-        "-vu",
-        "0",
-        "0",
-        "-1",
-        "-vh",
-        "0.00001",
-        "-vv",
-        "0.00001",
-        "--light-samples",
-        "1",
-        "--spp",
-        "1",
-    ]);
+    let view = view_down(0.0, 0.1, 0.00001);
+    let mut args = vec!["render", scene, "-o", out, "-q", "-x", "8", "-y", "8", "-ab", "0"];
+    args.extend(view.iter().map(String::as_str));
+    args.extend_from_slice(&["--light-samples", "1", "--spp", "1"]);
+    run_ok(&args);
     let upper_half = [[d, 0.0, -a], [d, a, -a], [d, a, a], [d, 0.0, a]];
     let expected = rho / std::f64::consts::PI * polygon_irradiance(&upper_half, [0.0, 0.0, 0.0], radiance);
     let direct = rgb(&read_exr(std::path::Path::new(out)), "direct")[0].clone();
