@@ -23,8 +23,22 @@ pub fn run(comm: &Comm<'_>, job: &Job, timeout: Duration, hosts: &Hosts) -> Resu
     let bad = |other: Result<Message, ProtocolError>| other.err().map_or_else(|| "not a round".into(), |e| e.0);
     if rank == 0 {
         // Workers start from the master's records (its cache file), as the master does.
+        // A round can be too large to go eagerly, and a standard send to a rank whose host is
+        // gone never returns: the master would hang there while the others time out waiting
+        // for it, and nobody would name the lost rank. So every send waits at most --timeout.
+        let send = |worker: i32, message: &Message| {
+            comm.send_within(worker, message, timeout, || -> std::convert::Infallible {
+                let line = format!(
+                    "prepass: rank {worker} on {} took no round from the master for {:.0} s: its host or link is \
+                     gone, or it hangs; the cache file keeps every record of the rounds before",
+                    hosts.of(worker),
+                    timeout.as_secs_f64()
+                );
+                super::end_job(comm, Some(cache), &line)
+            })
+        };
         let start = Message::PrepassStart(Records::from(cache.records()));
-        (1..size).for_each(|worker| comm.send(worker, &start));
+        (1..size).for_each(|worker| send(worker, &start));
         let mut gather = |_: RoundRecords| -> Result<RoundRecords, String> {
             let mut round = Vec::new();
             for worker in 1..size {
@@ -51,7 +65,7 @@ pub fn run(comm: &Comm<'_>, job: &Job, timeout: Duration, hosts: &Hosts) -> Resu
             }
             // Every rank puts the round in site order itself (see `run_shared`).
             let message = Message::PrepassRound(round);
-            (1..size).for_each(|worker| comm.send(worker, &message));
+            (1..size).for_each(|worker| send(worker, &message));
             let Message::PrepassRound(round) = message else {
                 unreachable!("built above")
             };
@@ -59,8 +73,12 @@ pub fn run(comm: &Comm<'_>, job: &Job, timeout: Duration, hosts: &Hosts) -> Resu
         };
         return run_shared(&integrator, &job.camera, &job.settings, Share::Nothing, &mut gather);
     }
+    // A worker outwaits the master: the master needs up to --timeout to notice a silent rank
+    // and up to another to give up sending to one, and only the master can say which rank was
+    // lost. A master that is itself gone is noticed sooner by this rank's pulse (`liveness`).
+    let patience = 2 * timeout;
     match comm
-        .receive(&[kind(Some(0), Kind::PrepassStart)], Some(timeout))
+        .receive(&[kind(Some(0), Kind::PrepassStart)], Some(patience))
         .map(|m| m.message)
     {
         Some(Ok(Message::PrepassStart(start))) => start.records.into_iter().for_each(|r| cache.insert_shared(r)),
@@ -69,7 +87,7 @@ pub fn run(comm: &Comm<'_>, job: &Job, timeout: Duration, hosts: &Hosts) -> Resu
     let mut exchange = |mine: RoundRecords| -> Result<RoundRecords, String> {
         comm.send(0, &Message::PrepassRound(mine));
         match comm
-            .receive(&[kind(Some(0), Kind::PrepassRound)], Some(timeout))
+            .receive(&[kind(Some(0), Kind::PrepassRound)], Some(patience))
             .map(|m| m.message)
         {
             Some(Ok(Message::PrepassRound(round))) => Ok(round),
@@ -81,7 +99,7 @@ pub fn run(comm: &Comm<'_>, job: &Job, timeout: Duration, hosts: &Hosts) -> Resu
                 "rank {rank} on {}: prepass: nothing from the master (rank 0 on {}) for {} s",
                 hosts.of(rank),
                 hosts.of(0),
-                timeout.as_secs()
+                patience.as_secs()
             )),
         }
     };
