@@ -80,15 +80,17 @@ def _cross(a, b):
 
 
 class Record:
-    __slots__ = ("p", "n", "u", "v", "r0", "r1", "reach", "level", "horizon", "owner", "t_master", "t_bcast", "rid")
+    __slots__ = ("p", "n", "u", "v", "r0", "r1", "reach", "level", "horizon", "headroom", "owner", "t_master",
+                 "t_bcast", "rid")
 
-    def __init__(self, p, n, u, r0, r1, level, horizon):
+    def __init__(self, p, n, u, r0, r1, level, horizon, headroom=math.inf):
         self.p, self.n, self.u = p, n, u
         self.v = _cross(n, u)
         self.r0, self.r1 = r0, r1
         self.reach = max(r0, r1)
         self.level = level
         self.horizon = horizon
+        self.headroom = headroom
         self.owner = -1
         self.t_master = math.inf  # when the master has it
         self.t_bcast = math.inf  # when other ranks have it (broadcast)
@@ -102,10 +104,11 @@ class Record:
             u = _norm(_cross(n, (1.0, 0.0, 0.0) if abs(n[0]) < 0.9 else (0.0, 1.0, 0.0)))
         else:
             u = _norm(u)
-        return Record(p, n, u, self.r0, self.r1, self.level, self.horizon)
+        return Record(p, n, u, self.r0, self.r1, self.level, self.horizon, self.headroom)
 
-    def weight(self, p, n, level, max_angle):
-        """The renderer's validity test (Record::weight_at, Hessian metric): weight or None."""
+    def weight(self, p, n, level, max_angle, headroom=math.inf):
+        """The renderer's validity test (Record::weight_at, Hessian metric, and the headroom
+        test of irradiance::record::under_one_roof): weight or None."""
         if self.level > level:
             return None
         ox, oy, oz = p[0] - self.p[0], p[1] - self.p[1], p[2] - self.p[2]
@@ -125,6 +128,8 @@ class Record:
         sector = min(int(turn * HORIZON_SECTORS), HORIZON_SECTORS - 1)
         if dist > self.horizon[sector]:
             return None
+        if not under_one_roof(self.headroom, headroom, math.sqrt(ox * ox + oy * oy + oz * oz)):
+            return None
         angle = math.acos(cos_n)
         if angle >= max_angle:
             return None
@@ -133,6 +138,16 @@ class Record:
         if not t2 < 1.0:
             return None
         return (1.0 - math.sqrt(t2)) * (1.0 - angle / max_angle)
+
+
+def under_one_roof(a, b, distance, same_roof_ratio=4.0, roof_reach=2.0):
+    """Whether a record and a point with headrooms a and b may share records `distance` apart
+    (irradiance::record::under_one_roof, its fade taken as a cut)."""
+    low, high = min(a, b), max(a, b)
+    if not low < math.inf or distance <= 0.0:
+        return True
+    excess = high / low - same_roof_ratio
+    return excess <= 0.0 or distance < roof_reach * low / excess
 
 
 class Trace:
@@ -160,7 +175,7 @@ class Trace:
                 elif parts[0] == "R":
                     v = [float(x) for x in parts[3:]]
                     rec = Record(tuple(v[0:3]), tuple(v[3:6]), tuple(v[6:9]), v[9], v[10], int(parts[2]),
-                                 tuple(v[11:19]))
+                                 tuple(v[11:19]), v[19] if len(v) > 19 else math.inf)
                     entry[3] = rec
                     reaches.append(rec.reach)
         reaches.sort()
@@ -356,10 +371,10 @@ class Sim:
             return r.t_bcast <= now
         return r.t_master <= self.seen_sync[rank]
 
-    def covered(self, p, n, level, rank, now):
+    def covered(self, p, n, level, rank, now, headroom=math.inf):
         ma = self.t.max_angle
         for r in self.grid.near(p):
-            if self.visible(r, rank, now) and r.weight(p, n, level, ma) is not None:
+            if self.visible(r, rank, now) and r.weight(p, n, level, ma, headroom) is not None:
                 return True
         return False
 
@@ -437,7 +452,7 @@ class Sim:
             spent = 0.0 if overture else c.pixel
             for entry in entries[:1] if overture else entries:
                 res.lookups += 1
-                if self.covered(entry[0], entry[1], entry[2], w, clock[w]):
+                if self.covered(entry[0], entry[1], entry[2], w, clock[w], entry[3].headroom):
                     spent += c.hit
                 else:
                     spent += c.record
@@ -622,7 +637,7 @@ class Sim:
             outstanding -= 1
             res.requests += 1
             spent = c.request_pa
-            if self.covered(entry[0], entry[1], entry[2], w, clock[w]):
+            if self.covered(entry[0], entry[1], entry[2], w, clock[w], entry[3].headroom):
                 spent += c.hit
             else:
                 spent += c.record
@@ -681,7 +696,7 @@ class Sim:
                 spent = c.pixel
                 for entry in self.t.lookups.get(pixel, ()):
                     res.lookups += 1
-                    if self.covered(entry[0], entry[1], entry[2], w, clock[w]):
+                    if self.covered(entry[0], entry[1], entry[2], w, clock[w], entry[3].headroom):
                         spent += c.hit
                     else:
                         buffer[w].append((pixel, entry))

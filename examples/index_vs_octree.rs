@@ -32,6 +32,7 @@ fn record(position: Vec3, normal: Vec3, reach: f32) -> Record {
         translation_gradient: Vec3::ZERO,
         rotation_gradient: Vec3::ZERO,
         horizon: [f32::INFINITY; HORIZON_SECTORS],
+        headroom: reach / 0.2,
         curvature: 0.0,
     }
 }

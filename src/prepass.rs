@@ -253,7 +253,12 @@ fn pixels_needing_samples(pass: Pass<'_, '_>, snapshot: &FrozenIndex, stats: &mu
         let mut rng = Rng::new(0, ((y as u64) << 32) | x.to_bits() as u64);
         integrator.record_sites(origin, dir, &mut rng, &mut Work::new(counts))
     };
-    let covered = |hits: &[SurfaceHit]| hits.iter().all(|h| cache.covered_in(snapshot, h.position, h.normal, 0));
+    let covered = |hits: &[SurfaceHit], counts: &mut RayCounts| {
+        hits.iter().all(|h| {
+            let headroom = integrator.headroom(cache, h, &mut Work::new(counts));
+            cache.covered_in(snapshot, h.position, h.normal, headroom, 0)
+        })
+    };
     let rows = AtomicUsize::new(area.y0 as usize);
     let needs = Mutex::new(vec![false; window.pixels()]);
     on_threads(stats, |counts| {
@@ -267,7 +272,7 @@ fn pixels_needing_samples(pass: Pass<'_, '_>, snapshot: &FrozenIndex, stats: &mu
                 (area.x0..=area.x1)
                     .map(|x| {
                         let hits = sites_at(x as f32, y as f32, counts);
-                        let ok = covered(&hits);
+                        let ok = covered(&hits, counts);
                         (hits, ok)
                     })
                     .collect()
@@ -397,7 +402,8 @@ fn site_records(
     work.sample.pixel = pixel as u32;
     for hit in integrator.record_sites(origin, dir, &mut rng, &mut work) {
         work.lookups += 1;
-        if cache.covered_in(snapshot, hit.position, hit.normal, 0) {
+        let headroom = integrator.headroom(cache, &hit, &mut work);
+        if cache.covered_in(snapshot, hit.position, hit.normal, headroom, 0) {
             work.hits += 1;
             continue;
         }
@@ -471,7 +477,7 @@ fn run_watched<E>(
             };
             // A record another of this round's sites made first would have served this one:
             // the price of computing a round's records side by side.
-            if cache.covered_in(snapshot, record.position, record.normal, 0) {
+            if cache.covered_in(snapshot, record.position, record.normal, record.headroom, 0) {
                 outcome.threads[0].rays.duplicates += 1;
             }
             snapshot.push(record.clone());

@@ -57,7 +57,7 @@ fn trace_cache_lists_every_lookup_and_record() {
     assert_eq!(misses, s["records_computed"].as_u64().unwrap());
     let hits = lookups.iter().filter(|l| l[3] == "1").count() as u64;
     assert_eq!(hits, s["hits"].as_u64().unwrap());
-    assert!(!records.is_empty() && lookups.iter().all(|l| l.len() == 10) && records.iter().all(|r| r.len() == 22));
+    assert!(!records.is_empty() && lookups.iter().all(|l| l.len() == 10) && records.iter().all(|r| r.len() == 23));
     // Every pixel index is inside the image.
     assert!(lookups.iter().all(|l| l[1].parse::<u32>().unwrap() < 24 * 24));
     // The same render as without the trace.

@@ -1,12 +1,12 @@
 //! The compact, versioned binary form of a record, shared by the cache file and (later) the
-//! messages between ranks: 124 bytes of little-endian fields and a 4-byte checksum. A record
+//! messages between ranks: 128 bytes of little-endian fields and a 4-byte checksum. A record
 //! that fails its checksum or its validation is refused, never trusted.
 
 use super::record::{HORIZON_SECTORS, Record};
 use glam::Vec3;
 
-pub const CODEC_VERSION: u32 = 1;
-pub const RECORD_BYTES: usize = 128;
+pub const CODEC_VERSION: u32 = 2;
+pub const RECORD_BYTES: usize = 132;
 const PAYLOAD_BYTES: usize = RECORD_BYTES - 4;
 /// Levels beyond this cannot come from any sane -ab.
 const MAX_LEVEL: u32 = 1024;
@@ -31,6 +31,7 @@ pub fn encode(record: &Record, out: &mut Vec<u8>) {
         v.to_array().into_iter().for_each(&mut put);
     }
     record.horizon.into_iter().for_each(&mut put);
+    put(record.headroom);
     out.extend_from_slice(&record.level.to_le_bytes());
     let sum = checksum(&out[start..]);
     out.extend_from_slice(&sum.to_le_bytes());
@@ -79,6 +80,7 @@ pub fn decode(bytes: &[u8]) -> Result<Record, DecodeError> {
     for h in &mut horizon {
         *h = floats.next().unwrap_or(f32::NAN);
     }
+    let headroom = floats.next().unwrap_or(f32::NAN);
     let level = u32::from_le_bytes(payload[PAYLOAD_BYTES - 4..].try_into().expect("4 bytes"));
     let record = Record {
         position,
@@ -92,6 +94,7 @@ pub fn decode(bytes: &[u8]) -> Result<Record, DecodeError> {
         translation_gradient,
         rotation_gradient,
         horizon,
+        headroom,
         curvature: 0.0,
     };
     validate(&record)?;
@@ -128,6 +131,9 @@ pub fn validate(r: &Record) -> Result<(), DecodeError> {
     }
     if r.horizon.iter().any(|h| h.is_nan() || *h < 0.0) {
         return Err(DecodeError::Invalid("bad horizon"));
+    }
+    if !(r.headroom.is_finite() && r.headroom > 0.0) {
+        return Err(DecodeError::Invalid("headroom not positive"));
     }
     Ok(())
 }

@@ -53,6 +53,8 @@ pub struct CacheSettings {
     pub metric: Metric,
     pub min_radius: f32,
     pub max_radius: f32,
+    /// The scene's size: a headroom ray that meets nothing counts as this long.
+    pub headroom_cap: f32,
 }
 
 impl CacheSettings {
@@ -79,6 +81,7 @@ impl CacheSettings {
             metric,
             min_radius,
             max_radius: max_radius.max(min_radius),
+            headroom_cap: size,
         }
     }
 
@@ -201,9 +204,10 @@ impl IrradianceCache {
         self.index.all()
     }
 
-    /// The cached value (irradiance over pi) at a point, or None when no record may be used.
-    pub fn lookup(&self, point: Vec3, normal: Vec3, level: u32) -> Option<Vec3> {
-        self.interpolate(point, normal, level, None).map(|(v, _)| v)
+    /// The cached value (irradiance over pi) at a point with its headroom (see
+    /// `Record::headroom`), or None when no record may be used.
+    pub fn lookup(&self, point: Vec3, normal: Vec3, headroom: f32, level: u32) -> Option<Vec3> {
+        self.interpolate(point, normal, headroom, level, None).map(|(v, _)| v)
     }
 
     /// A lock-free copy of the records as they are now, for asking `covered_in` many times
@@ -214,8 +218,8 @@ impl IrradianceCache {
 
     /// Whether the records of `snapshot` cover the point firmly: their weights there add up to
     /// at least `FIRM_COVERAGE`.
-    pub fn covered_in(&self, snapshot: &FrozenIndex, point: Vec3, normal: Vec3, level: u32) -> bool {
-        self.interpolate(point, normal, level, Some(snapshot))
+    pub fn covered_in(&self, snapshot: &FrozenIndex, point: Vec3, normal: Vec3, headroom: f32, level: u32) -> bool {
+        self.interpolate(point, normal, headroom, level, Some(snapshot))
             .is_some_and(|(_, weight)| weight >= FIRM_COVERAGE)
     }
 
@@ -225,17 +229,20 @@ impl IrradianceCache {
         &self,
         point: Vec3,
         normal: Vec3,
+        headroom: f32,
         level: u32,
         snapshot: Option<&FrozenIndex>,
     ) -> Option<(Vec3, f32)> {
         let (mut sum, mut total) = (Vec3::ZERO, 0.0f32);
         let (metric, accuracy) = (self.settings.metric, self.settings.accuracy);
         let weigh = |r: &Record| {
-            let reach = r.reach();
-            if (r.position - point).length_squared() > reach * reach {
+            let (reach, distance_squared) = (r.reach(), (r.position - point).length_squared());
+            if distance_squared > reach * reach {
                 return None;
             }
             r.weight_at(point, normal, level, metric, accuracy)
+                .map(|w| w * record::under_one_roof(r.headroom, headroom, distance_squared.sqrt()))
+                .filter(|w| *w > 0.0)
                 .map(|w| (r.extrapolate(point, normal) * w, w))
         };
         let mut add = |r: &Record| {
@@ -353,7 +360,7 @@ impl IrradianceCache {
     }
 
     /// Turns a sampled hemisphere into a record: value, gradients, radii, leak horizon.
-    pub fn make_record(&self, hemisphere: &Hemisphere, position: Vec3, level: u32) -> Record {
+    pub fn make_record(&self, hemisphere: &Hemisphere, position: Vec3, headroom: f32, level: u32) -> Record {
         let s = &self.settings;
         let value = hemisphere.value();
         let brightness = crate::scene::light::luminance(value) * std::f32::consts::PI;
@@ -424,6 +431,7 @@ impl IrradianceCache {
             translation_gradient,
             rotation_gradient,
             horizon,
+            headroom,
             curvature: 0.0,
         }
     }

@@ -4,9 +4,10 @@
 //!
 //! Lines, in the order the cache saw them (one thread gives a deterministic order):
 //! `L pixel level hit x y z nx ny nz`, each followed by
-//! `R pixel level x y z nx ny nz ux uy uz r0 r1 h0 .. h7`: the record the lookup made (miss) or
-//! would have made (hit; sampled for the trace only, so a traced run is much slower): position,
-//! normal, first principal axis, radii and leak-test horizon per sector (infinite as `inf`).
+//! `R pixel level x y z nx ny nz ux uy uz r0 r1 h0 .. h7 headroom`: the record the lookup made
+//! (miss) or would have made (hit; sampled for the trace only, so a traced run is much slower):
+//! position, normal, first principal axis, radii, leak-test horizon per sector (infinite as
+//! `inf`) and headroom (the lookup point's too: the record is made there).
 //! With -ab 1 the traced render is the same as without the trace; with more bounces the sampled
 //! records' own bounces go through the cache and add to it.
 
@@ -34,14 +35,15 @@ pub fn lookup_line(pixel: u32, level: u32, hit: bool, point: Vec3, normal: Vec3)
 pub fn record_line(pixel: u32, r: &Record) -> String {
     let horizon: Vec<String> = r.horizon.iter().map(|h| h.to_string()).collect();
     format!(
-        "R {pixel} {} {} {} {} {} {} {}",
+        "R {pixel} {} {} {} {} {} {} {} {}",
         r.level,
         vec(r.position),
         vec(r.normal),
         vec(r.u_axis),
         r.radii[0],
         r.radii[1],
-        horizon.join(" ")
+        horizon.join(" "),
+        r.headroom
     )
 }
 
@@ -76,10 +78,11 @@ mod tests {
         assert_eq!(l, "L 7 0 1 1 2 3 0 0 1");
         let r = record_line(7, &flat_record(1.0, 0.5));
         let fields: Vec<&str> = r.split_whitespace().collect();
-        assert_eq!(fields.len(), 1 + 2 + 9 + 2 + 8);
+        assert_eq!(fields.len(), 1 + 2 + 9 + 2 + 8 + 1);
         assert_eq!(fields[0], "R");
         assert_eq!(fields[12], "0.5");
         assert_eq!(fields[14], "inf");
+        assert_eq!(fields[22], "100");
     }
 
     #[test]

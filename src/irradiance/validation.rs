@@ -23,7 +23,7 @@
 //! holds the same records makes the same changes.
 
 use super::index::FrozenIndex;
-use super::record::Metric;
+use super::record::{Metric, under_one_roof};
 use crate::scene::light::luminance;
 
 /// The largest miss of a record's extrapolation at its edge, relative to the larger of the
@@ -64,11 +64,13 @@ fn for_each_pair(
             if i == j || a.level != b.level || !wanted(i, j) {
                 return;
             }
-            let reach = a.reach();
-            if (b.position - a.position).length_squared() > reach * reach {
+            let (reach, distance_squared) = (a.reach(), (b.position - a.position).length_squared());
+            if distance_squared > reach * reach {
                 return;
             }
-            if a.weight_at(b.position, b.normal, a.level, metric, accuracy).is_none() {
+            if a.weight_at(b.position, b.normal, a.level, metric, accuracy).is_none()
+                || under_one_roof(a.headroom, b.headroom, distance_squared.sqrt()) <= 0.0
+            {
                 return;
             }
             let neighbour = Neighbour {

@@ -614,7 +614,11 @@ impl<'a> Integrator<'a> {
         counts: &mut Work<'_>,
     ) -> Vec3 {
         counts.lookups += 1;
-        if let Some(value) = self.cache.and_then(|c| c.lookup(hit.position, hit.normal, state.level)) {
+        let cached = self.cache.and_then(|c| {
+            let headroom = self.headroom(c, hit, counts);
+            c.lookup(hit.position, hit.normal, headroom, state.level)
+        });
+        if let Some(value) = cached {
             counts.hits += 1;
             return surface.diffuse * value;
         }
@@ -727,7 +731,8 @@ impl<'a> Integrator<'a> {
         counts: &mut Work<'_>,
     ) -> Vec3 {
         counts.lookups += 1;
-        if let Some(value) = cache.lookup(hit.position, hit.normal, state.level) {
+        let headroom = self.headroom(cache, hit, counts);
+        if let Some(value) = cache.lookup(hit.position, hit.normal, headroom, state.level) {
             counts.hits += 1;
             if cache.tracing() {
                 // The record a miss here would make (for the trace only: its own random stream
@@ -750,7 +755,7 @@ impl<'a> Integrator<'a> {
             return record.value;
         }
         // Another thread may have covered this point while we sampled: the work was done twice.
-        if cache.lookup(hit.position, hit.normal, state.level).is_some() {
+        if cache.lookup(hit.position, hit.normal, headroom, state.level).is_some() {
             counts.duplicates += 1;
         }
         let value = record.value;
@@ -821,7 +826,26 @@ impl<'a> Integrator<'a> {
             c.radiance = (c.radiance + s.radiance) * 0.5;
             c.distance = c.distance.min(s.distance);
         }
-        cache.make_record(&hemisphere, hit.position, state.level)
+        let headroom = self.headroom(cache, hit, counts);
+        cache.make_record(&hemisphere, hit.position, headroom, state.level)
+    }
+
+    /// How far the surface at `hit` is free along its normal (`Record::headroom`): one ray,
+    /// traced for every lookup and record, as the cache compares the two.
+    pub fn headroom(&self, cache: &IrradianceCache, hit: &SurfaceHit, counts: &mut Work<'_>) -> f32 {
+        let up = if hit.normal.dot(hit.facing_normal) > 0.0 {
+            hit.normal
+        } else {
+            hit.facing_normal
+        };
+        counts.ambient += 1;
+        let cap = cache.settings.headroom_cap;
+        let origin = self.tracer.spawn_point(hit, up);
+        let floor = self.tracer.epsilon_at(hit.position);
+        self.tracer
+            .hit_distance(origin, up)
+            .map_or(cap, |t| t.min(cap))
+            .max(floor)
     }
 }
 
