@@ -163,10 +163,12 @@ pub struct RenderArgs {
     /// setting, and what the MPI modes do).
     #[arg(long = "ic-build", value_enum)]
     pub ic_build: Option<CacheBuildArg>,
-    /// Indirect light beyond a record's own bounce (-ab 2 and more). paths: each of a record's
-    /// hemisphere rays continues as one path (unbiased, no deeper records); records: deeper
-    /// bounces are cached records too, as in Radiance.
-    #[arg(long = "ic-deep", value_enum, default_value_t = DeepArg::Paths)]
+    /// Indirect light beyond a record's own bounce (-ab 2 and more). grid (the default): each of
+    /// a record's hemisphere rays continues as a path whose last bounce reads a world-space grid
+    /// of that bounce's light, sampled before the prepass (without a prepass, as paths); paths:
+    /// the last bounce traced too (unbiased, no deeper records); records: deeper bounces are
+    /// cached records too, as in Radiance.
+    #[arg(long = "ic-deep", value_enum, default_value_t = DeepArg::Grid)]
     pub ic_deep: DeepArg,
     /// How ranks share the work under mpirun (serial without mpirun).
     #[arg(long = "mode", value_enum)]
@@ -387,6 +389,7 @@ pub enum CacheBuildArg {
 pub enum DeepArg {
     Paths,
     Records,
+    Grid,
 }
 
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]

@@ -114,7 +114,8 @@ fn shading_options(args: &RenderArgs) -> ShadingOptions {
         min_weight: args.min_weight,
         light_samples: args.light_samples.max(1),
         analytic_direct: args.direct == crate::cli::DirectArg::Analytic,
-        deep_paths: args.ic_deep == crate::cli::DeepArg::Paths,
+        deep_paths: args.ic_deep != crate::cli::DeepArg::Records,
+        last_bounce_grid: args.ic_deep == crate::cli::DeepArg::Grid,
     }
 }
 
@@ -143,10 +144,10 @@ pub fn cache_settings_line(args: &RenderArgs, scene: &Scene) -> String {
         args.lambertian,
         // Deeper bounces by paths change what a record holds; the default keeps the line that
         // files made before the option had.
-        if args.ic_deep == crate::cli::DeepArg::Paths && args.ambient_bounces > 1 {
-            "; deep paths"
-        } else {
-            ""
+        match args.ic_deep {
+            crate::cli::DeepArg::Paths if args.ambient_bounces > 1 => "; deep paths",
+            crate::cli::DeepArg::Grid if args.ambient_bounces > 1 => "; deep paths, last bounce grid",
+            _ => "",
         }
     )
 }

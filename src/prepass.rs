@@ -24,6 +24,7 @@ use crate::image::region::Region;
 use crate::image::window::PixelWindow;
 use crate::irradiance::IrradianceCache;
 use crate::irradiance::index::FrozenIndex;
+use crate::irradiance::last_bounce::{self, LastBounceGrid};
 use crate::irradiance::record::{Record, RecordIdentity};
 use crate::render::pixel::{RenderSettings, ThreadClock, ThreadStats, pixel_offset};
 use crate::sampling::Rng;
@@ -67,6 +68,9 @@ pub struct PrepassOutcome {
     pub pixels_sampled: u64,
     pub records: u64,
     pub seconds: f64,
+    /// The last bounce's grid (`--ic-deep grid`): cells with a mean, and samples taken.
+    pub last_bounce_cells: u64,
+    pub last_bounce_samples: u64,
 }
 
 impl PrepassOutcome {
@@ -221,6 +225,32 @@ fn on_threads(stats: &mut [ThreadStats], work: impl Fn(&mut RayCounts) + Sync) {
             });
         }
     });
+}
+
+/// The last bounce's grid from the sites of every pixel of the whole image (the same grid for
+/// every region, rank and thread count: rows are gathered in order).
+fn last_bounce_grid(pass: Pass<'_, '_>, stats: &mut [ThreadStats]) -> LastBounceGrid {
+    let Pass { integrator, camera, .. } = pass;
+    let cell = integrator.scene.size() / last_bounce::CELLS_PER_SIZE;
+    let next = AtomicUsize::new(0);
+    let rows = Mutex::new(Vec::new());
+    on_threads(stats, |counts| {
+        let mut work = Work::new(counts);
+        loop {
+            let y = next.fetch_add(1, Ordering::Relaxed) as u32;
+            if y >= camera.height {
+                break;
+            }
+            let mut row = Vec::new();
+            for x in 0..camera.width {
+                integrator.last_bounce_samples(camera, (x, y), &mut row, &mut work);
+            }
+            rows.lock().unwrap_or_else(|e| e.into_inner()).push((y, row));
+        }
+    });
+    let mut rows = rows.into_inner().unwrap_or_else(|e| e.into_inner());
+    rows.sort_unstable_by_key(|(y, _)| *y);
+    LastBounceGrid::from_samples(cell, rows.into_iter().flat_map(|(_, row)| row))
 }
 
 /// Whether two hits lie on one plane (as far as a record is concerned): normals within about
@@ -464,6 +494,12 @@ fn run_watched<E>(
         camera,
         settings,
     };
+    if integrator.options.last_bounce_grid && cache.last_bounce().is_none() {
+        let grid = last_bounce_grid(pass, &mut outcome.threads);
+        outcome.last_bounce_cells = grid.cells() as u64;
+        outcome.last_bounce_samples = grid.samples();
+        cache.set_last_bounce(grid);
+    }
     // The rounds look records up in a lock-free copy of the cache, which grows with it.
     let mut snapshot = cache.snapshot();
     let mut run = |sites: Vec<Site>, snapshot: &mut FrozenIndex, outcome: &mut PrepassOutcome| -> Result<(), E> {

@@ -166,6 +166,9 @@ pub struct RenderStats {
     /// Pixels whose every sample the prepass visited (edges; the others' samples share their
     /// centre's records).
     pub prepass_pixels_sampled: u64,
+    /// The last bounce's grid (`--ic-deep grid`): cells with a mean, and the samples taken.
+    pub last_bounce_cells: u64,
+    pub last_bounce_samples: u64,
     /// Records pixels had to make after the prepass, each for its own use (a gap it left).
     pub gap_records: u64,
     pub triangles: usize,
@@ -242,6 +245,8 @@ impl RenderStats {
         self.prepass_sites = prepass.sites;
         self.prepass_records = prepass.records;
         self.prepass_pixels_sampled = prepass.pixels_sampled;
+        self.last_bounce_cells = prepass.last_bounce_cells;
+        self.last_bounce_samples = prepass.last_bounce_samples;
     }
 
     pub fn add_threads(&mut self, threads: &[ThreadStats]) {

@@ -51,12 +51,13 @@ fn white_furnace_converges_to_e_over_one_minus_rho() {
     );
 }
 
-/// A grey box under -av A at -ab 2, with both ways of reaching the second bounce: every record
+/// A grey box under -av A at -ab 2, with every way of reaching the second bounce: every record
 /// of the first level holds rho^2 A, of the second rho A, and the eye sees rho^3 A at every
 /// pixel, to float precision. With `--ic-deep records` a lookup at the second level once also
-/// took first-level records (rho^2 A, a bounce too many) and pixels read up to 22 % low.
+/// took first-level records (rho^2 A, a bounce too many) and pixels read up to 22 % low. The
+/// last bounce's grid holds rho A in every cell.
 #[test]
-fn both_deep_bounce_methods_give_the_grey_furnace_exactly() {
+fn every_deep_bounce_method_gives_the_grey_furnace_exactly() {
     let dir = tempfile::tempdir().unwrap();
     let (rho, a) = (0.5f64, 0.8f64);
     let mut b = GltfBuilder::new();
@@ -64,7 +65,7 @@ fn both_deep_bounce_methods_give_the_grey_furnace_exactly() {
     inward_box(&mut b, [0.0; 3], [1.0; 3], m);
     let scene = b.write(dir.path(), "grey");
     let expected = rho.powi(3) * a;
-    for deep in ["paths", "records"] {
+    for deep in ["paths", "records", "grid"] {
         let options = [
             "-x",
             "32",

@@ -207,3 +207,55 @@ fn the_ceiling_above_a_hanging_plate_is_not_lit_by_the_open_ceilings_records() {
         100.0 * wrong / open_ceiling
     );
 }
+
+/// At -ab 2 a record's hemisphere rays end on surfaces whose own indirect light is the last
+/// bounce: by default read from the last bounce's grid (`irradiance::last_bounce`) instead of
+/// one more traced ray and shadow ray each. On the ceiling room, looking up at the ceiling
+/// (lit by the floor and walls, which the lamp lights): the grid's image keeps brute force's
+/// indirect light within 2 % over three seeds, closer than tracing the last bounce does, for
+/// half the hemisphere and shadow rays (measured 0.51x).
+#[test]
+fn the_last_bounce_grid_keeps_the_indirect_light_for_fewer_rays() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = ceiling_room(dir.path());
+    let common = [
+        &["-x", "48", "-y", "48", "-ab", "2", "-ad", "256", "--threads", "2"][..],
+        &LOOK_UP[..],
+    ]
+    .concat();
+    let (brute, _) = render_to(dir.path(), &scene, "brute", &[&common[..], &["-aa", "0"]].concat());
+    let indirect = |image: &ImageData| mean(&rgb(image, "indirect").concat());
+    let truth = indirect(&brute);
+    let mut rays_by_method = Vec::new();
+    for deep in ["paths", "grid"] {
+        let mut biases = Vec::new();
+        let mut rays = 0;
+        for seed in ["1", "2", "3"] {
+            let name = format!("{deep}-{seed}");
+            let args = [&common[..], &["--ic-deep", deep, "--seed", seed]].concat();
+            let (image, stats) = render_to(dir.path(), &scene, &name, &args);
+            let cells = stats["last_bounce_cells"].as_u64().unwrap();
+            assert_eq!(cells > 0, deep == "grid", "{deep}: {cells} cells");
+            rays += stats["rays"]["ambient"].as_u64().unwrap() + stats["rays"]["shadow"].as_u64().unwrap();
+            biases.push(indirect(&image) / truth - 1.0);
+        }
+        let bias = biases.iter().sum::<f64>() / 3.0;
+        println!("--ic-deep {deep}: bias by seed {biases:?}, {rays} ambient and shadow rays");
+        // Measured: the grid -0.8, +3.0, -1.7 % (mean +0.2 %); paths +2.2, +5.6, +1.8 % (+3.2 %),
+        // the one-path samples' heavy tail making some records bright.
+        let bound = if deep == "grid" { 0.02 } else { 0.05 };
+        assert!(
+            bias.abs() < bound,
+            "--ic-deep {deep}: indirect bias {:.2} %",
+            bias * 100.0
+        );
+        rays_by_method.push(rays);
+    }
+    let [traced, grid] = rays_by_method[..] else {
+        unreachable!()
+    };
+    assert!(
+        grid * 4 < traced * 3,
+        "the grid's {grid} rays against the traced last bounce's {traced}"
+    );
+}

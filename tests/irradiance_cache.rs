@@ -37,8 +37,9 @@ fn furnace_through_the_cache_at_every_level() {
     // 2 % around the truth (the samples of deep records are heavy-tailed); the mean of
     // several independent renders must still find E / (1 - rho) within 1 %.
     let options = "-x 32 -y 32 -ab 8 -aa 0.2 -ad 256 --light-samples 64 -vp 0.5 0.5 0.5 -vd 0 0 -1 -vh 60 -vv 60";
-    // Deeper bounces by records at every level (Radiance's way) and by paths (the default).
-    for deep in ["records", "paths"] {
+    // Deeper bounces by records at every level (Radiance's way), by paths, and by paths whose
+    // last bounce reads the grid (the default).
+    for deep in ["records", "paths", "grid"] {
         let mut totals = Vec::new();
         for seed in ["1", "2", "3", "4", "5", "6"] {
             let mut args: Vec<&str> = options.split_whitespace().collect();

@@ -144,6 +144,7 @@ pub fn options_line(args: &RenderArgs) -> String {
         match args.ic_deep {
             crate::cli::DeepArg::Paths => "paths",
             crate::cli::DeepArg::Records => "records",
+            crate::cli::DeepArg::Grid => "grid",
         },
         args.overture.map(|n| format!(" --overture {n}")).unwrap_or_default(),
         if args.lambertian { " --lambertian" } else { "" },

@@ -6,6 +6,7 @@
 pub mod codec;
 pub mod hemisphere;
 pub mod index;
+pub mod last_bounce;
 pub mod persist;
 pub mod record;
 pub mod trace;
@@ -113,6 +114,8 @@ pub struct IrradianceCache {
     trace: Option<trace::CacheTrace>,
     /// The complete cache's read-only index, once a prepass has made every record (`freeze`).
     frozen: OnceLock<FrozenIndex>,
+    /// The last bounce's grid (`--ic-deep grid`), built before the prepass's first round.
+    last_bounce: OnceLock<last_bounce::LastBounceGrid>,
 }
 
 impl IrradianceCache {
@@ -130,6 +133,7 @@ impl IrradianceCache {
             outbox: None,
             trace: None,
             frozen: OnceLock::new(),
+            last_bounce: OnceLock::new(),
         }
     }
 
@@ -145,6 +149,8 @@ impl IrradianceCache {
     /// its view needs to those the frames before made (its own prepass freezes it again).
     pub fn thaw(&mut self) {
         self.frozen = OnceLock::new();
+        // The next frame's scene may have moved: its prepass builds its own grid.
+        self.last_bounce = OnceLock::new();
     }
 
     /// Attaches a persistent file: its records join the cache, new ones are appended to it.
@@ -312,6 +318,16 @@ impl IrradianceCache {
                 self.index.replace(old, new);
             }
         }
+    }
+
+    /// From now on the last diffuse bounce of a path reads `grid` where it has a mean (set
+    /// once, before the prepass; a second grid is ignored).
+    pub fn set_last_bounce(&self, grid: last_bounce::LastBounceGrid) {
+        let _ = self.last_bounce.set(grid);
+    }
+
+    pub fn last_bounce(&self) -> Option<&last_bounce::LastBounceGrid> {
+        self.last_bounce.get()
     }
 
     /// Adds a record (and appends it to the file, if any).

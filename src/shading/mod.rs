@@ -8,6 +8,7 @@
 
 pub mod direct;
 pub mod glossy;
+pub mod last_bounce;
 pub mod request;
 
 use crate::image::components::Components;
@@ -46,6 +47,9 @@ pub struct ShadingOptions {
     /// Past a record's bounce (-ab 2 and more), each hemisphere ray continues as one path
     /// instead of looking up records of deeper levels (`--ic-deep paths`).
     pub deep_paths: bool,
+    /// Those paths' last bounce reads the last bounce's grid where it has a mean
+    /// (`--ic-deep grid`; `irradiance::last_bounce`).
+    pub last_bounce_grid: bool,
 }
 
 impl Default for ShadingOptions {
@@ -59,6 +63,7 @@ impl Default for ShadingOptions {
             light_samples: 1,
             analytic_direct: true,
             deep_paths: true,
+            last_bounce_grid: false,
         }
     }
 }
@@ -679,6 +684,12 @@ impl<'a> Integrator<'a> {
     fn ambient_radiance(&self, hit: &SurfaceHit, state: PathState, rng: &mut Rng, counts: &mut Work<'_>) -> Vec3 {
         if state.level >= self.options.ambient_bounces {
             return self.options.ambient_value;
+        }
+        if state.level > 0 && Some(state.level) == self.last_bounce_level() {
+            let grid = self.cache.and_then(|c| c.last_bounce());
+            if let Some(mean) = grid.and_then(|g| g.lookup(hit.position, hit.normal)) {
+                return mean;
+            }
         }
         timed_ambient(counts, |counts| match self.cache {
             Some(cache) if state.level == 0 || !self.options.deep_paths => {

@@ -1,0 +1,213 @@
+//! The last bounce's grid: a world-space average of the light a path's last diffuse bounce
+//! brings, so that the rays leaving a record at -ab 2 and beyond need not each trace one more
+//! path segment and shadow ray (the idea of V-Ray's light cache, in its simplest form).
+//!
+//! A record's hemisphere rays at -ab 2 end on surfaces whose own indirect light is one more
+//! bounce: traced as a path, each hemisphere ray pays a second ray, a light pick and a shadow
+//! ray, and brings one sample of that light, the noise that sets the records' error there.
+//! The grid holds, per cell of space and side a surface faces, the mean of many such samples
+//! taken before the prepass (`shading::last_bounce` places them); a hemisphere ray's hit
+//! reads its cell's mean instead. What it gives up is detail finer than a cell in light that
+//! has already been reflected twice, seen through a record's whole hemisphere.
+//!
+//! The mean is made in the order the samples are given (the builder gives them in site order),
+//! so every process and thread count builds the same grid.
+
+use glam::{DVec3, Vec3};
+use std::collections::HashMap;
+use std::hash::{BuildHasherDefault, Hasher};
+
+/// A cell's mean is used only once this many samples made it: below that a hit traces its
+/// path as without the grid (at the image's edge, on surfaces seldom seen).
+pub const MIN_SAMPLES: u32 = 8;
+
+/// Cells per scene size along each axis.
+pub const CELLS_PER_SIZE: f32 = 128.0;
+
+/// Which cell a point and the side it faces fall in: the cell's integer coordinates (20 bits
+/// each, wrapping far out, where cells a million apart share a key) and the normal's dominant
+/// axis and sign (6 sides: the floor and the ceiling above it never share a mean).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct CellKey(u64);
+
+/// The grid: for each of `LEVELS` cell sizes (the finest `cell`, each next one twice as
+/// large), each well-sampled cell's mean. A lookup reads the finest cell that has one: where
+/// the sites are dense (the surfaces near the camera) the cells are small, where they are
+/// sparse the light is averaged over more space rather than traced again.
+#[derive(Clone, Debug, Default)]
+pub struct LastBounceGrid {
+    cell: f32,
+    levels: Vec<HashMap<CellKey, Vec3, BuildHasherDefault<KeyHasher>>>,
+    samples: u64,
+}
+
+/// Cell sizes, each twice the one before.
+pub const LEVELS: usize = 4;
+
+/// One sample of the last bounce's light: where it was taken, the side the surface faces
+/// there, and the value (irradiance over pi).
+#[derive(Clone, Copy, Debug)]
+pub struct GridSample {
+    pub position: Vec3,
+    pub normal: Vec3,
+    pub value: Vec3,
+}
+
+impl LastBounceGrid {
+    /// The key of point `p` facing along `normal` with cells of side `cell`.
+    pub fn key(cell: f32, p: Vec3, normal: Vec3) -> CellKey {
+        let q = |v: f32| ((v / cell).floor() as i64 as u64) & 0xF_FFFF;
+        let a = normal.abs();
+        let axis = if a.x >= a.y && a.x >= a.z {
+            0
+        } else if a.y >= a.z {
+            1
+        } else {
+            2
+        };
+        let side = (axis * 2) as u64 + (normal[axis] < 0.0) as u64;
+        CellKey(q(p.x) | q(p.y) << 20 | q(p.z) << 40 | side << 60)
+    }
+
+    /// The grid with finest cells of side `cell` from `samples`, summed in the order given;
+    /// cells with fewer than `MIN_SAMPLES` are left out. Non-finite samples are dropped.
+    pub fn from_samples(cell: f32, samples: impl IntoIterator<Item = GridSample>) -> LastBounceGrid {
+        type Sums = HashMap<CellKey, (DVec3, u32), BuildHasherDefault<KeyHasher>>;
+        let mut sums: Vec<Sums> = (0..LEVELS).map(|_| Sums::default()).collect();
+        let mut count = 0;
+        for sample in samples {
+            if !sample.value.is_finite() {
+                continue;
+            }
+            for (level, sums) in sums.iter_mut().enumerate() {
+                let key = Self::key(cell * (1 << level) as f32, sample.position, sample.normal);
+                let entry = sums.entry(key).or_insert((DVec3::ZERO, 0));
+                entry.0 += sample.value.as_dvec3();
+                entry.1 += 1;
+            }
+            count += 1;
+        }
+        let levels = sums
+            .into_iter()
+            .map(|sums| {
+                sums.into_iter()
+                    .filter(|(_, (_, n))| *n >= MIN_SAMPLES)
+                    .map(|(key, (sum, n))| (key, (sum / n as f64).as_vec3()))
+                    .collect()
+            })
+            .collect();
+        LastBounceGrid {
+            cell,
+            levels,
+            samples: count,
+        }
+    }
+
+    /// The finest cells' side.
+    pub fn cell(&self) -> f32 {
+        self.cell
+    }
+
+    /// The mean of the finest cell `p` falls in on the side `normal` faces that was sampled
+    /// enough, if any.
+    pub fn lookup(&self, p: Vec3, normal: Vec3) -> Option<Vec3> {
+        self.levels
+            .iter()
+            .enumerate()
+            .find_map(|(level, means)| means.get(&Self::key(self.cell * (1 << level) as f32, p, normal)))
+            .copied()
+    }
+
+    /// Cells with a mean, at every level.
+    pub fn cells(&self) -> usize {
+        self.levels.iter().map(|l| l.len()).sum()
+    }
+
+    /// Samples the grid was built from.
+    pub fn samples(&self) -> u64 {
+        self.samples
+    }
+}
+
+/// The keys are already spread over 64 bits; one multiply mixes them enough for the table.
+#[derive(Default)]
+pub struct KeyHasher(u64);
+
+impl Hasher for KeyHasher {
+    fn finish(&self) -> u64 {
+        self.0
+    }
+
+    fn write(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.0 = (self.0 ^ b as u64).wrapping_mul(0x100_0000_01b3);
+        }
+    }
+
+    fn write_u64(&mut self, v: u64) {
+        self.0 = (v ^ (v >> 29)).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn at(p: Vec3, n: Vec3, v: f32) -> GridSample {
+        GridSample {
+            position: p,
+            normal: n,
+            value: Vec3::splat(v),
+        }
+    }
+
+    #[test]
+    fn a_cell_reads_the_mean_of_its_samples_once_it_has_enough() {
+        let p = Vec3::new(0.5, 0.5, 0.5);
+        let few: Vec<_> = (0..MIN_SAMPLES - 1).map(|_| at(p, Vec3::Y, 1.0)).collect();
+        assert_eq!(
+            LastBounceGrid::from_samples(1.0, few).lookup(Vec3::splat(0.2), Vec3::Y),
+            None
+        );
+        let many: Vec<_> = (0..2 * MIN_SAMPLES).map(|i| at(p, Vec3::Y, (i % 2) as f32)).collect();
+        let grid = LastBounceGrid::from_samples(1.0, many);
+        assert_eq!(grid.lookup(Vec3::splat(0.9), Vec3::Y), Some(Vec3::splat(0.5)));
+        assert_eq!(grid.cells(), LEVELS);
+    }
+
+    #[test]
+    fn a_sparse_cell_reads_the_coarser_cell_around_it() {
+        // Enough samples in the 2x2x2 block [0, 2)^3, each unit cell too few alone but one.
+        let mut samples: Vec<_> = (0..MIN_SAMPLES).map(|_| at(Vec3::splat(0.5), Vec3::Y, 4.0)).collect();
+        samples.extend((0..MIN_SAMPLES).map(|_| at(Vec3::splat(1.5), Vec3::Y, 0.0)));
+        samples.push(at(Vec3::new(1.5, 0.5, 0.5), Vec3::Y, 2.0));
+        let grid = LastBounceGrid::from_samples(1.0, samples);
+        assert_eq!(grid.lookup(Vec3::splat(0.4), Vec3::Y), Some(Vec3::splat(4.0)));
+        assert_eq!(grid.lookup(Vec3::splat(1.4), Vec3::Y), Some(Vec3::splat(0.0)));
+        let block = (8.0 * 4.0 + 2.0) / (2 * MIN_SAMPLES + 1) as f32;
+        assert_eq!(grid.lookup(Vec3::new(1.5, 0.5, 0.5), Vec3::Y), Some(Vec3::splat(block)));
+        assert_eq!(grid.lookup(Vec3::new(1.5, 0.5, 0.5), -Vec3::Y), None);
+    }
+
+    #[test]
+    fn neighbouring_cells_and_opposite_sides_have_their_own_keys() {
+        let key = |p: Vec3, n: Vec3| LastBounceGrid::key(2.0, p, n);
+        let p = Vec3::new(1.0, 1.0, 1.0);
+        assert_eq!(key(p, Vec3::Y), key(Vec3::new(1.9, 0.1, 1.5), Vec3::new(0.3, 0.9, 0.1)));
+        assert_ne!(key(p, Vec3::Y), key(p, -Vec3::Y));
+        assert_ne!(key(p, Vec3::Y), key(p, Vec3::X));
+        assert_ne!(key(p, Vec3::Y), key(Vec3::new(2.1, 1.0, 1.0), Vec3::Y));
+        assert_ne!(key(p, Vec3::Y), key(Vec3::new(-1.0, 1.0, 1.0), Vec3::Y));
+        assert_ne!(key(p, Vec3::Y), key(Vec3::new(1.0, 1.0, -1.0), Vec3::Y));
+    }
+
+    #[test]
+    fn non_finite_samples_are_dropped() {
+        let mut samples: Vec<_> = (0..MIN_SAMPLES).map(|_| at(Vec3::splat(0.5), Vec3::Z, 2.0)).collect();
+        samples.push(at(Vec3::splat(0.5), Vec3::Z, f32::NAN));
+        samples.push(at(Vec3::splat(0.5), Vec3::Z, f32::INFINITY));
+        let grid = LastBounceGrid::from_samples(1.0, samples);
+        assert_eq!(grid.lookup(Vec3::splat(0.5), Vec3::Z), Some(Vec3::splat(2.0)));
+        assert_eq!(grid.samples(), MIN_SAMPLES as u64);
+    }
+}

@@ -1,0 +1,85 @@
+//! The samples of the last bounce's grid (`irradiance::last_bounce`): from the first diffuse
+//! surface seen through a pixel, cosine-weighted bounces down to the level whose indirect
+//! light is the last bounce (-ab minus one), and there that light sampled as a path would
+//! sample it. These are the surfaces a record's hemisphere rays meet, in proportion to how
+//! often they meet them (seen from the surfaces the image shows).
+
+use super::{Integrator, PathState, Work};
+use crate::irradiance::last_bounce::GridSample;
+use crate::sampling::{Rng, cosine_hemisphere};
+use crate::scene::view::Camera;
+use crate::sys::embree::Coherence;
+use glam::Vec3;
+
+/// Sites started per pixel, and samples of the last bounce's light taken at each. Measured
+/// on the conference room (-ab 2, 320x240): see `irradiance::last_bounce`.
+pub const SITES_PER_PIXEL: u32 = 1;
+pub const SAMPLES_PER_SITE: u32 = 2;
+
+/// The random streams of the sites: apart from every stream a pixel's samples and the
+/// prepass's records use (those are below 2^33).
+const SITE_STREAM: u64 = 1 << 40;
+
+impl Integrator<'_> {
+    /// The level whose indirect light the grid holds: the last diffuse bounce but one (-ab 2:
+    /// the hits of a record's hemisphere rays). None below -ab 2, where records hold it all.
+    pub fn last_bounce_level(&self) -> Option<u32> {
+        (self.options.ambient_bounces >= 2).then(|| self.options.ambient_bounces - 1)
+    }
+
+    /// The grid's samples from the sites of pixel (x, y), appended to `out`.
+    pub fn last_bounce_samples(
+        &self,
+        camera: &Camera,
+        (x, y): (u32, u32),
+        out: &mut Vec<GridSample>,
+        counts: &mut Work<'_>,
+    ) {
+        let Some(level) = self.last_bounce_level() else {
+            return;
+        };
+        let pixel = y as u64 * camera.width as u64 + x as u64;
+        let mut rng = Rng::new(0, SITE_STREAM + pixel);
+        for _ in 0..SITES_PER_PIXEL {
+            let (origin, dir) = camera.ray(x as f32 + rng.next_f32(), y as f32 + rng.next_f32());
+            let Some((mut hit, mut surface)) = self.first_surface(origin, dir, Coherence::Incoherent) else {
+                continue;
+            };
+            let mut reached = true;
+            for _ in 0..level {
+                let wi = cosine_hemisphere(hit.normal, rng.next_f32(), rng.next_f32());
+                if surface.diffuse.max_element() <= 0.0 || wi.dot(hit.facing_normal) <= 0.0 {
+                    reached = false;
+                    break;
+                }
+                let from = self.tracer.spawn_point(&hit, wi);
+                match self.first_surface(from, wi, Coherence::Incoherent) {
+                    Some(next) => (hit, surface) = next,
+                    None => {
+                        reached = false;
+                        break;
+                    }
+                }
+            }
+            if !reached || surface.diffuse.max_element() <= 0.0 {
+                continue;
+            }
+            let state = PathState {
+                level,
+                specular_depth: 0,
+                weight: 1.0,
+                count_emission: false,
+                first_emission_elsewhere: false,
+                throughput: Vec3::ONE,
+                albedo_chain: false,
+            };
+            for _ in 0..SAMPLES_PER_SITE {
+                out.push(GridSample {
+                    position: hit.position,
+                    normal: hit.normal,
+                    value: self.brute_force_ambient(&hit, state, &mut rng, counts),
+                });
+            }
+        }
+    }
+}
