@@ -494,7 +494,8 @@ fn run_watched<E>(
         camera,
         settings,
     };
-    if integrator.options.last_bounce_grid && cache.last_bounce().is_none() {
+    let grid_level = integrator.last_bounce_level().filter(|_| integrator.options.last_bounce_grid);
+    if grid_level.is_some() && cache.last_bounce().is_none() {
         let grid = last_bounce_grid(pass, &mut outcome.threads);
         outcome.last_bounce_cells = grid.cells() as u64;
         outcome.last_bounce_samples = grid.samples();
