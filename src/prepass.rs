@@ -227,22 +227,26 @@ fn on_threads(stats: &mut [ThreadStats], work: impl Fn(&mut RayCounts) + Sync) {
     });
 }
 
-/// The last bounce's grid from the sites of every pixel of the whole image (the same grid for
-/// every region, rank and thread count: rows are gathered in order).
+/// The last bounce's grid from sites over the whole image (the same grid for every region,
+/// rank and thread count: rows are gathered in order; under mpirun every rank builds it
+/// alike). Every pixel starts sites up to `last_bounce::MAX_SITE_PIXELS` pixels; a larger
+/// image takes every s-th pixel of every s-th row, so that a region task of a large frame does
+/// not trace the whole frame's sites again.
 fn last_bounce_grid(pass: Pass<'_, '_>, stats: &mut [ThreadStats]) -> LastBounceGrid {
     let Pass { integrator, camera, .. } = pass;
     let cell = integrator.scene.size() / last_bounce::CELLS_PER_SIZE;
+    let stride = last_bounce::site_stride(camera.width, camera.height);
     let next = AtomicUsize::new(0);
     let rows = Mutex::new(Vec::new());
     on_threads(stats, |counts| {
         let mut work = Work::new(counts);
         loop {
-            let y = next.fetch_add(1, Ordering::Relaxed) as u32;
+            let y = next.fetch_add(1, Ordering::Relaxed) as u32 * stride;
             if y >= camera.height {
                 break;
             }
             let mut row = Vec::new();
-            for x in 0..camera.width {
+            for x in (0..camera.width).step_by(stride as usize) {
                 integrator.last_bounce_samples(camera, (x, y), &mut row, &mut work);
             }
             rows.lock().unwrap_or_else(|e| e.into_inner()).push((y, row));
@@ -494,7 +498,9 @@ fn run_watched<E>(
         camera,
         settings,
     };
-    let grid_level = integrator.last_bounce_level().filter(|_| integrator.options.last_bounce_grid);
+    let grid_level = integrator
+        .last_bounce_level()
+        .filter(|_| integrator.options.last_bounce_grid);
     if grid_level.is_some() && cache.last_bounce().is_none() {
         let grid = last_bounce_grid(pass, &mut outcome.threads);
         outcome.last_bounce_cells = grid.cells() as u64;

@@ -24,6 +24,21 @@ pub const MIN_SAMPLES: u32 = 8;
 /// Cells per scene size along each axis.
 pub const CELLS_PER_SIZE: f32 = 128.0;
 
+/// Most pixels that start sites: a larger image starts them on a sparser lattice
+/// (`site_stride`). About a quarter of a million sites hold the conference room's grid many
+/// times over (320x240 takes 76,800).
+pub const MAX_SITE_PIXELS: u64 = 1 << 18;
+
+/// The spacing of the pixels that start sites in a `width` x `height` image: 1 up to
+/// `MAX_SITE_PIXELS` pixels, else the smallest that keeps them within it.
+pub fn site_stride(width: u32, height: u32) -> u32 {
+    let mut stride = 1u64;
+    while (width as u64).div_ceil(stride) * (height as u64).div_ceil(stride) > MAX_SITE_PIXELS {
+        stride += 1;
+    }
+    stride as u32
+}
+
 /// Which cell a point and the side it faces fall in: the cell's integer coordinates (20 bits
 /// each, wrapping far out, where cells a million apart share a key) and the normal's dominant
 /// axis and sign (6 sides: the floor and the ceiling above it never share a mean).
@@ -199,6 +214,25 @@ mod tests {
         assert_ne!(key(p, Vec3::Y), key(Vec3::new(2.1, 1.0, 1.0), Vec3::Y));
         assert_ne!(key(p, Vec3::Y), key(Vec3::new(-1.0, 1.0, 1.0), Vec3::Y));
         assert_ne!(key(p, Vec3::Y), key(Vec3::new(1.0, 1.0, -1.0), Vec3::Y));
+    }
+
+    #[test]
+    fn large_images_start_sites_on_a_sparser_lattice() {
+        assert_eq!(site_stride(320, 240), 1);
+        assert_eq!(site_stride(512, 512), 1);
+        assert_eq!(site_stride(513, 512), 2);
+        assert_eq!(site_stride(1920, 1080), 3);
+        for (w, h) in [(7680, 4320), (20000, 20000), (1, 1_000_000)] {
+            let s = site_stride(w, h) as u64;
+            assert!(
+                (w as u64).div_ceil(s) * (h as u64).div_ceil(s) <= MAX_SITE_PIXELS,
+                "{w}x{h}"
+            );
+            assert!(
+                (w as u64).div_ceil(s - 1) * (h as u64).div_ceil(s - 1) > MAX_SITE_PIXELS,
+                "{w}x{h}"
+            );
+        }
     }
 
     #[test]
