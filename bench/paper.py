@@ -576,7 +576,9 @@ def main():
         w, h = size
         ambient = {"aa": aa, "ad": args.ad, "as": args.as_, "ar": args.ar}
         base = ["-x", str(w), "-y", str(h), "-ab", "1", "-aa", str(aa), "-ad", str(args.ad), "-as", str(args.as_),
-                "-ar", str(args.ar), "--tile", args.tile]
+                "-ar", str(args.ar), "--tile", args.tile,
+                # -ar's floor alone, as in rpict and in the runs docs/RESULTS.md reports.
+                "--ic-min-pixels", "0"]
         ref = os.path.join(args.out, f"ref-{name}-{w}x{h}.exr")
         t0 = time.perf_counter()
         if not os.path.exists(ref):

@@ -31,7 +31,8 @@ SCENES = {
     "sibenik": os.path.join(common.SHARED_SCENES, "sibenik_cathedral", "sibenik.gltf"),
     "cornell": os.path.join(common.SHARED_SCENES, "cornell_box", "CornellBox-Original.gltf"),
 }
-RENDER = "-x 320 -y 240 -ab 2 --lambertian -aa 0.1 -ad 512 -as 128 -ar 64 --spp 16 --threads 1".split()
+# -ar 64 alone (no view floor): the settings of the rates measured before --ic-min-pixels.
+RENDER = "-x 320 -y 240 -ab 2 --lambertian -aa 0.1 -ad 512 -as 128 -ar 64 --ic-min-pixels 0 --spp 16 --threads 1".split()
 
 
 def embree_rate(scene, seconds):

@@ -296,7 +296,8 @@ def equal_error(args, icrender, scene_args, out_dir, ref, ref_px, rpict_base, oc
     runs = []
     pin = shutil.which("taskset") is not None
     for ad, as_, ls in icrender_ladder(args):
-        options = ["-ab", args.ab, "-aa", args.aa, "-ad", ad, "-as", as_, "-ar", args.ar]
+        # -ar's floor alone (no view floor), as rpict has it.
+        options = ["-ab", args.ab, "-aa", args.aa, "-ad", ad, "-as", as_, "-ar", args.ar, "--ic-min-pixels", "0"]
         options += ["--light-samples", ls] if ls else []
         for threads, pinned in ((1, pin), (0, False)):
             # Same seed, same image: repeats differ in time only; the fastest is kept (the machine

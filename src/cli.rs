@@ -134,10 +134,18 @@ pub struct RenderArgs {
     /// -as: extra hemisphere samples where the first ones vary most.
     #[arg(long = "as", default_value_t = 128, allow_negative_numbers = true)]
     pub ambient_supersamples: u32,
-    /// -ar: ambient resolution; the smallest record radius is the scene's cube size / ar (0: no
-    /// limit), as in Radiance.
-    #[arg(long = "ar", default_value_t = 64, allow_negative_numbers = true)]
+    /// -ar: ambient resolution; the smallest record radius is the scene's cube size / ar, as in
+    /// Radiance (0: no such limit, only --ic-min-pixels'). Off by default: a share of the whole
+    /// scene suits some views and not others; the view's floor (--ic-min-pixels) follows the
+    /// camera.
+    #[arg(long = "ar", default_value_t = 0, allow_negative_numbers = true)]
     pub ambient_resolution: u32,
+    /// The smallest record radius in pixels: a record is never smaller than this many pixel
+    /// widths at its depth in the view (for a sequence, the first frame's view), nor than -ar's
+    /// floor. -ar's floor is a share of the whole scene, whatever part the camera sees; this one
+    /// follows the view. 0: -ar's floor alone (as Radiance).
+    #[arg(long = "ic-min-pixels", default_value_t = 3.0, allow_negative_numbers = true)]
+    pub ic_min_pixels: f32,
     /// -af FILE: persistent irradiance cache, loaded at start and appended to while rendering.
     #[arg(long = "af")]
     pub ambient_file: Option<PathBuf>,

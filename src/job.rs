@@ -69,6 +69,9 @@ pub fn validate(args: &RenderArgs) -> Result<(), String> {
     if !(args.ambient_accuracy.is_finite() && args.ambient_accuracy >= 0.0) {
         return Err("-aa must be a finite, non-negative number".into());
     }
+    if !(args.ic_min_pixels.is_finite() && args.ic_min_pixels >= 0.0) {
+        return Err("--ic-min-pixels must be a finite, non-negative number".into());
+    }
     if args.threads == Some(0) {
         return Err("--threads must be at least 1".into());
     }
@@ -124,7 +127,7 @@ fn shading_options(args: &RenderArgs) -> ShadingOptions {
 pub fn cache_settings_line(args: &RenderArgs, scene: &Scene) -> String {
     let av = args.ambient_value.as_deref().unwrap_or(&[0.0, 0.0, 0.0]);
     format!(
-        "scene {} size {:.6e}; -ab {} -aa {} -ad {} -as {} -ar {} -av {} {} {}; -st {}; metric {:?}; lambertian {}{}",
+        "scene {} size {:.6e}; -ab {} -aa {} -ad {} -as {} -ar {} -av {} {} {}; -st {}; metric {:?}; lambertian {}{}{}",
         scene
             .path
             .file_name()
@@ -148,6 +151,12 @@ pub fn cache_settings_line(args: &RenderArgs, scene: &Scene) -> String {
             crate::cli::DeepArg::Paths if args.ambient_bounces > 1 => "; deep paths",
             crate::cli::DeepArg::Grid if args.ambient_bounces > 1 => "; deep paths, last bounce grid",
             _ => "",
+        },
+        // Said only when set, so that files made before the option keep their line.
+        if args.ic_min_pixels > 0.0 {
+            format!("; min radius {} pixels", args.ic_min_pixels)
+        } else {
+            String::new()
         }
     )
 }
@@ -283,7 +292,8 @@ impl Job {
                 args.ambient_resolution,
                 metric,
                 scene.cube_size(),
-            );
+            )
+            .with_view_floor(&camera, args.ic_min_pixels);
             let cache = IrradianceCache::new(settings);
             let cache = match &args.ambient_file {
                 Some(path) => {

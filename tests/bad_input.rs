@@ -469,7 +469,7 @@ fn negative_counts_say_what_the_option_accepts() {
         assert!(line.contains("not in 0.."), "{option}: {line}");
     }
     // Options taking a number that may not be negative: refused by the render's own checks.
-    for option in ["-aa", "-st", "-lw"] {
+    for option in ["-aa", "-st", "-lw", "--ic-min-pixels"] {
         let args = [
             "render",
             scene.to_str().unwrap(),

@@ -259,3 +259,93 @@ fn the_last_bounce_grid_keeps_the_indirect_light_for_fewer_rays() {
         "the grid's {grid} rays against the traced last bounce's {traced}"
     );
 }
+
+/// The ceiling room with a speck 300 units away: the scene's cube, and with it -ar's smallest
+/// record radius, grows a hundredfold while the view stays in the room.
+fn ceiling_room_in_a_large_scene(dir: &Path) -> PathBuf {
+    let mut b = GltfBuilder::new();
+    let grey = b.material(lambertian("grey", [0.6; 3]));
+    inward_box(&mut b, [0.0, 0.0, 0.0], [4.0, 2.0, 4.0], grey);
+    let light = b.material(emissive_lambertian("lamp", [0.5; 3], 20.0));
+    let lamp = [[0.9, 0.5, 2.3], [1.7, 0.5, 2.3], [1.7, 0.5, 3.1], [0.9, 0.5, 3.1]];
+    b.quad(facing(lamp, [2.0, 0.0, 2.0]), Some(light));
+    let speck = [
+        [300.0, 0.0, 300.0],
+        [300.1, 0.0, 300.0],
+        [300.1, 0.1, 300.0],
+        [300.0, 0.1, 300.0],
+    ];
+    b.quad(speck, Some(grey));
+    b.write(dir, "large_scene")
+}
+
+/// -ar's smallest radius is a share of the whole scene, blind to where the camera stands: in a
+/// room seen from inside, with a speck far away making the scene's cube 75x the room, -ar 64
+/// holds every record at 4.7 units, wider than the room, and one record's extrapolation paints
+/// the whole ceiling. `--ic-min-pixels` floors the radius at a number of pixel widths at the
+/// record's depth instead (Sibenik's aisle is the same case: a close view in a large building).
+#[test]
+fn the_view_floor_sizes_records_by_what_the_image_shows() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = ceiling_room_in_a_large_scene(dir.path());
+    // From the room's centre into a top corner: two walls and the ceiling meet there.
+    let into_the_corner = [
+        "--vp", "2", "1", "2", "--vd", "1", "0.6", "1", "--vu", "0", "1", "0", "--vh", "90",
+    ];
+    let common = [
+        &["-x", "48", "-y", "48", "-ab", "1", "-ad", "256", "--threads", "2"][..],
+        &into_the_corner[..],
+    ]
+    .concat();
+    let (brute, _) = render_to(
+        dir.path(),
+        &scene,
+        "brute",
+        &[&common[..], &["-aa", "0", "--spp", "4"]].concat(),
+    );
+    // The indirect layer's green in 4x4 blocks: brute force's own noise averaged down, the
+    // cache's interpolation error (smooth over many pixels) kept.
+    let blocks = |image: &ImageData| {
+        let green = &rgb(image, "indirect")[1];
+        (0..144)
+            .map(|b| {
+                let (bx, by) = (b % 12 * 4, b / 12 * 4);
+                (0..16)
+                    .map(|i| green[(by + i / 4) * 48 + bx + i % 4] as f64)
+                    .sum::<f64>()
+                    / 16.0
+            })
+            .collect::<Vec<f64>>()
+    };
+    let truth = blocks(&brute);
+    let error = |image: &ImageData| {
+        let b = blocks(image);
+        b.iter()
+            .zip(&truth)
+            .map(|(p, q)| (p - q).powi(2) / (q * q + 1e-4))
+            .sum::<f64>()
+            / b.len() as f64
+    };
+    let mut results = Vec::new();
+    for (name, extra) in [
+        ("ar64", &["--ar", "64"][..]),
+        ("view", &["--ar", "0", "--ic-min-pixels", "2.5"][..]),
+        ("view-coarse", &["--ar", "0", "--ic-min-pixels", "12"][..]),
+    ] {
+        let (image, stats) = render_to(dir.path(), &scene, name, &[&common[..], extra].concat());
+        results.push((name, error(&image), stats["cache_records"].as_u64().unwrap()));
+    }
+    println!("indirect relMSE against brute force, records: {results:?}");
+    let [(_, ar64, ar64_records), (_, view, view_records), (_, _, coarse_records)] = results[..] else {
+        unreachable!()
+    };
+    assert!(view < 0.25 * ar64, "view floor {view:.2e}, -ar 64 {ar64:.2e}");
+    assert!(
+        ar64_records < view_records,
+        "records {ar64_records} at -ar 64, {view_records} with the view's floor"
+    );
+    assert!(
+        coarse_records < view_records,
+        "a coarser view floor makes fewer records"
+    );
+}

@@ -86,7 +86,10 @@ fn vanishing_accuracy_reproduces_brute_force() {
         "4",
         "--light-samples",
         "4",
+        // No smallest radius at all: neither -ar's nor the view's.
         "-ar",
+        "0",
+        "--ic-min-pixels",
         "0",
         // Every lookup of the final pass misses only when records are made as pixels render
         // (a prepass would have made them at the same points just before).

@@ -132,6 +132,16 @@ impl Camera {
         if ratio.is_finite() && ratio > 0.0 { ratio } else { 1.0 }
     }
 
+    /// The width of one pixel at `point`'s depth in the view (the whole image's pixels, in
+    /// world units): what the image can tell apart there.
+    pub fn pixel_width_at(&self, point: Vec3) -> f32 {
+        let plane = 2.0 * self.half_width / self.width.max(1) as f32;
+        match self.view.projection {
+            Projection::Perspective => self.view_depth(point) * plane,
+            Projection::Parallel => plane,
+        }
+    }
+
     /// Distance of `point` from the camera along the view axis (its forward direction; for a
     /// parallel view, from the view's plane), never negative.
     pub fn view_depth(&self, point: Vec3) -> f32 {
@@ -225,6 +235,24 @@ mod tests {
         v.vertical = 180.0;
         assert!(v.validate().is_err());
         assert!(view().validate().is_ok());
+    }
+
+    /// A pixel's width grows with the depth along the view axis (not the distance), and is the
+    /// same everywhere in a parallel view.
+    #[test]
+    fn a_pixel_is_wider_the_deeper_it_looks() {
+        let cam = view().camera(100, 100);
+        assert!((cam.pixel_width_at(Vec3::new(0.0, 0.0, -5.0)) - 0.1).abs() < 1e-6);
+        assert!((cam.pixel_width_at(Vec3::new(3.0, -2.0, -5.0)) - 0.1).abs() < 1e-6);
+        assert_eq!(cam.pixel_width_at(Vec3::new(0.0, 0.0, 5.0)), 0.0, "behind the eye");
+        let mut parallel = view();
+        parallel.projection = Projection::Parallel;
+        parallel.horizontal = 10.0;
+        parallel.vertical = 10.0;
+        let cam = parallel.camera(100, 100);
+        for z in [-1.0, -50.0] {
+            assert!((cam.pixel_width_at(Vec3::new(1.0, 0.0, z)) - 0.1).abs() < 1e-6);
+        }
     }
 
     #[test]
