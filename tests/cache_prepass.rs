@@ -10,13 +10,33 @@ use std::path::{Path, PathBuf};
 /// the room's centre, facing the floor. The view looks straight up at the ceiling, so every pixel is indirect light of
 /// one large flat surface.
 fn ceiling_room(dir: &Path) -> PathBuf {
+    ceiling_room_with(dir, "ceiling_room", |_, _| {})
+}
+
+/// The ceiling room with `more` added (given the builder and the grey material).
+fn ceiling_room_with(dir: &Path, name: &str, more: impl FnOnce(&mut GltfBuilder, usize)) -> PathBuf {
     let mut b = GltfBuilder::new();
     let grey = b.material(lambertian("grey", [0.6; 3]));
     inward_box(&mut b, [0.0, 0.0, 0.0], [4.0, 2.0, 4.0], grey);
     let light = b.material(emissive_lambertian("lamp", [0.5; 3], 20.0));
     let lamp = [[0.9, 0.5, 2.3], [1.7, 0.5, 2.3], [1.7, 0.5, 3.1], [0.9, 0.5, 3.1]];
     b.quad(facing(lamp, [2.0, 0.0, 2.0]), Some(light));
-    b.write(dir, "ceiling_room")
+    more(&mut b, grey);
+    b.write(dir, name)
+}
+
+/// The ceiling room with a speck 300 units away: the scene's cube, and with it -ar's smallest
+/// record radius, grows 75-fold while the view stays in the room.
+fn ceiling_room_in_a_large_scene(dir: &Path) -> PathBuf {
+    ceiling_room_with(dir, "large_scene", |b, grey| {
+        let speck = [
+            [300.0, 0.0, 300.0],
+            [300.1, 0.0, 300.0],
+            [300.1, 0.1, 300.0],
+            [300.0, 0.1, 300.0],
+        ];
+        b.quad(speck, Some(grey));
+    })
 }
 
 const LOOK_UP: [&str; 14] = [
@@ -258,25 +278,6 @@ fn the_last_bounce_grid_keeps_the_indirect_light_for_fewer_rays() {
         grid * 4 < traced * 3,
         "the grid's {grid} rays against the traced last bounce's {traced}"
     );
-}
-
-/// The ceiling room with a speck 300 units away: the scene's cube, and with it -ar's smallest
-/// record radius, grows a hundredfold while the view stays in the room.
-fn ceiling_room_in_a_large_scene(dir: &Path) -> PathBuf {
-    let mut b = GltfBuilder::new();
-    let grey = b.material(lambertian("grey", [0.6; 3]));
-    inward_box(&mut b, [0.0, 0.0, 0.0], [4.0, 2.0, 4.0], grey);
-    let light = b.material(emissive_lambertian("lamp", [0.5; 3], 20.0));
-    let lamp = [[0.9, 0.5, 2.3], [1.7, 0.5, 2.3], [1.7, 0.5, 3.1], [0.9, 0.5, 3.1]];
-    b.quad(facing(lamp, [2.0, 0.0, 2.0]), Some(light));
-    let speck = [
-        [300.0, 0.0, 300.0],
-        [300.1, 0.0, 300.0],
-        [300.1, 0.1, 300.0],
-        [300.0, 0.1, 300.0],
-    ];
-    b.quad(speck, Some(grey));
-    b.write(dir, "large_scene")
 }
 
 /// -ar's smallest radius is a share of the whole scene, blind to where the camera stands: in a

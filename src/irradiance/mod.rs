@@ -498,19 +498,10 @@ impl IrradianceCache {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::scene::view::{Projection, View};
 
     /// A 90-degree view 100 pixels wide down -z: a pixel is 0.02 wide per unit of depth.
     fn camera() -> crate::scene::view::Camera {
-        let view = View {
-            projection: Projection::Perspective,
-            position: Vec3::ZERO,
-            direction: -Vec3::Z,
-            up: Vec3::Y,
-            horizontal: 90.0,
-            vertical: 90.0,
-        };
-        view.camera(100, 100)
+        crate::scene::view::tests::view().camera(100, 100)
     }
 
     /// The smallest radius is -ar's or the view's, whichever is larger, never above the

@@ -203,10 +203,11 @@ pub fn world_coordinate(v: f64) -> String {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
-    fn view() -> View {
+    /// A 90-degree square view from the origin down -z.
+    pub(crate) fn view() -> View {
         View {
             projection: Projection::Perspective,
             position: Vec3::ZERO,
