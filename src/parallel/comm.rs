@@ -1,7 +1,9 @@
 //! Point-to-point messages between ranks, counted (messages, bytes) and timed (idle), over the
-//! `mpi` crate. Receiving polls with a growing pause instead of blocking in MPI, because Open
-//! MPI's blocking calls spin: on an oversubscribed machine a waiting rank would steal the core
-//! from the rank it waits for.
+//! `mpi` crate. Every wait (a receive, a send that waits for its receiver, a collective) polls
+//! with a growing pause instead of blocking in MPI, because Open MPI's blocking calls spin (and
+//! call sched_yield in a loop where ranks outnumber cores): a waiting rank would steal the core
+//! from the rank it waits for. Open MPI 4 has no wait that sleeps until a message comes (its
+//! poll-when-idle proposal was never merged), so a paused poll is the nearest thing to blocking.
 
 pub use super::counters::Counters;
 use super::liveness::Silence;
@@ -32,7 +34,7 @@ const LONG_WAIT_PAUSE: Duration = Duration::from_millis(5);
 
 /// Whether the request in `pending` has completed (it is then gone); a request still in flight
 /// stays there.
-fn completed<'a, S: Scope<'a>>(pending: &mut Option<Request<'a, [u8], S>>) -> Option<()> {
+fn completed<'a, D: ?Sized, S: Scope<'a>>(pending: &mut Option<Request<'a, D, S>>) -> Option<()> {
     match pending.take()?.test() {
         Ok(_) => Some(()),
         Err(still) => {
@@ -97,10 +99,12 @@ impl<'c> Comm<'c> {
         self.world.size()
     }
 
+    /// Sends and waits until the message has left (at once for one small enough to go eagerly;
+    /// a larger one waits for its receiver to take it, polling with pauses, not spinning).
     pub fn send(&self, dest: i32, message: &Message) {
-        let data = message.encode();
-        self.world.process_at_rank(dest).send_with_tag(&data[..], message.tag());
-        self.count_sent(data.len());
+        self.send_until(dest, message, None, || {
+            unreachable!("a send without a limit never stalls")
+        });
     }
 
     fn count_sent(&self, bytes: usize) {
@@ -113,6 +117,10 @@ impl<'c> Comm<'c> {
     /// does. Past the limit `stalled` is called, which ends the job (it cannot return): the
     /// send is still in flight and MPI owns `data` until it completes.
     pub fn send_within(&self, dest: i32, message: &Message, limit: Duration, stalled: impl FnOnce() -> Infallible) {
+        self.send_until(dest, message, Some(limit), stalled);
+    }
+
+    fn send_until(&self, dest: i32, message: &Message, limit: Option<Duration>, stalled: impl FnOnce() -> Infallible) {
         let (tag, data) = (message.tag(), message.encode());
         let data = data.as_slice();
         mpi::request::scope(|scope| {
@@ -121,7 +129,7 @@ impl<'c> Comm<'c> {
                 .process_at_rank(dest)
                 .immediate_send_with_tag(scope, data, tag);
             let mut pending = Some(request);
-            let sent = self.poll_with_pauses(Some(limit), || completed(&mut pending));
+            let sent = self.poll_with_pauses(limit, || completed(&mut pending));
             if sent.is_none() {
                 match stalled() {}
             }
@@ -240,14 +248,13 @@ impl<'c> Comm<'c> {
 
     /// Every rank's host (MPI processor) name, by rank. A collective: every rank calls it.
     pub fn host_names(&self) -> Hosts {
-        use mpi::collective::CommunicatorCollectives;
         const LEN: usize = 64;
         let name = mpi::environment::processor_name().unwrap_or_else(|_| "?".into());
         let mut mine = [0u8; LEN];
         let bytes = name.as_bytes();
         mine[..bytes.len().min(LEN)].copy_from_slice(&bytes[..bytes.len().min(LEN)]);
         let mut all = vec![0u8; LEN * self.size() as usize];
-        self.world.all_gather_into(&mine[..], &mut all[..]);
+        self.all_gather(&mine[..], &mut all[..]);
         Hosts(
             all.chunks_exact(LEN)
                 .map(|c| String::from_utf8_lossy(&c[..c.iter().position(|&b| b == 0).unwrap_or(LEN)]).into_owned())
@@ -258,15 +265,25 @@ impl<'c> Comm<'c> {
     /// Waits until every rank has come here. A collective: every rank calls it.
     pub fn barrier(&self) {
         use mpi::collective::CommunicatorCollectives;
-        self.world.barrier();
+        let mut pending = Some(self.world.immediate_barrier());
+        self.poll_with_pauses(None, || completed(&mut pending));
     }
 
     /// Every rank's flag, by rank. A collective: every rank calls it.
     pub fn all_flags(&self, flag: bool) -> Vec<bool> {
-        use mpi::collective::CommunicatorCollectives;
         let mut all = vec![0u8; self.size() as usize];
-        self.world.all_gather_into(&[flag as u8][..], &mut all[..]);
+        self.all_gather(&[flag as u8][..], &mut all[..]);
         all.into_iter().map(|f| f != 0).collect()
+    }
+
+    /// Every rank's `mine`, by rank, into `all` (`mine`'s length times the ranks); waits with
+    /// pauses, since ranks come to it at different times (one still building its scene).
+    fn all_gather(&self, mine: &[u8], all: &mut [u8]) {
+        use mpi::collective::CommunicatorCollectives;
+        mpi::request::scope(|scope| {
+            let mut pending = Some(self.world.immediate_all_gather_into(scope, mine, all));
+            self.poll_with_pauses(None, || completed(&mut pending));
+        });
     }
 
     /// Ends the whole job (every rank) with an error code.
