@@ -1,5 +1,9 @@
-//! Base-colour textures: 8-bit RGBA decoded to linear floats once, sampled bilinearly with the
-//! glTF sampler's wrap modes.
+//! Base-colour textures: 8-bit RGBA kept as it was stored and decoded to linear floats by a
+//! table as each texel is read, sampled bilinearly with the glTF sampler's wrap modes. Kept as
+//! bytes, a texture takes a quarter of the memory of one decoded to floats, and the texel reads
+//! of hemisphere rays, which land anywhere on it, miss the processor's caches less: with float
+//! texels, on Sibenik (three 512x512 textures) at -ab 2, sampling was 9.6 % of the render, 85 %
+//! of it waiting for the texel loads.
 
 use crate::sys::scene_io::GltfTexture;
 use glam::Vec4;
@@ -12,7 +16,9 @@ pub struct Texture {
     pub name: String,
     width: u32,
     height: u32,
-    texels: Vec<Vec4>,
+    texels: Vec<[u8; 4]>,
+    /// A stored colour byte's linear value (sRGB decoded, or not, as the glTF says).
+    decode: Box<[f32; 256]>,
     wrap_s: i32,
     wrap_t: i32,
 }
@@ -41,36 +47,23 @@ fn wrap(coord: i64, size: u32, mode: i32) -> usize {
 impl Texture {
     /// Bytes its texels take.
     pub fn memory_bytes(&self) -> u64 {
-        (self.texels.len() * std::mem::size_of::<Vec4>()) as u64
+        (self.texels.len() * std::mem::size_of::<[u8; 4]>()) as u64
     }
 
     pub fn from_gltf(t: &GltfTexture) -> Texture {
-        let lut: Vec<f32> = (0..256)
-            .map(|i| {
-                if t.srgb {
-                    srgb_to_linear(i as f32 / 255.0)
-                } else {
-                    i as f32 / 255.0
-                }
-            })
-            .collect();
+        let decode = Box::new(std::array::from_fn(|i| {
+            if t.srgb {
+                srgb_to_linear(i as f32 / 255.0)
+            } else {
+                i as f32 / 255.0
+            }
+        }));
         let expected = 4 * t.width as usize * t.height as usize;
         let (width, height, texels) = if t.width == 0 || t.height == 0 || t.rgba.len() != expected {
             // The loader guarantees sizes; a 1x1 white texel keeps sampling total if not.
-            (1, 1, vec![Vec4::ONE])
+            (1, 1, vec![[255; 4]])
         } else {
-            let texels = t
-                .rgba
-                .chunks_exact(4)
-                .map(|p| {
-                    Vec4::new(
-                        lut[p[0] as usize],
-                        lut[p[1] as usize],
-                        lut[p[2] as usize],
-                        p[3] as f32 / 255.0,
-                    )
-                })
-                .collect();
+            let texels = t.rgba.chunks_exact(4).map(|p| [p[0], p[1], p[2], p[3]]).collect();
             (t.width, t.height, texels)
         };
         Texture {
@@ -78,15 +71,29 @@ impl Texture {
             width,
             height,
             texels,
+            decode,
             wrap_s: t.wrap_s,
             wrap_t: t.wrap_t,
         }
     }
 
+    /// Texel `index` in linear floats.
+    #[inline(always)]
+    fn texel(&self, index: usize) -> Vec4 {
+        let [r, g, b, a] = self.texels[index];
+        let decode = &self.decode;
+        Vec4::new(
+            decode[r as usize],
+            decode[g as usize],
+            decode[b as usize],
+            a as f32 / 255.0,
+        )
+    }
+
     /// Bilinear sample at glTF texture coordinates (origin at the image's top-left).
     pub fn sample(&self, uv: [f32; 2]) -> Vec4 {
         if !(uv[0].is_finite() && uv[1].is_finite()) {
-            return self.texels[0];
+            return self.texel(0);
         }
         let x = uv[0] as f64 * self.width as f64 - 0.5;
         let y = uv[1] as f64 * self.height as f64 - 0.5;
@@ -97,7 +104,7 @@ impl Texture {
         let at = |xi: i64, yi: i64| {
             let col = wrap(xi, self.width, self.wrap_s);
             let row = wrap(yi, self.height, self.wrap_t);
-            self.texels[row * self.width as usize + col]
+            self.texel(row * self.width as usize + col)
         };
         let top = at(x0, y0) * (1.0 - fx) + at(x0 + 1, y0) * fx;
         let bottom = at(x0, y0 + 1) * (1.0 - fx) + at(x0 + 1, y0 + 1) * fx;
