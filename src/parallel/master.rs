@@ -3,60 +3,29 @@
 //! relays shared records (`RecordRelay`, which also keeps the -af file), gathers the ranks'
 //! statistics, and ends the job naming a rank that falls silent. It renders nothing itself.
 //! How records are shared, and when the render is complete, is the mode's `Sharing` policy:
-//! `sharing.rs` holds the traditional modes' (paper, section 4), `component::master` component
+//! `worker` holds the traditional modes' (paper, section 4), `component::master` component
 //! mode's (section 5).
 
 use super::comm::{Comm, Hosts};
+use super::component::{Roles, master::ComponentSharing};
 use super::liveness::Silence;
 use super::protocol::{FinishedTile, Message, Records};
 use super::relay::RecordRelay;
-use crate::checkpoint::{Checkpoint, Restored};
+use super::worker::TraditionalSharing;
+use super::{Setup, end_job};
+use crate::commands::{CommandError, CommandResult, warn};
 use crate::image::framebuffer::FrameBuffer;
-use crate::irradiance::IrradianceCache;
-use crate::stats::RankReport;
-use crate::tiles::{Tile, TileQueue, store_tile};
+use crate::stats::{RankReport, RenderStats};
+use crate::tiles::{TileQueue, store_tile};
 use std::convert::Infallible;
-use std::time::{Duration, Instant};
-
-pub struct MasterResult {
-    pub frame: FrameBuffer,
-    pub ranks: Vec<RankReport>,
-    pub render_s: f64,
-}
-
-/// What the master controls.
-pub struct Plan<'a> {
-    pub tiles: &'a [Tile],
-    pub width: u32,
-    pub height: u32,
-    /// The cache holding the -af file's records (the master renders nothing with it).
-    pub cache: Option<&'a IrradianceCache>,
-    /// How long a rank may be silent before it counts as lost.
-    pub timeout: Duration,
-    /// Each rank's host, for messages that name a rank.
-    pub hosts: &'a Hosts,
-    /// The --checkpoint journal and what an earlier run finished (those tiles are not handed out).
-    pub resume: Option<(&'a Checkpoint, &'a Restored)>,
-    /// Every worker already holds the cache's records (the prepass shared them).
-    pub workers_have_cache: bool,
-}
-
-impl Plan<'_> {
-    /// The records of the cache file the workers do not hold yet.
-    pub fn initial_records(&self) -> Records {
-        match self.cache {
-            Some(c) if !self.workers_have_cache => Records::from(c.records()),
-            _ => Records::default(),
-        }
-    }
-}
+use std::time::Instant;
 
 /// A mode's way of sharing records, as the master sees it.
 pub trait Sharing {
     /// Before any tile: what the workers start from (by default, every worker the records of
     /// the cache file it lacks).
     fn start(&mut self, core: &mut MasterCore<'_, '_>) {
-        let initial = Message::InitialRecords(core.plan.initial_records());
+        let initial = Message::InitialRecords(core.setup.initial_records());
         for worker in 1..core.comm.size() {
             core.send(worker, &initial);
         }
@@ -76,7 +45,7 @@ pub trait Sharing {
     fn finished(&self, core: &MasterCore<'_, '_>) -> bool;
     /// The line that ends the job when `silence` holds.
     fn lost(&self, core: &MasterCore<'_, '_>, silence: &Silence) -> String {
-        lost_rank(silence, core.plan.hosts)
+        lost_rank(silence, &core.setup.hosts)
     }
     /// After the render is complete: the rest of the job (component mode gathers the images).
     fn gather(&mut self, _core: &mut MasterCore<'_, '_>) -> Result<(), String> {
@@ -87,7 +56,7 @@ pub trait Sharing {
 /// What every mode's master has and does.
 pub struct MasterCore<'a, 'c> {
     pub comm: &'a Comm<'c>,
-    pub plan: &'a Plan<'a>,
+    pub setup: &'a Setup<'a>,
     pub queue: TileQueue,
     pub frame: FrameBuffer,
     tiles_done: Vec<bool>,
@@ -98,23 +67,23 @@ pub struct MasterCore<'a, 'c> {
 }
 
 impl<'a, 'c> MasterCore<'a, 'c> {
-    fn new(comm: &'a Comm<'c>, plan: &'a Plan<'a>) -> Self {
-        let size = comm.size() as usize;
-        let (frame, tiles_done, todo) = match plan.resume {
+    fn new(comm: &'a Comm<'c>, setup: &'a Setup<'a>) -> Self {
+        let (size, tiles) = (comm.size() as usize, setup.tiles.len());
+        let (frame, tiles_done, todo) = match &setup.checkpoint {
             Some((_, restored)) => (restored.frame.clone(), restored.done.clone(), restored.unfinished()),
             None => (
-                FrameBuffer::new(plan.width, plan.height),
-                vec![false; plan.tiles.len()],
-                (0..plan.tiles.len()).collect(),
+                FrameBuffer::new(setup.job_in.width, setup.job_in.height),
+                vec![false; tiles],
+                (0..tiles).collect(),
             ),
         };
         MasterCore {
             comm,
-            plan,
+            setup,
             queue: TileQueue::new(todo),
             frame,
             tiles_done,
-            relay: RecordRelay::new(size, plan.cache),
+            relay: RecordRelay::new(size, setup.cache()),
             reports: vec![None; size],
             turned_away: 0,
         }
@@ -127,15 +96,15 @@ impl<'a, 'c> MasterCore<'a, 'c> {
     /// job. Past the timeout the job ends as on any other failure (the cache file keeps what it
     /// has), naming the rank and host that stopped taking messages.
     pub fn send(&self, dest: i32, message: &Message) {
-        let limit = self.plan.timeout;
+        let limit = self.setup.job_in.silence_limit;
         self.comm.send_within(dest, message, limit, || -> Infallible {
             let line = format!(
                 "rank {dest} (host {}) took no message from the master for {:.0} s: its host or link is gone, or \
                  it hangs",
-                self.plan.hosts.of(dest),
+                self.setup.hosts.of(dest),
                 limit.as_secs_f64()
             );
-            super::end_job(self.comm, self.plan.cache, &line)
+            end_job(self.comm, self.setup.cache(), &line)
         });
     }
 
@@ -149,7 +118,8 @@ impl<'a, 'c> MasterCore<'a, 'c> {
 
     /// The next message from any rank; Err once a rank the master still waits for is lost.
     pub fn receive(&self, awaited: impl Fn(i32) -> bool) -> Result<(i32, Result<Message, String>), Silence> {
-        let envelope = self.comm.receive_live(&[(None, None)], self.plan.timeout, awaited)?;
+        let limit = self.setup.job_in.silence_limit;
+        let envelope = self.comm.receive_live(&[(None, None)], limit, awaited)?;
         let source = envelope.source;
         Ok((
             source,
@@ -171,7 +141,7 @@ impl<'a, 'c> MasterCore<'a, 'c> {
     fn take_tile(&mut self, source: i32, finished: FinishedTile, keep: bool) -> Result<(), String> {
         let (index, pixels) = (finished.tile, finished.pixels);
         let tile = self
-            .plan
+            .setup
             .tiles
             .get(index as usize)
             .filter(|_| !self.tiles_done[index as usize])
@@ -179,7 +149,7 @@ impl<'a, 'c> MasterCore<'a, 'c> {
         if pixels.len() != ((tile.x1 - tile.x0) * (tile.y1 - tile.y0)) as usize {
             return Err(format!("rank {source} returned tile {index} with the wrong size"));
         }
-        if let Some((journal, _)) = self.plan.resume {
+        if let Some((journal, _)) = &self.setup.checkpoint {
             journal.tile(index, finished.requests, &pixels);
         }
         if keep {
@@ -203,7 +173,7 @@ impl<'a, 'c> MasterCore<'a, 'c> {
             }
             Message::Stats(report) => self.reports[source as usize] = Some(*report),
             Message::Results(results) => {
-                if let Some((journal, _)) = self.plan.resume {
+                if let Some((journal, _)) = &self.setup.checkpoint {
                     journal.results(&results);
                 }
             }
@@ -213,9 +183,60 @@ impl<'a, 'c> MasterCore<'a, 'c> {
     }
 }
 
-pub fn run(comm: &Comm<'_>, plan: &Plan<'_>, sharing: &mut dyn Sharing) -> Result<MasterResult, String> {
+/// The master's part: the one master with the mode's policy, then the image, its statistics
+/// and the table.
+pub fn run(comm: &Comm<'_>, setup: &Setup<'_>, roles: Option<Roles>, wall: Instant) -> CommandResult {
+    let (job_in, job) = (setup.job_in, &setup.job);
+    let threads = job_in.threads.unwrap_or(1);
+    let mut sharing: Box<dyn Sharing> = match roles {
+        None => Box::new(TraditionalSharing::new(job_in.mode, threads)),
+        Some(roles) => {
+            if !job_in.quiet {
+                eprintln!("icrender: {}", roles.describe());
+                if roles.pas.is_empty() {
+                    eprintln!(
+                        "icrender: the scene has no indirect diffuse work (-ab 0 or no diffuse surface): no PA is needed"
+                    );
+                }
+            }
+            Box::new(ComponentSharing::new(roles))
+        }
+    };
+    let (mut frame, ranks, render_s) =
+        control(comm, setup, sharing.as_mut()).unwrap_or_else(|e| end_job(comm, setup.cache(), &e));
+    if let Some(cache) = setup.cache()
+        && let Err(e) = cache.finish()
+    {
+        warn(&format!("cache file not fully written: {e}"));
+    }
+    let mut stats = RenderStats {
+        threads,
+        ..job_in
+            .host
+            .job_stats(job, job_in.mode.name(), comm.size() as usize, render_s)
+    };
+    stats.tiles_restored = setup.checkpoint.as_ref().map_or(0, |(_, r)| r.count()) as u64;
+    stats.add_ranks(ranks);
+    if let Some(prepass) = &setup.prepass {
+        stats.add_prepass(prepass);
+        crate::render::add_prepass_records(&mut frame, prepass);
+    }
+    stats.wall_s = wall.elapsed().as_secs_f64();
+    job_in.host.write(job, &frame, &stats).map_err(CommandError::failed)?;
+    if !job_in.quiet {
+        print_table(&stats);
+    }
+    Ok(())
+}
+
+/// The render under the mode's policy: the image, every rank's report and the render's seconds.
+fn control(
+    comm: &Comm<'_>,
+    setup: &Setup<'_>,
+    sharing: &mut dyn Sharing,
+) -> Result<(FrameBuffer, Vec<RankReport>, f64), String> {
     let start = Instant::now();
-    let mut core = MasterCore::new(comm, plan);
+    let mut core = MasterCore::new(comm, setup);
     sharing.start(&mut core);
     while !sharing.finished(&core) {
         let reports = &core.reports;
@@ -241,11 +262,7 @@ pub fn run(comm: &Comm<'_>, plan: &Plan<'_>, sharing: &mut dyn Sharing) -> Resul
         ..super::traffic_report(0, "mc", &[comm.counters], comm.counters.idle_s())
     }];
     ranks.extend(core.reports.into_iter().skip(1).flatten());
-    Ok(MasterResult {
-        frame: core.frame,
-        ranks,
-        render_s,
-    })
+    Ok((core.frame, ranks, render_s))
 }
 
 /// The line that ends a job when a rank has fallen silent.
@@ -257,4 +274,34 @@ pub fn lost_rank(silence: &Silence, hosts: &Hosts) -> String {
         hosts.of(silence.rank),
         silence.seconds
     )
+}
+
+/// The per-rank statistics as a table on stderr.
+fn print_table(stats: &RenderStats) {
+    eprintln!(
+        "icrender: {} mode, {} ranks, {}x{} in {:.2} s",
+        stats.mode, stats.ranks, stats.width, stats.height, stats.render_s
+    );
+    eprintln!(
+        "{:>4} {:>6} {:>6} {:>9} {:>9} {:>8} {:>9} {:>8} {:>8} {:>11}",
+        "rank", "role", "tiles", "records", "lookups", "T_amb", "T_notamb", "idle", "msgs", "bytes"
+    );
+    let all = RankReport {
+        tiles: stats.per_rank.iter().map(|r| r.tiles).sum(),
+        records_computed: stats.records_computed,
+        lookups: stats.lookups,
+        t_amb_s: stats.t_amb_s,
+        t_notamb_s: stats.t_notamb_s,
+        idle_s: stats.idle_s,
+        messages: stats.messages,
+        bytes: stats.bytes,
+        ..Default::default()
+    };
+    let rows = stats.per_rank.iter().map(|r| (r.rank.to_string(), r));
+    for (rank, r) in rows.chain([("all".to_string(), &all)]) {
+        eprintln!(
+            "{rank:>4} {:>6} {:>6} {:>9} {:>9} {:>8.2} {:>9.2} {:>8.2} {:>8} {:>11}",
+            r.role, r.tiles, r.records_computed, r.lookups, r.t_amb_s, r.t_notamb_s, r.idle_s, r.messages, r.bytes
+        );
+    }
 }

@@ -12,22 +12,22 @@ pub mod prepass;
 pub mod protocol;
 pub mod pulse;
 pub mod relay;
-pub mod sharing;
 pub mod worker;
 
 use crate::checkpoint::{Checkpoint, Restored};
-use crate::commands::{CommandError, CommandResult, warn};
+use crate::commands::{CommandError, CommandResult};
 use crate::image::framebuffer::FrameBuffer;
 use crate::irradiance::IrradianceCache;
 use crate::job::Job;
+use crate::prepass::PrepassOutcome;
 use crate::render::ThreadStats;
 use crate::shading::Integrator;
 use crate::stats::{RankReport, RenderStats, ThreadReport};
 use crate::tiles::{Tile, tiles};
 use comm::{Comm, Counters, Hosts};
+use component::Roles;
 use mpi::Threading;
 use protocol::{Kind, Message, Records};
-use sharing::{TraditionalSharing, WorkerSharing};
 use std::sync::atomic::AtomicU64;
 use std::sync::atomic::Ordering::Relaxed;
 use std::time::{Duration, Instant};
@@ -79,7 +79,7 @@ pub struct ParallelJob<'a> {
 }
 
 /// The command's side of a parallel run: what only it knows how to do.
-pub trait JobHost {
+pub trait JobHost: Sync {
     /// Checks the options (every rank, the same verdict).
     fn validate(&self) -> Result<(), String>;
     /// Rank 0: checks that the outputs can be written, before any work.
@@ -109,7 +109,8 @@ impl SyncThreshold {
     pub const COMPONENT: SyncThreshold = SyncThreshold(8);
 
     /// `--sync` if given (at least 1), else the mode's default.
-    pub fn of(sync: Option<u32>, default: SyncThreshold) -> SyncThreshold {
+    pub fn of(sync: Option<u32>, component: bool) -> SyncThreshold {
+        let default = if component { Self::COMPONENT } else { Self::TRADITIONAL };
         sync.map_or(default, |n| SyncThreshold(n.max(1) as usize))
     }
 
@@ -207,35 +208,47 @@ impl Intake {
     }
 }
 
-/// What a worker renders with: this rank's job and the image's tiles.
-pub struct WorkerSetup<'a> {
-    pub job: &'a Job,
-    pub tiles: &'a [Tile],
+/// This rank's part of the job once every rank has its job and the prepass (if any) is done:
+/// what the master controls and what a worker renders with.
+pub struct Setup<'a> {
+    pub job_in: &'a ParallelJob<'a>,
+    pub job: Job,
+    pub tiles: Vec<Tile>,
+    /// Each rank's host, for messages that name a rank.
+    pub hosts: Hosts,
+    pub prepass: Option<PrepassOutcome>,
+    /// The master's --checkpoint journal and what an earlier run finished (those tiles are not
+    /// handed out).
+    pub checkpoint: Option<(Checkpoint, Restored)>,
+    /// The mode's synchronisation threshold (see `SyncThreshold::of`).
+    pub sync: SyncThreshold,
     /// The messages this rank sent and received before its role began (the prepass's), for
     /// its report.
     pub traffic_before: &'a Counters,
+    /// When the role began: its report's wall time.
+    pub start: Instant,
 }
 
-impl<'a> WorkerSetup<'a> {
-    pub fn new(job: &'a Job, tiles: &'a [Tile], traffic_before: &'a Counters) -> Self {
-        WorkerSetup {
-            job,
-            tiles,
-            traffic_before,
-        }
-    }
-
-    pub fn cache(&self) -> Option<&'a IrradianceCache> {
+impl Setup<'_> {
+    pub fn cache(&self) -> Option<&IrradianceCache> {
         self.job.cache.as_ref()
     }
 
     /// The integrator of every worker: the rank's cache, read only after a prepass.
-    pub fn integrator(&self) -> Integrator<'a> {
-        let job = self.job;
+    pub fn integrator(&self) -> Integrator<'_> {
+        let job = &self.job;
         Integrator::new(&job.scene, &job.tracer, &job.shading, job.cache.as_ref()).cache_frozen(job.settings.prepass)
     }
 
-    /// This rank's report: what its rendering `threads` did (with its share of the prepass),
+    /// The records of the cache file the workers do not hold yet (after a prepass they do).
+    pub fn initial_records(&self) -> Records {
+        match self.cache() {
+            Some(c) if self.prepass.is_none() => Records::from(c.records()),
+            _ => Records::default(),
+        }
+    }
+
+    /// A worker's report: what its rendering `threads` did (with its share of the prepass),
     /// the messages of `comm`, of its helper thread (`helper`) and of the prepass, and as idle
     /// time the waiting of the rendering threads on `comm` (not of the helper, which waits by
     /// design).
@@ -255,17 +268,9 @@ impl<'a> WorkerSetup<'a> {
             t_amb_s: reports.iter().map(|t| t.t_amb_s).sum(),
             t_notamb_s: reports.iter().map(|t| t.t_notamb_s).sum(),
             rays: crate::stats::RayStats::sum(reports.iter().map(|t| &t.rays)),
+            wall_s: self.start.elapsed().as_secs_f64(),
             ..traffic_report(comm.rank(), role, &[comm.counters, helper, self.traffic_before], idle_s)
         }
-    }
-}
-
-fn threading_name(t: Threading) -> &'static str {
-    match t {
-        Threading::Single => "MPI_THREAD_SINGLE",
-        Threading::Funneled => "MPI_THREAD_FUNNELED",
-        Threading::Serialized => "MPI_THREAD_SERIALIZED",
-        Threading::Multiple => "MPI_THREAD_MULTIPLE",
     }
 }
 
@@ -281,7 +286,7 @@ fn check_threads(mode: Mode, threads: usize, granted: Threading) -> Result<(), S
         return Err(format!(
             "--mode {} with {threads} thread(s) per rank needs MPI_THREAD_MULTIPLE, but the MPI library grants only {}",
             mode.name(),
-            threading_name(granted)
+            format!("MPI_THREAD_{granted:?}").to_uppercase()
         ));
     }
     Ok(())
@@ -321,39 +326,6 @@ fn stop_together(comm: &Comm<'_>, line: Option<&str>) -> CommandResult {
     }
     comm.barrier();
     Err(CommandError::input(String::new()))
-}
-
-/// What the worker ranks are, chosen alike on every rank.
-enum Layout {
-    /// A traditional mode's workers, sharing records its way.
-    Traditional(WorkerSharing),
-    /// Component mode's PAs and PRs.
-    Component(component::Roles),
-}
-
-impl Layout {
-    /// Every rank reaches the same verdict from the same scene and options.
-    fn choose(job_in: &ParallelJob<'_>, job: &Job, size: i32) -> Result<Layout, String> {
-        Ok(match job_in.mode {
-            Mode::Component => {
-                let needed = job.cache.is_some() || (job.shading.ambient_bounces > 0 && job.scene.needs().diffuse);
-                Layout::Component(component::Roles::choose(size, job_in.pa, needed)?)
-            }
-            Mode::Centralised => Layout::Traditional(WorkerSharing::ThroughMaster),
-            Mode::Broadcast => Layout::Traditional(WorkerSharing::ToEveryone),
-            _ => Layout::Traditional(WorkerSharing::Kept),
-        })
-    }
-}
-
-/// A rank once every rank has its job and the prepass (if any) is done.
-struct Ready<'a, 'c> {
-    job_in: &'a ParallelJob<'a>,
-    comm: &'a Comm<'c>,
-    job: Job,
-    tiles: Vec<Tile>,
-    hosts: Hosts,
-    prepass: Option<crate::prepass::PrepassOutcome>,
 }
 
 pub fn run(job_in: &ParallelJob<'_>) -> CommandResult {
@@ -397,8 +369,9 @@ pub fn run(job_in: &ParallelJob<'_>) -> CommandResult {
     let checkpoint = if rank == 0 {
         // Rank 0 alone writes images; the other ranks never open the image library.
         crate::sys::image_io::open_in_background();
-        host.check_outputs().unwrap_or_else(|e| fatal(&comm, &e));
-        host.open_checkpoint(&all_tiles).unwrap_or_else(|e| fatal(&comm, &e))
+        host.check_outputs().unwrap_or_else(|e| end_job(&comm, None, &e));
+        host.open_checkpoint(&all_tiles)
+            .unwrap_or_else(|e| end_job(&comm, None, &e))
     } else {
         None
     };
@@ -425,110 +398,46 @@ pub fn run(job_in: &ParallelJob<'_>) -> CommandResult {
             .unwrap_or_else(|e| end_job(&comm, job.cache.as_ref(), &e))
     });
     job.prepass_threads = prepass.as_ref().map(|p| p.threads.clone()).unwrap_or_default();
-    let layout = match Layout::choose(job_in, &job, size) {
-        Ok(layout) => layout,
+    // Component mode's PAs and PRs: every rank chooses alike from the same scene and options.
+    let roles = (job_in.mode == Mode::Component).then(|| {
+        let needed = job.cache.is_some() || (job.shading.ambient_bounces > 0 && job.scene.needs().diffuse);
+        Roles::choose(size, job_in.pa, needed)
+    });
+    let roles = match roles.transpose() {
+        Ok(roles) => roles,
         Err(e) => return fail(e),
     };
-    let ready = Ready {
+    let setup = Setup {
         job_in,
-        comm: &comm,
         job,
         tiles: all_tiles,
         hosts,
         prepass,
+        checkpoint,
+        sync: SyncThreshold::of(job_in.sync, roles.is_some()),
+        traffic_before: &counters,
+        start: Instant::now(),
     };
     if rank == 0 {
-        ready.master(layout, checkpoint, wall)?;
+        master::run(&comm, &setup, roles, wall)?;
     } else {
-        ready.work(&layout);
+        work(&comm, setup, roles.as_ref());
     }
     drop(session);
     Ok(())
 }
 
-impl Ready<'_, '_> {
-    /// A worker rank's part: a traditional mode's worker, or component mode's PA or PR.
-    fn work(mut self, layout: &Layout) {
-        let (job_in, comm) = (self.job_in, self.comm);
-        let keeps_outbox = !matches!(layout, Layout::Traditional(WorkerSharing::Kept)) || job_in.cache_file;
-        if keeps_outbox && let Some(cache) = self.job.cache.as_mut() {
-            cache.keep_outbox();
-        }
-        let setup = WorkerSetup::new(&self.job, &self.tiles, comm.counters);
-        match layout {
-            Layout::Traditional(way) => {
-                let sync = SyncThreshold::of(job_in.sync, SyncThreshold::TRADITIONAL);
-                worker::run(&setup, *way, sync, job_in.cache_file);
-            }
-            Layout::Component(roles) => {
-                let sync = SyncThreshold::of(job_in.sync, SyncThreshold::COMPONENT);
-                if roles.pas.contains(&comm.rank()) {
-                    let bound = job_in.pa_queue.max(1) as usize;
-                    component::pa::run(&setup, sync, job_in.seed, job_in.journal, bound);
-                } else {
-                    let send_at = job_in.send.max(1) as usize;
-                    component::pr::run(&setup, roles, send_at, sync, job_in.seed, job_in.journal);
-                }
-            }
-        }
+/// A worker rank's part: a traditional mode's worker, or component mode's PA or PR.
+fn work(comm: &Comm<'_>, mut setup: Setup<'_>, roles: Option<&Roles>) {
+    if (setup.job_in.mode != Mode::Noshare || setup.job_in.cache_file)
+        && let Some(cache) = setup.job.cache.as_mut()
+    {
+        cache.keep_outbox();
     }
-
-    /// The master's part: the one master with the mode's policy, then the image, its statistics
-    /// and the table.
-    fn master(self, layout: Layout, checkpoint: Option<(Checkpoint, Restored)>, wall: Instant) -> CommandResult {
-        let (job_in, comm, job, prepass) = (self.job_in, self.comm, &self.job, &self.prepass);
-        let threads = job_in.threads.unwrap_or(1);
-        let mut sharing: Box<dyn master::Sharing> = match layout {
-            Layout::Traditional(way) => Box::new(TraditionalSharing::new(way, threads)),
-            Layout::Component(roles) => {
-                if !job_in.quiet {
-                    eprintln!("icrender: {}", roles.describe());
-                    if roles.pas.is_empty() {
-                        eprintln!(
-                            "icrender: the scene has no indirect diffuse work (-ab 0 or no diffuse surface): no PA is needed"
-                        );
-                    }
-                }
-                Box::new(component::master::ComponentSharing::new(roles))
-            }
-        };
-        let resume = checkpoint.as_ref().map(|(journal, restored)| (journal, restored));
-        let plan = master::Plan {
-            tiles: &self.tiles,
-            width: job_in.width,
-            height: job_in.height,
-            cache: job.cache.as_ref(),
-            timeout: job_in.silence_limit,
-            hosts: &self.hosts,
-            resume,
-            workers_have_cache: prepass.is_some(),
-        };
-        let result =
-            master::run(comm, &plan, sharing.as_mut()).unwrap_or_else(|e| end_job(comm, job.cache.as_ref(), &e));
-        if let Some(cache) = &job.cache
-            && let Err(e) = cache.finish()
-        {
-            warn(&format!("cache file not fully written: {e}"));
-        }
-        let mut stats = RenderStats {
-            threads,
-            ..job_in
-                .host
-                .job_stats(job, job_in.mode.name(), comm.size() as usize, result.render_s)
-        };
-        stats.tiles_restored = resume.map_or(0, |(_, r)| r.count()) as u64;
-        stats.add_ranks(result.ranks);
-        let mut frame = result.frame;
-        if let Some(prepass) = prepass {
-            stats.add_prepass(prepass);
-            crate::render::add_prepass_records(&mut frame, prepass);
-        }
-        stats.wall_s = wall.elapsed().as_secs_f64();
-        job_in.host.write(job, &frame, &stats).map_err(CommandError::failed)?;
-        if !job_in.quiet {
-            print_table(&stats);
-        }
-        Ok(())
+    match roles {
+        None => worker::run(&setup),
+        Some(roles) if roles.pas.contains(&comm.rank()) => component::pa::run(&setup),
+        Some(roles) => component::pr::run(&setup, roles),
     }
 }
 
@@ -540,56 +449,6 @@ pub(crate) fn end_job(comm: &Comm<'_>, cache: Option<&IrradianceCache>, message:
     }
     crate::commands::error(message);
     comm.abort(1)
-}
-
-/// Says why this rank cannot go on and ends every rank of the job.
-fn fatal(comm: &Comm<'_>, message: &str) -> ! {
-    if comm.rank() == 0 {
-        crate::commands::error(message);
-    } else {
-        crate::commands::error(&format!("rank {}: {message}", comm.rank()));
-    }
-    comm.abort(1)
-}
-
-/// The per-rank statistics as a table on stderr.
-fn print_table(stats: &RenderStats) {
-    eprintln!(
-        "icrender: {} mode, {} ranks, {}x{} in {:.2} s",
-        stats.mode, stats.ranks, stats.width, stats.height, stats.render_s
-    );
-    eprintln!(
-        "{:>4} {:>6} {:>6} {:>9} {:>9} {:>8} {:>9} {:>8} {:>8} {:>11}",
-        "rank", "role", "tiles", "records", "lookups", "T_amb", "T_notamb", "idle", "msgs", "bytes"
-    );
-    for r in &stats.per_rank {
-        eprintln!(
-            "{:>4} {:>6} {:>6} {:>9} {:>9} {:>8.2} {:>9.2} {:>8.2} {:>8} {:>11}",
-            r.rank,
-            r.role,
-            r.tiles,
-            r.records_computed,
-            r.lookups,
-            r.t_amb_s,
-            r.t_notamb_s,
-            r.idle_s,
-            r.messages,
-            r.bytes
-        );
-    }
-    eprintln!(
-        "{:>4} {:>6} {:>6} {:>9} {:>9} {:>8.2} {:>9.2} {:>8.2} {:>8} {:>11}",
-        "all",
-        "",
-        stats.per_rank.iter().map(|r| r.tiles).sum::<usize>(),
-        stats.records_computed,
-        stats.lookups,
-        stats.t_amb_s,
-        stats.t_notamb_s,
-        stats.idle_s,
-        stats.messages,
-        stats.bytes
-    );
 }
 
 #[cfg(test)]

@@ -1,22 +1,25 @@
-//! A worker rank of the traditional modes (paper, section 4): asks the master for tiles, renders
-//! them with its own cache, and shares new records the mode's way: not at all (noshare),
-//! through the master (centralised), or with every other rank (broadcast, with a receiving
-//! thread that merges incoming records while the rendering threads go on).
+//! The traditional modes (paper, section 4): a worker rank asks the master for tiles, renders
+//! them with its own cache, and shares new records the mode's way: not at all (noshare; with
+//! -af they come to the master at the end), through the master, which answers with the records
+//! the worker lacks (centralised), or with every other rank (broadcast, with a receiving thread
+//! that merges incoming records while the rendering threads go on; the master keeps them for
+//! the file). `TraditionalSharing` is the master's policy for them. In each, workers start from
+//! the cache file's records and the render is complete once every rendering thread has been
+//! told "no tile left" and every rank has reported (in broadcast mode, also once every worker's
+//! last batch has arrived).
 
 use super::comm::{Comm, Counters, kind};
+use super::master::{MasterCore, Sharing};
 use super::protocol::{FinishedTile, Kind, Message, Records};
-use super::sharing::WorkerSharing;
-use super::{Intake, SyncThreshold, WorkerSetup, send_report};
+use super::{Intake, Mode, Setup, send_report};
 use crate::irradiance::IrradianceCache;
 use crate::render::{ThreadClock, ThreadStats, render_tile};
 use std::sync::Mutex;
-use std::time::Instant;
 
-/// How this worker's rendering threads share records: the mode's way, every `sync` new
+/// How this worker's rendering threads share records: the mode's way, every --sync new
 /// records, one thread at a time; and the records that came back.
 struct Sharer<'a> {
-    way: WorkerSharing,
-    sync: SyncThreshold,
+    setup: &'a Setup<'a>,
     cache: Option<&'a IrradianceCache>,
     /// Held while a thread shares: the others render on instead of waiting to share too.
     lock: Mutex<()>,
@@ -27,8 +30,8 @@ impl Sharer<'_> {
     /// After a pixel: shares if the cache has gathered enough and no other thread is sharing.
     fn after_pixel(&self, comm: &Comm<'_>, thread: u32) {
         if let Some(cache) = self.cache
-            && self.way != WorkerSharing::Kept
-            && self.sync.reached(cache.outbox_len())
+            && self.setup.job_in.mode != Mode::Noshare
+            && self.setup.sync.reached(cache.outbox_len())
             && let Ok(_guard) = self.lock.try_lock()
         {
             self.share(comm, thread, false);
@@ -36,16 +39,19 @@ impl Sharer<'_> {
     }
 
     /// Sends what the cache has gathered since the last share, the mode's way. `thread` is the
-    /// calling rendering thread (replies come back on its own tag). The `end` of broadcasting
-    /// is marked, records or none (without a cache too): every receiver waits for the marker.
+    /// calling rendering thread (replies come back on its own tag). At the `end`, noshare sends
+    /// the master its records for the -af file, and broadcast marks its end, records or none
+    /// (without a cache too): every receiver waits for the marker.
     fn share(&self, comm: &Comm<'_>, thread: u32, end: bool) {
-        match (self.way, self.cache) {
-            (WorkerSharing::ThroughMaster, Some(cache)) if cache.outbox_len() > 0 => {
-                self.intake.sync(comm, thread, cache)
+        let outbox = || Records::from(self.cache.map_or_else(Vec::new, |c| c.take_outbox()));
+        match (self.setup.job_in.mode, self.cache) {
+            (Mode::Noshare, Some(_)) if end && self.setup.job_in.cache_file => {
+                comm.send(0, &Message::FinalRecords(outbox()));
             }
-            (WorkerSharing::ToEveryone, cache) if end || cache.is_some_and(|c| c.outbox_len() > 0) => {
+            (Mode::Centralised, Some(cache)) if cache.outbox_len() > 0 => self.intake.sync(comm, thread, cache),
+            (Mode::Broadcast, cache) if end || cache.is_some_and(|c| c.outbox_len() > 0) => {
                 let batch = Message::RecordsBroadcast {
-                    records: Records::from(cache.map_or_else(Vec::new, |c| c.take_outbox())),
+                    records: outbox(),
                     last: end,
                 };
                 // The master is a recipient too: it keeps the cache file.
@@ -81,7 +87,7 @@ fn receive_broadcasts(counters: &Counters, cache: &IrradianceCache, peers: usize
 
 /// One rendering thread: tiles from the master until there are none left, each finished tile
 /// going back with the request for the next.
-fn render_tiles(setup: &WorkerSetup<'_>, counters: &Counters, sharer: &Sharer<'_>, thread: u32) -> ThreadStats {
+fn render_tiles(setup: &Setup<'_>, counters: &Counters, sharer: &Sharer<'_>, thread: u32) -> ThreadStats {
     let comm = Comm::new(counters);
     let integrator = setup.integrator();
     let mut stats = ThreadStats::default();
@@ -115,19 +121,17 @@ fn render_tiles(setup: &WorkerSetup<'_>, counters: &Counters, sharer: &Sharer<'_
     stats
 }
 
-pub fn run(setup: &WorkerSetup<'_>, way: WorkerSharing, sync: SyncThreshold, persist_local: bool) {
+pub fn run(setup: &Setup<'_>) {
     let counters = Counters::default();
     let listener_counters = Counters::default();
     let comm = Comm::new(&counters);
-    let start = Instant::now();
     let cache = setup.cache();
     let initial = comm.receive(&[kind(Some(0), Kind::InitialRecords)], None);
     if let (Some(cache), Some(Ok(Message::InitialRecords(records)))) = (cache, initial.map(|m| m.message)) {
         records.records.into_iter().for_each(|r| cache.insert_shared(r));
     }
     let sharer = Sharer {
-        way,
-        sync,
+        setup,
         cache,
         lock: Mutex::new(()),
         intake: Intake::default(),
@@ -135,8 +139,8 @@ pub fn run(setup: &WorkerSetup<'_>, way: WorkerSharing, sync: SyncThreshold, per
     let threads = setup.job.settings.threads.max(1) as u32;
     let peers = comm.size() as usize - 2;
     let thread_stats: Vec<ThreadStats> = std::thread::scope(|scope| {
-        let listener = match (way, cache) {
-            (WorkerSharing::ToEveryone, Some(cache)) => {
+        let listener = match (setup.job_in.mode, cache) {
+            (Mode::Broadcast, Some(cache)) => {
                 Some(scope.spawn(|| receive_broadcasts(&listener_counters, cache, peers, &sharer.intake)))
             }
             _ => None,
@@ -150,13 +154,7 @@ pub fn run(setup: &WorkerSetup<'_>, way: WorkerSharing, sync: SyncThreshold, per
         let stats = renderers.into_iter().map(|r| r.join().unwrap_or_default()).collect();
         // What is left to share goes out now; broadcast ends with the end marker so every
         // receiver knows when it has everything.
-        match (way, cache) {
-            (WorkerSharing::Kept, Some(cache)) if persist_local => {
-                comm.send(0, &Message::FinalRecords(Records::from(cache.take_outbox())));
-            }
-            (WorkerSharing::Kept, _) => {}
-            _ => sharer.share(&comm, 0, true),
-        }
+        sharer.share(&comm, 0, true);
         if let Some(listener) = listener {
             let _ = listener.join();
         }
@@ -165,6 +163,48 @@ pub fn run(setup: &WorkerSetup<'_>, way: WorkerSharing, sync: SyncThreshold, per
 
     let mut report = setup.report(&comm, "worker", thread_stats, &listener_counters);
     (report.records_received, report.records_rejected) = sharer.intake.totals();
-    report.wall_s = start.elapsed().as_secs_f64();
     send_report(&comm, report);
+}
+
+/// The master's side of a traditional mode.
+pub struct TraditionalSharing {
+    mode: Mode,
+    /// The threads that ask for tiles on each worker.
+    threads_per_worker: usize,
+    /// Broadcast: workers whose last batch has arrived.
+    ended: usize,
+}
+
+impl TraditionalSharing {
+    pub fn new(mode: Mode, threads_per_worker: usize) -> Self {
+        TraditionalSharing {
+            mode,
+            threads_per_worker,
+            ended: 0,
+        }
+    }
+}
+
+impl Sharing for TraditionalSharing {
+    fn on_message(&mut self, core: &mut MasterCore<'_, '_>, source: i32, message: Message) -> Result<(), String> {
+        match (self.mode, message) {
+            (Mode::Noshare, Message::FinalRecords(records)) => {
+                core.relay.keep(records);
+            }
+            (Mode::Centralised, Message::RecordsUp { thread, records }) => core.sync(source, thread, records),
+            (Mode::Broadcast, Message::RecordsBroadcast { records, last }) => {
+                core.relay.keep(records);
+                self.ended += usize::from(last);
+            }
+            (_, other) => {
+                return Err(format!("rank {source} sent an unexpected message ({:?})", other.kind()));
+            }
+        }
+        Ok(())
+    }
+
+    fn finished(&self, core: &MasterCore<'_, '_>) -> bool {
+        let all_ended = self.mode != Mode::Broadcast || self.ended == core.workers();
+        core.turned_away == core.workers() * self.threads_per_worker && core.every_report_in() && all_ended
+    }
 }

@@ -44,7 +44,7 @@ impl ComponentSharing {
 impl Sharing for ComponentSharing {
     fn start(&mut self, core: &mut MasterCore<'_, '_>) {
         // The cache file's records: PAs get them now, PRs with their first tile.
-        let initial = core.plan.initial_records();
+        let initial = core.setup.initial_records();
         core.relay.preload(initial.records);
         for &pa in &self.roles.pas {
             let records = core.relay.catch_up(pa as usize);
@@ -98,7 +98,7 @@ impl Sharing for ComponentSharing {
             .map(|&r| {
                 format!(
                     "PA {r} (rank {r}, host {}, last queue {}, computed {})",
-                    core.plan.hosts.of(r),
+                    core.setup.hosts.of(r),
                     self.balancer.queue(r),
                     self.ledger.computed_by(r)
                 )
@@ -108,7 +108,7 @@ impl Sharing for ComponentSharing {
             .ledger
             .unflushed()
             .iter()
-            .map(|r| format!("PR {r} (host {})", core.plan.hosts.of(*r)))
+            .map(|r| format!("PR {r} (host {})", core.setup.hosts.of(*r)))
             .collect();
         let list = |what: &str, items: &[String]| {
             if items.is_empty() {
@@ -121,7 +121,7 @@ impl Sharing for ComponentSharing {
             "rank {} (host {}) has been silent for {:.0} s; {}{}missing: the indirect light of every pixel whose \
              requests those ranks held, and the pixels of unfinished PRs (requests reported sent {}, computed {})",
             lost.rank,
-            core.plan.hosts.of(lost.rank),
+            core.setup.hosts.of(lost.rank),
             lost.seconds,
             list("silent", &quiet),
             list("unfinished", &unfinished),
@@ -145,10 +145,10 @@ impl Sharing for ComponentSharing {
             let awaited = |r: i32| !has_image[r as usize] || reports[r as usize].is_none();
             let (source, message) = core
                 .receive(awaited)
-                .map_err(|lost| format!("{}; its image is missing", lost_rank(&lost, core.plan.hosts)))?;
+                .map_err(|lost| format!("{}; its image is missing", lost_rank(&lost, &core.setup.hosts)))?;
             match message? {
                 Message::Image(floats) => {
-                    let part = FrameBuffer::from_floats(core.plan.width, core.plan.height, &floats)
+                    let part = FrameBuffer::from_floats(core.setup.job_in.width, core.setup.job_in.height, &floats)
                         .ok_or_else(|| format!("rank {source} sent an image of the wrong size"))?;
                     core.frame.accumulate(&part);
                     has_image[source as usize] = true;

@@ -61,20 +61,13 @@ pub struct Roles {
 impl Roles {
     /// `pa`: the requested number of PAs (default half the workers, at least one); `needed`:
     /// whether the scene has indirect diffuse work at all (without it, every worker is a PR).
+    /// Too few ranks leave no PR (`check_layout` has said so already).
     pub fn choose(size: i32, pa: Option<u32>, needed: bool) -> Result<Roles, String> {
         let workers = size - 1;
-        if workers < 1 {
-            return Err(format!(
-                "--mode component needs at least 2 MPI ranks (a master and a PR); got {size}"
-            ));
-        }
-        let count = if !needed {
-            0
-        } else {
-            match pa {
-                Some(n) => n as i32,
-                None => (workers / 2).max(1),
-            }
+        let count = match pa {
+            _ if !needed => 0,
+            Some(n) => n as i32,
+            None => (workers / 2).max(1),
         };
         if needed && count < 1 {
             return Err("--pa 0 leaves no PA to compute indirect diffuse light".into());

@@ -2,8 +2,9 @@
 //! process) receives request buffers from PRs into a queue and carries out the master's
 //! forward orders; the computing thread takes requests (those at the overture's grid pixels
 //! first, see `order`), answers each from the PA's cache or computes a new record, multiplies
-//! by the request's coefficient and adds it to the PA's own image. Every --sync new records, and whenever its queue runs dry, it syncs with the
-//! master, reporting its queue length and how many requests it has computed.
+//! by the request's coefficient and adds it to the PA's own image. Every --sync new records,
+//! and whenever its queue runs dry, it syncs with the master, reporting its queue length and
+//! how many requests it has computed.
 
 use super::order::RequestQueue;
 use super::{compute_request, send_results};
@@ -11,11 +12,11 @@ use crate::image::framebuffer::FrameBuffer;
 use crate::irradiance::IrradianceCache;
 use crate::parallel::comm::{Comm, Counters, kind};
 use crate::parallel::protocol::{Kind, Message, Records, Requests};
-use crate::parallel::{Intake, SyncThreshold, WorkerSetup, send_report};
+use crate::parallel::{Intake, Setup, send_report};
 use crate::render::{ThreadClock, ThreadStats};
 use crate::shading::request::AmbientRequest;
-use crate::shading::request::RequestResult;
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::AtomicU64;
+use std::sync::atomic::Ordering::{AcqRel, Acquire, Relaxed};
 use std::sync::{Condvar, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
@@ -26,14 +27,30 @@ struct Queued {
     longest: usize,
 }
 
-/// The requests the communicating thread queues and the computing thread takes, and the
-/// signal that some came (or FINISH did).
-struct Queue {
+/// What the communicating thread and the computing thread share.
+struct Shared<'a> {
+    /// The requests the communicating thread queues and the computing thread takes, and the
+    /// signal that some came (or FINISH did).
     queued: Mutex<Queued>,
     ready: Condvar,
+    /// Requests handed to helpers, and requests (or whole batches) refused as malformed.
+    forwarded: AtomicU64,
+    rejected: AtomicU64,
+    /// Nanoseconds spent decoding arriving request batches and queueing them.
+    handling_ns: AtomicU64,
+    /// Where the master's replies to this PA's statuses go: the records the PA lacks. The PA
+    /// does not wait for them (a PA that waited for every reply spent its time polling MPI, as
+    /// CPU outside L_a and as idle time): the communicating thread takes them in as they come,
+    /// straight into the shared cache, and the computing thread takes in what is still owed at
+    /// the end. Taking them in promptly matters: a large reply goes by rendezvous, and the
+    /// master's send blocks until this rank receives it.
+    cache: Option<&'a IrradianceCache>,
+    /// Statuses sent whose reply has not been taken in.
+    pending: AtomicU64,
+    intake: Intake,
 }
 
-impl Queue {
+impl Shared<'_> {
     fn lock(&self) -> MutexGuard<'_, Queued> {
         self.queued.lock().unwrap_or_else(|e| e.into_inner())
     }
@@ -50,37 +67,12 @@ impl Queue {
                 .unwrap_or_else(|e| e.into_inner())
                 .0;
         }
-        idle_ns.fetch_add(waited.elapsed().as_nanos() as u64, Ordering::Relaxed);
+        idle_ns.fetch_add(waited.elapsed().as_nanos() as u64, Relaxed);
         q.requests.is_empty() && q.finish
     }
-}
 
-/// What the communicating thread counts for the PA's report: requests handed to helping PRs,
-/// and requests (or whole batches) refused as malformed.
-#[derive(Default)]
-struct Tallies {
-    forwarded: AtomicU64,
-    rejected: AtomicU64,
-    /// Nanoseconds spent decoding arriving request batches and queueing them.
-    handling_ns: AtomicU64,
-}
-
-/// The master's replies to this PA's status messages: the records the PA lacks. The PA does not
-/// wait for them (a PA that waited for every reply spent its time polling MPI, as CPU outside
-/// L_a and as idle time): the communicating thread takes them in as they come, straight into
-/// the shared cache, and the computing thread takes in what is still owed at the end. Taking
-/// them in promptly matters: a large reply goes by rendezvous, and the master's send blocks
-/// until this rank receives it.
-struct Replies<'a> {
-    cache: Option<&'a IrradianceCache>,
-    /// Statuses sent whose reply has not been taken in.
-    pending: AtomicU64,
-    intake: Intake,
-}
-
-impl Replies<'_> {
-    fn take(&self, records: Records) {
-        self.pending.fetch_sub(1, Ordering::AcqRel);
+    fn take_reply(&self, records: Records) {
+        self.pending.fetch_sub(1, AcqRel);
         if let Some(cache) = self.cache {
             self.intake.take(cache, records);
         }
@@ -95,14 +87,7 @@ impl Replies<'_> {
 /// too large to go eagerly waits until its receiver takes it, and two PAs ordered to feed each
 /// other (each ran dry in turn) each waited in its send for the other, which was not receiving
 /// (seen once in the paper bench: conference room, 4 workers, the job hung).
-fn communicate(
-    counters: &Counters,
-    queue: &Queue,
-    pixels: u32,
-    tallies: &Tallies,
-    replies: &Replies<'_>,
-    bound: usize,
-) {
+fn communicate(counters: &Counters, shared: &Shared<'_>, pixels: u32, bound: usize) {
     let comm = Comm::new(counters);
     // Replies before FINISH: the master sends FINISH after every reply it owed, so all of them
     // are in before FINISH is taken.
@@ -116,7 +101,7 @@ fn communicate(
     ];
     std::thread::scope(|senders| {
         loop {
-            let full = queue.lock().requests.len() >= bound;
+            let full = shared.lock().requests.len() >= bound;
             // Full: only the master's messages, looking again at the queue every few milliseconds.
             let (accepted, wait) = if full {
                 (&filters[..3], Some(Duration::from_millis(2)))
@@ -127,31 +112,30 @@ fn communicate(
                 continue;
             };
             match msg.message {
-                Ok(Message::RecordsDown { records, .. }) => replies.take(records),
+                Ok(Message::RecordsDown { records, .. }) => shared.take_reply(records),
                 Ok(Message::Requests(decoded)) | Ok(Message::Forwarded(decoded)) => {
                     let handling = Instant::now();
                     // Refused requests still count as done, so the master's totals close.
                     let (inside, outside): (Vec<AmbientRequest>, Vec<AmbientRequest>) =
                         decoded.requests.into_iter().partition(|r| r.pixel < pixels);
-                    tallies
-                        .rejected
-                        .fetch_add((decoded.rejected + outside.len()) as u64, Ordering::Relaxed);
-                    let mut q = queue.lock();
+                    let rejected = decoded.rejected + outside.len();
+                    shared.rejected.fetch_add(rejected as u64, Relaxed);
+                    let mut q = shared.lock();
                     q.requests.extend(inside);
                     q.longest = q.longest.max(q.requests.len());
                     drop(q);
-                    queue.ready.notify_one();
-                    tallies
+                    shared.ready.notify_one();
+                    shared
                         .handling_ns
-                        .fetch_add(handling.elapsed().as_nanos() as u64, Ordering::Relaxed);
+                        .fetch_add(handling.elapsed().as_nanos() as u64, Relaxed);
                 }
                 Ok(Message::ForwardOrder { to, count, to_pa }) => {
                     // A PR waits for its share, empty or not; a PA that ran dry does not (see
                     // component::balancer), and an empty share sent to it could arrive after FINISH.
                     // The newest requests go: the PA keeps working through the oldest (see
                     // RequestQueue::take_newest).
-                    let share = queue.lock().requests.take_newest(count as usize);
-                    tallies.forwarded.fetch_add(share.len() as u64, Ordering::Relaxed);
+                    let share = shared.lock().requests.take_newest(count as usize);
+                    shared.forwarded.fetch_add(share.len() as u64, Relaxed);
                     if !(to_pa && share.is_empty()) {
                         // Every share is received before the job ends (a PR waits for its own, and
                         // a PA's are requests the master waits to see computed), so the scope's
@@ -162,11 +146,11 @@ fn communicate(
                 }
                 // A batch that cannot be read: counted, never trusted.
                 Err(_) => {
-                    tallies.rejected.fetch_add(1, Ordering::Relaxed);
+                    shared.rejected.fetch_add(1, Relaxed);
                 }
                 _ => {
-                    queue.lock().finish = true;
-                    queue.ready.notify_all();
+                    shared.lock().finish = true;
+                    shared.ready.notify_all();
                     break;
                 }
             }
@@ -174,16 +158,13 @@ fn communicate(
     });
 }
 
-/// `journal`: --checkpoint is on, so computed requests are reported to the master.
-/// `bound`: the most requests the queue takes (see `communicate`).
-pub fn run(setup: &WorkerSetup<'_>, sync: SyncThreshold, seed: u64, journal: bool, bound: usize) {
+pub fn run(setup: &Setup<'_>) {
     let counters = Counters::default();
     let comm_counters = Counters::default();
     let comm = Comm::new(&counters);
-    let start = Instant::now();
     let (width, height) = (setup.job.camera.width, setup.job.camera.height);
     let cache = setup.cache();
-    let queue = Queue {
+    let shared = Shared {
         queued: Mutex::new(Queued {
             // The overture's grid orders the queue (see `order`; 0: arrival order). A PR makes
             // no records before its pixels (its misses go to the PAs): it renders the grid's
@@ -193,9 +174,9 @@ pub fn run(setup: &WorkerSetup<'_>, sync: SyncThreshold, seed: u64, journal: boo
             longest: 0,
         }),
         ready: Condvar::new(),
-    };
-    let tallies = Tallies::default();
-    let replies = Replies {
+        forwarded: AtomicU64::new(0),
+        rejected: AtomicU64::new(0),
+        handling_ns: AtomicU64::new(0),
         cache,
         pending: AtomicU64::new(0),
         intake: Intake::default(),
@@ -207,18 +188,19 @@ pub fn run(setup: &WorkerSetup<'_>, sync: SyncThreshold, seed: u64, journal: boo
         batch.records.into_iter().for_each(|r| cache.insert_shared(r));
     }
 
+    let (seed, journal) = (setup.job_in.seed, setup.job_in.journal);
+    let bound = setup.job_in.pa_queue.max(1) as usize;
     let mut frame = FrameBuffer::new(width, height);
     let mut stats = ThreadStats::default();
     let (mut done, mut reported) = (0u64, u64::MAX);
     let mut queue_samples = Vec::new();
-    let mut results: Vec<RequestResult> = Vec::new();
+    let mut results = Vec::new();
     std::thread::scope(|scope| {
-        let comm_thread =
-            scope.spawn(|| communicate(&comm_counters, &queue, width * height, &tallies, &replies, bound));
+        let comm_thread = scope.spawn(|| communicate(&comm_counters, &shared, width * height, bound));
         let integrator = setup.integrator();
         let clock = ThreadClock::start();
         loop {
-            let next = queue.lock().requests.pop();
+            let next = shared.lock().requests.pop();
             // The queue length to report: a sync every --sync new records, and before going
             // idle, when the master must know everything done so far (the queue may also have
             // been emptied by a forward order while a request was computed).
@@ -227,13 +209,13 @@ pub fn run(setup: &WorkerSetup<'_>, sync: SyncThreshold, seed: u64, journal: boo
                     let kept = journal.then_some(&mut results);
                     compute_request(&integrator, &request, seed, &mut stats.rays, &mut frame, kept);
                     done += 1;
-                    if !sync.reached(cache.map_or(0, |c| c.outbox_len())) {
+                    if !setup.sync.reached(cache.map_or(0, |c| c.outbox_len())) {
                         continue;
                     }
-                    queue.lock().requests.len()
+                    shared.lock().requests.len()
                 }
                 None if done == reported => {
-                    if queue.wait(&counters.idle_ns) {
+                    if shared.wait(&counters.idle_ns) {
                         break;
                     }
                     continue;
@@ -242,18 +224,18 @@ pub fn run(setup: &WorkerSetup<'_>, sync: SyncThreshold, seed: u64, journal: boo
             };
             // The sync: new records up, and the queue length and the count of computed
             // requests, which the master's termination check relies on. The results go first
-            // (the status counts them as done); the reply is not waited for (see `Replies`).
+            // (the status counts them as done); the reply is not waited for (see `Shared`).
             send_results(&comm, &mut results);
             let records = cache.map_or_else(Vec::new, |c| c.take_outbox());
-            replies.pending.fetch_add(1, Ordering::AcqRel);
+            shared.pending.fetch_add(1, AcqRel);
             let status = Message::PaStatus {
                 queue: left as u64,
                 // Refused requests count as done: the PR counted them as sent.
-                done: done + tallies.rejected.load(Ordering::Relaxed),
+                done: done + shared.rejected.load(Relaxed),
                 records: Records::from(records),
             };
             comm.send(0, &status);
-            queue_samples.push((start.elapsed().as_secs_f64(), left as u32));
+            queue_samples.push((setup.start.elapsed().as_secs_f64(), left as u32));
             reported = done;
         }
         clock.stop(&mut stats);
@@ -261,25 +243,24 @@ pub fn run(setup: &WorkerSetup<'_>, sync: SyncThreshold, seed: u64, journal: boo
     });
     // A status sent after FINISH (the last sync) still has its reply coming: the master answers
     // every status, also after FINISH.
-    while replies.pending.load(Ordering::Acquire) > 0 {
+    while shared.pending.load(Acquire) > 0 {
         match comm
             .receive(&[kind(Some(0), Kind::RecordsDown)], None)
             .map(|r| r.message)
         {
-            Some(Ok(Message::RecordsDown { records, .. })) => replies.take(records),
+            Some(Ok(Message::RecordsDown { records, .. })) => shared.take_reply(records),
             _ => break,
         }
     }
 
     comm.send(0, &Message::Image(frame.to_floats()));
     let mut report = setup.report(&comm, "pa", vec![stats], &comm_counters);
-    report.records_received = replies.intake.totals().0;
-    report.records_rejected = tallies.rejected.load(Ordering::Relaxed);
+    report.records_received = shared.intake.totals().0;
+    report.records_rejected = shared.rejected.load(Relaxed);
     report.requests_computed = done;
-    report.requests_forwarded = tallies.forwarded.load(Ordering::Relaxed);
-    report.request_handling_s = tallies.handling_ns.load(Ordering::Relaxed) as f64 * 1e-9;
+    report.requests_forwarded = shared.forwarded.load(Relaxed);
+    report.request_handling_s = shared.handling_ns.load(Relaxed) as f64 * 1e-9;
     report.queue_lengths = queue_samples;
-    report.queue_max = queue.lock().longest as u64;
-    report.wall_s = start.elapsed().as_secs_f64();
+    report.queue_max = shared.lock().longest as u64;
     send_report(&comm, report);
 }

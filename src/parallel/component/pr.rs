@@ -5,17 +5,17 @@
 //! forwarded from a loaded PA. Its image goes to the master only at the end.
 
 use super::{Roles, compute_request, send_results};
-use crate::checkpoint::RequestResult;
 use crate::image::framebuffer::FrameBuffer;
 use crate::parallel::comm::{Comm, Counters, Marker, kind};
 use crate::parallel::protocol::{FinishedTile, Kind, Message, Records, Requests};
-use crate::parallel::{Intake, SyncThreshold, WorkerSetup, send_report};
+use crate::parallel::{Intake, Setup, send_report};
 use crate::render::{ThreadClock, ThreadStats, render_tile};
 use crate::shading::Integrator;
 use crate::shading::request::RequestBuffer;
 use crate::tiles::store_tile;
 use std::collections::HashMap;
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::AtomicU64;
+use std::sync::atomic::Ordering::Relaxed;
 use std::sync::mpsc::{Receiver, SyncSender, TrySendError, sync_channel};
 use std::time::Instant;
 
@@ -32,11 +32,10 @@ struct Sender<'c> {
     outbox: Option<SyncSender<(i32, Message)>>,
     /// Where the renderer's waits for a full outbox are counted (its idle time).
     idle_ns: &'c AtomicU64,
-    pas: &'c [i32],
-    /// Each tile's PA (an index into `pas`).
-    pa_of_tile: Vec<usize>,
+    /// Each tile's PA (none without PAs).
+    pa_of_tile: Vec<i32>,
     /// The PA of the tile being rendered.
-    pa: usize,
+    pa: Option<i32>,
     sent: u64,
     /// Nanoseconds spent taking, encoding and queueing batches (waits for a full outbox not
     /// included: those are idle time).
@@ -46,33 +45,24 @@ struct Sender<'c> {
 impl Sender<'_> {
     /// Requests from now on belong to this tile.
     fn start_tile(&mut self, index: u32) {
-        self.pa = self.pa_of_tile.get(index as usize).copied().unwrap_or(0);
+        self.pa = self.pa_of_tile.get(index as usize).copied();
     }
 
     /// Sends the buffered requests to the current tile's PA.
     fn send(&mut self, sink: &RequestBuffer) {
         let handling = Instant::now();
         let batch = sink.take();
-        let Some(outbox) = &self.outbox else { return };
-        if batch.is_empty() || self.pas.is_empty() {
+        let (Some(outbox), Some(pa), false) = (&self.outbox, self.pa, batch.is_empty()) else {
             return;
-        }
-        let pa = self.pas[self.pa];
+        };
         self.sent += batch.len() as u64;
-        let message = (pa, Message::Requests(Requests::from(batch)));
-        let queued = outbox.try_send(message);
+        let queued = outbox.try_send((pa, Message::Requests(Requests::from(batch))));
         self.handling_ns += handling.elapsed().as_nanos() as u64;
         if let Err(TrySendError::Full(message)) = queued {
             let waited = Instant::now();
             let _ = outbox.send(message);
-            self.idle_ns
-                .fetch_add(waited.elapsed().as_nanos() as u64, Ordering::Relaxed);
+            self.idle_ns.fetch_add(waited.elapsed().as_nanos() as u64, Relaxed);
         }
-    }
-
-    /// No more requests: the courier ends once it has delivered what it holds.
-    fn close(&mut self) {
-        self.outbox = None;
     }
 }
 
@@ -112,22 +102,17 @@ fn deliver(counters: &Counters, inbox: Receiver<(i32, Message)>) {
 /// A PR's work and what it has to show for it, through its two phases: rendering tiles, then
 /// helping.
 struct Pr<'a, 'c> {
-    setup: &'a WorkerSetup<'a>,
+    setup: &'a Setup<'a>,
     comm: Comm<'c>,
     integrator: Integrator<'a>,
     frame: FrameBuffer,
     stats: ThreadStats,
     intake: Intake,
-    /// --checkpoint is on: finished tiles and computed requests are reported to the master as
-    /// they finish.
-    journal: bool,
 }
 
-/// `journal`: --checkpoint is on (see `Pr::journal`).
-pub fn run(setup: &WorkerSetup<'_>, roles: &Roles, send_at: usize, sync: SyncThreshold, seed: u64, journal: bool) {
+pub fn run(setup: &Setup<'_>, roles: &Roles) {
     let counters = Counters::default();
     let courier_counters = Counters::default();
-    let start = Instant::now();
     let sink = RequestBuffer::default();
     let mut integrator = setup.integrator();
     if !roles.pas.is_empty() {
@@ -141,33 +126,32 @@ pub fn run(setup: &WorkerSetup<'_>, roles: &Roles, send_at: usize, sync: SyncThr
         frame: FrameBuffer::new(width, height),
         stats: ThreadStats::default(),
         intake: Intake::default(),
-        journal,
     };
     let clock = ThreadClock::start();
     let (outbox, inbox) = sync_channel(BATCHES_IN_FLIGHT);
     let mut sender = Sender {
         outbox: Some(outbox),
         idle_ns: &counters.idle_ns,
-        pas: &roles.pas,
-        pa_of_tile: pa_of_tiles(setup.tiles, roles.pas.len()),
-        pa: 0,
+        pa_of_tile: (pa_of_tiles(&setup.tiles, roles.pas.len()).into_iter())
+            .filter_map(|i| roles.pas.get(i).copied())
+            .collect(),
+        pa: None,
         sent: 0,
         handling_ns: 0,
     };
     std::thread::scope(|scope| {
         let courier = scope.spawn(|| deliver(&courier_counters, inbox));
-        pr.render_tiles(&mut sender, &sink, send_at);
+        pr.render_tiles(&mut sender, &sink);
         sender.send(&sink);
-        sender.close();
-        // Every batch must have reached its PA before this PR counts as flushed (the master may
-        // end the job once the counts close, and a PA stops taking requests then).
+        // No more requests: the courier ends once it has delivered what it holds. Every batch
+        // must have reached its PA before this PR counts as flushed (the master may end the job
+        // once the counts close, and a PA stops taking requests then).
+        sender.outbox = None;
         let waited = Instant::now();
         let _ = courier.join();
-        counters
-            .idle_ns
-            .fetch_add(waited.elapsed().as_nanos() as u64, Ordering::Relaxed);
+        counters.idle_ns.fetch_add(waited.elapsed().as_nanos() as u64, Relaxed);
     });
-    let helped = pr.help(sender.sent, seed, sync);
+    let helped = pr.help(sender.sent);
     clock.stop(&mut pr.stats);
 
     pr.comm.send(0, &Message::Image(pr.frame.to_floats()));
@@ -176,7 +160,6 @@ pub fn run(setup: &WorkerSetup<'_>, roles: &Roles, send_at: usize, sync: SyncThr
     report.requests_sent = sender.sent;
     report.request_handling_s = sender.handling_ns as f64 * 1e-9;
     report.requests_computed = helped;
-    report.wall_s = start.elapsed().as_secs_f64();
     send_report(&pr.comm, report);
 }
 
@@ -199,12 +182,13 @@ impl Pr<'_, '_> {
     }
 
     /// Tiles until the master has none left, the requests they make going out through `sender`
-    /// every `send_at`. A PR asks for its next tile as it starts the current one, so the
+    /// every --send. A PR asks for its next tile as it starts the current one, so the
     /// master's round trip overlaps the rendering instead of idling the PR between tiles (a
     /// 16x16 tile is under a millisecond of work, the round trip a few tenths). The request
     /// carries the report of the tile finished before (with --checkpoint); the records that
     /// come with the next tile are one tile older than they would have been.
-    fn render_tiles(&mut self, sender: &mut Sender<'_>, sink: &RequestBuffer, send_at: usize) {
+    fn render_tiles(&mut self, sender: &mut Sender<'_>, sink: &RequestBuffer) {
+        let send_at = self.setup.job_in.send.max(1) as usize;
         self.ask(None);
         let mut finished: Option<FinishedTile> = None;
         loop {
@@ -223,7 +207,7 @@ impl Pr<'_, '_> {
                 });
                 // The tile's last requests go to its PA now, not with the next tile's.
                 sender.send(sink);
-                if self.journal {
+                if self.setup.job_in.journal {
                     let requests = (sender.sent - sent_before) as u32;
                     finished = Some(FinishedTile {
                         tile: index,
@@ -244,9 +228,10 @@ impl Pr<'_, '_> {
     /// Helping: computes what the master has a PA forward, until it says everything is done.
     /// Each time it runs out it reports itself idle with the requests it `sent` and those it
     /// helped with so far. How many it helped with.
-    fn help(&mut self, sent: u64, seed: u64, sync: SyncThreshold) -> u64 {
+    fn help(&mut self, sent: u64) -> u64 {
+        let (seed, journal) = (self.setup.job_in.seed, self.setup.job_in.journal);
         let pixels = self.frame.width * self.frame.height;
-        let mut results: Vec<RequestResult> = Vec::new();
+        let mut results = Vec::new();
         let mut helped = 0u64;
         loop {
             let records = self.setup.cache().map_or_else(Vec::new, |c| c.take_outbox());
@@ -265,7 +250,7 @@ impl Pr<'_, '_> {
             match msg.message {
                 Ok(Message::Forwarded(decoded)) => {
                     for request in decoded.requests.iter().filter(|r| r.pixel < pixels) {
-                        let kept = self.journal.then_some(&mut results);
+                        let kept = journal.then_some(&mut results);
                         compute_request(
                             &self.integrator,
                             request,
@@ -276,7 +261,7 @@ impl Pr<'_, '_> {
                         );
                         // A helper shares its records as often as a PA does.
                         if let Some(cache) = self.setup.cache()
-                            && sync.reached(cache.outbox_len())
+                            && self.setup.sync.reached(cache.outbox_len())
                         {
                             send_results(&self.comm, &mut results);
                             self.intake.sync(&self.comm, 0, cache);
