@@ -121,12 +121,10 @@ impl<'a, 'c> MasterCore<'a, 'c> {
         let limit = self.setup.job_in.silence_limit;
         let envelope = self.comm.receive_live(&[(None, None)], limit, awaited)?;
         let source = envelope.source;
-        Ok((
-            source,
-            envelope
-                .message
-                .map_err(|e| format!("rank {source} sent a malformed message: {e}")),
-        ))
+        let message = envelope
+            .message
+            .map_err(|e| format!("rank {source} sent a malformed message: {e}"));
+        Ok((source, message))
     }
 
     /// A sync of `source`'s rendering thread `thread`: its new records join the relay, and it
@@ -189,7 +187,7 @@ pub fn run(comm: &Comm<'_>, setup: &Setup<'_>, roles: Option<Roles>, wall: Insta
     let (job_in, job) = (setup.job_in, &setup.job);
     let threads = job_in.threads.unwrap_or(1);
     let mut sharing: Box<dyn Sharing> = match roles {
-        None => Box::new(TraditionalSharing::new(job_in.mode, threads)),
+        None => Box::<TraditionalSharing>::default(),
         Some(roles) => {
             if !job_in.quiet {
                 eprintln!("icrender: {}", roles.describe());
@@ -240,10 +238,9 @@ fn control(
     sharing.start(&mut core);
     while !sharing.finished(&core) {
         let reports = &core.reports;
-        let (source, message) = match core.receive(|r| reports[r as usize].is_none()) {
-            Ok(received) => received,
-            Err(silence) => return Err(sharing.lost(&core, &silence)),
-        };
+        let (source, message) = core
+            .receive(|r| reports[r as usize].is_none())
+            .map_err(|silence| sharing.lost(&core, &silence))?;
         core.handle(sharing, source, message?)?;
     }
     if !core.queue.all_out() {

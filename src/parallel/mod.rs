@@ -51,6 +51,15 @@ impl Mode {
             Mode::Component => "component",
         }
     }
+
+    /// The paper's synchronisation threshold without --sync: how many new records a rank
+    /// gathers before it shares them. In the traditional modes every share is a round trip
+    /// through the master (or a message to every rank), paid out of rendering time; component
+    /// mode's PAs and helping PRs make every record and share them sooner, so the other PAs,
+    /// and the PRs answering lookups themselves, work with fresher caches.
+    fn default_sync(self) -> usize {
+        if self == Mode::Component { 8 } else { 50 }
+    }
 }
 
 /// What a parallel run is given by the command that starts it: typed settings, and the
@@ -62,7 +71,7 @@ pub struct ParallelJob<'a> {
     pub tile: (u32, u32),
     /// Rendering threads per rank (None: 1).
     pub threads: Option<usize>,
-    /// --sync, --send, --pa, --pa-queue (see `SyncThreshold` and component mode).
+    /// --sync, --send, --pa, --pa-queue (see `Mode::default_sync` and component mode).
     pub sync: Option<u32>,
     pub send: u32,
     pub pa: Option<u32>,
@@ -93,31 +102,6 @@ pub trait JobHost: Sync {
     fn job_stats(&self, job: &Job, mode: &'static str, ranks: usize, render_s: f64) -> RenderStats;
     /// Rank 0: writes the image, its preview and the statistics.
     fn write(&self, job: &Job, frame: &FrameBuffer, stats: &RenderStats) -> Result<(), String>;
-}
-
-/// The paper's synchronisation threshold: how many new records a rank gathers before it
-/// shares them (`--sync`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct SyncThreshold(pub usize);
-
-impl SyncThreshold {
-    /// The traditional modes' default: every share is a round trip through the master (or a
-    /// message to every rank), paid out of rendering time.
-    pub const TRADITIONAL: SyncThreshold = SyncThreshold(50);
-    /// Component mode's PAs and helping PRs make every record and share them sooner: the
-    /// other PAs, and the PRs answering lookups themselves, work with fresher caches.
-    pub const COMPONENT: SyncThreshold = SyncThreshold(8);
-
-    /// `--sync` if given (at least 1), else the mode's default.
-    pub fn of(sync: Option<u32>, component: bool) -> SyncThreshold {
-        let default = if component { Self::COMPONENT } else { Self::TRADITIONAL };
-        sync.map_or(default, |n| SyncThreshold(n.max(1) as usize))
-    }
-
-    /// Whether `gathered` new records are to be shared now.
-    pub fn reached(self, gathered: usize) -> bool {
-        gathered >= self.0
-    }
 }
 
 /// A rank's report of its messages and waiting alone: the master's.
@@ -220,8 +204,9 @@ pub struct Setup<'a> {
     /// The master's --checkpoint journal and what an earlier run finished (those tiles are not
     /// handed out).
     pub checkpoint: Option<(Checkpoint, Restored)>,
-    /// The mode's synchronisation threshold (see `SyncThreshold::of`).
-    pub sync: SyncThreshold,
+    /// New records a rank gathers before it shares them (--sync, at least 1, or the mode's
+    /// default).
+    pub sync: usize,
     /// The messages this rank sent and received before its role began (the prepass's), for
     /// its report.
     pub traffic_before: &'a Counters,
@@ -295,11 +280,10 @@ fn check_threads(mode: Mode, threads: usize, granted: Threading) -> Result<(), S
 /// Checks that the layout can work; the same answer on every rank, so every rank can stop on
 /// its own and only rank 0 needs to say why.
 fn check_layout(job: &ParallelJob<'_>, size: i32, tile_count: usize, threads: usize) -> Result<(), String> {
-    let mode = job.mode;
     if size < 2 {
         return Err(format!(
             "--mode {} needs at least 2 MPI ranks (a master and a worker); got {size}",
-            mode.name()
+            job.mode.name()
         ));
     }
     if job.sync == Some(0) {
@@ -308,8 +292,7 @@ fn check_layout(job: &ParallelJob<'_>, size: i32, tile_count: usize, threads: us
     let workers = (size - 1) as usize * threads;
     if workers > tile_count {
         return Err(format!(
-            "{} rendering threads on {} worker rank(s) but only {tile_count} tiles: use smaller --tile or fewer ranks",
-            workers,
+            "{workers} rendering threads on {} worker rank(s) but only {tile_count} tiles: use smaller --tile or fewer ranks",
             size - 1
         ));
     }
@@ -320,12 +303,12 @@ fn check_layout(job: &ParallelJob<'_>, size: i32, tile_count: usize, threads: us
 /// verdict all ranks share, rank 0 alone has one), then all meet at a barrier before any exits.
 /// A rank that exits with an error first makes mpirun kill the job, rank 0 included, before its
 /// line is out.
-fn stop_together(comm: &Comm<'_>, line: Option<&str>) -> CommandResult {
+fn stop_together(comm: &Comm<'_>, line: Option<&str>) -> CommandError {
     if let Some(line) = line {
         crate::commands::error(line);
     }
     comm.barrier();
-    Err(CommandError::input(String::new()))
+    CommandError::input(String::new())
 }
 
 pub fn run(job_in: &ParallelJob<'_>) -> CommandResult {
@@ -341,14 +324,12 @@ pub fn run(job_in: &ParallelJob<'_>) -> CommandResult {
     let (rank, size) = (comm.rank(), comm.size());
     let fail = |message: String| stop_together(&comm, (rank == 0).then_some(message.as_str()));
     let threads = job_in.threads.unwrap_or(1);
-    if let Err(e) = check_threads(job_in.mode, threads, granted).and_then(|()| host.validate()) {
-        return fail(e);
-    }
+    check_threads(job_in.mode, threads, granted)
+        .and_then(|()| host.validate())
+        .map_err(&fail)?;
     let (tile_width, tile_height) = job_in.tile;
     let all_tiles = tiles(job_in.width, job_in.height, tile_width, tile_height);
-    if let Err(e) = check_layout(job_in, size, all_tiles.len(), threads) {
-        return fail(e);
-    }
+    check_layout(job_in, size, all_tiles.len(), threads).map_err(&fail)?;
     let hosts = comm.host_names();
     // Heartbeats from here on (see `liveness`): every rank hears from its master and the master
     // from every rank while the job runs (the pulse needs MPI_THREAD_MULTIPLE). The pulse stops
@@ -363,9 +344,8 @@ pub fn run(job_in: &ParallelJob<'_>) -> CommandResult {
     let pulse = (granted == Threading::Multiple).then(|| pulse::Pulse::start(job_in.silence_limit, lost_master));
     let session = (pulse, universe);
     // From here on a failure may hit one rank only (its files, its file system): that rank says
-    // why and ends the whole job, or the others would wait for it for ever.
-    // Every rank loads the scene; only the master opens the cache file.
-    // With --checkpoint the master also journals finished work and keeps the cache beside it.
+    // why and ends the whole job, or the others would wait for it for ever. Every rank loads the
+    // scene; only the master opens the cache file (with --checkpoint, beside its journal).
     let checkpoint = if rank == 0 {
         // Rank 0 alone writes images; the other ranks never open the image library.
         crate::sys::image_io::open_in_background();
@@ -388,7 +368,7 @@ pub fn run(job_in: &ParallelJob<'_>) -> CommandResult {
                 Err(e) if !failed[0] => Some(format!("rank {rank}: {e}")),
                 _ => None,
             };
-            return stop_together(&comm, line.as_deref());
+            return Err(stop_together(&comm, line.as_deref()));
         }
     };
     // The prepass: every rank ends it with the same complete cache; the modes then only read
@@ -403,10 +383,7 @@ pub fn run(job_in: &ParallelJob<'_>) -> CommandResult {
         let needed = job.cache.is_some() || (job.shading.ambient_bounces > 0 && job.scene.needs().diffuse);
         Roles::choose(size, job_in.pa, needed)
     });
-    let roles = match roles.transpose() {
-        Ok(roles) => roles,
-        Err(e) => return fail(e),
-    };
+    let roles = roles.transpose().map_err(&fail)?;
     let setup = Setup {
         job_in,
         job,
@@ -414,7 +391,7 @@ pub fn run(job_in: &ParallelJob<'_>) -> CommandResult {
         hosts,
         prepass,
         checkpoint,
-        sync: SyncThreshold::of(job_in.sync, roles.is_some()),
+        sync: job_in.sync.map_or(job_in.mode.default_sync(), |n| n.max(1) as usize),
         traffic_before: &counters,
         start: Instant::now(),
     };

@@ -77,13 +77,11 @@ pub fn run(comm: &Comm<'_>, job: &Job, timeout: Duration, hosts: &Hosts) -> Resu
     // and up to another to give up sending to one, and only the master can say which rank was
     // lost. A master that is itself gone is noticed sooner by this rank's pulse (`liveness`).
     let patience = 2 * timeout;
-    match comm
-        .receive(&[kind(Some(0), Kind::PrepassStart)], Some(patience))
-        .map(|m| m.message)
-    {
-        Some(Ok(Message::PrepassStart(start))) => start.records.into_iter().for_each(|r| cache.insert_shared(r)),
-        _ => return Err(format!("rank {rank}: prepass: no start from the master")),
-    }
+    let start = comm.receive(&[kind(Some(0), Kind::PrepassStart)], Some(patience));
+    let Some(Ok(Message::PrepassStart(start))) = start.map(|m| m.message) else {
+        return Err(format!("rank {rank}: prepass: no start from the master"));
+    };
+    start.records.into_iter().for_each(|r| cache.insert_shared(r));
     let mut exchange = |mine: RoundRecords| -> Result<RoundRecords, String> {
         comm.send(0, &Message::PrepassRound(mine));
         match comm

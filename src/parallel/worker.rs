@@ -20,7 +20,6 @@ use std::sync::Mutex;
 /// records, one thread at a time; and the records that came back.
 struct Sharer<'a> {
     setup: &'a Setup<'a>,
-    cache: Option<&'a IrradianceCache>,
     /// Held while a thread shares: the others render on instead of waiting to share too.
     lock: Mutex<()>,
     intake: Intake,
@@ -29,9 +28,9 @@ struct Sharer<'a> {
 impl Sharer<'_> {
     /// After a pixel: shares if the cache has gathered enough and no other thread is sharing.
     fn after_pixel(&self, comm: &Comm<'_>, thread: u32) {
-        if let Some(cache) = self.cache
+        if let Some(cache) = self.setup.cache()
             && self.setup.job_in.mode != Mode::Noshare
-            && self.setup.sync.reached(cache.outbox_len())
+            && cache.outbox_len() >= self.setup.sync
             && let Ok(_guard) = self.lock.try_lock()
         {
             self.share(comm, thread, false);
@@ -43,8 +42,8 @@ impl Sharer<'_> {
     /// the master its records for the -af file, and broadcast marks its end, records or none
     /// (without a cache too): every receiver waits for the marker.
     fn share(&self, comm: &Comm<'_>, thread: u32, end: bool) {
-        let outbox = || Records::from(self.cache.map_or_else(Vec::new, |c| c.take_outbox()));
-        match (self.setup.job_in.mode, self.cache) {
+        let outbox = || Records::from(self.setup.cache().map_or_else(Vec::new, |c| c.take_outbox()));
+        match (self.setup.job_in.mode, self.setup.cache()) {
             (Mode::Noshare, Some(_)) if end && self.setup.job_in.cache_file => {
                 comm.send(0, &Message::FinalRecords(outbox()));
             }
@@ -94,13 +93,7 @@ fn render_tiles(setup: &Setup<'_>, counters: &Counters, sharer: &Sharer<'_>, thr
     let clock = ThreadClock::start();
     let mut finished: Option<FinishedTile> = None;
     loop {
-        comm.send(
-            0,
-            &Message::WorkRequest {
-                thread,
-                finished: finished.take(),
-            },
-        );
+        comm.send(0, &Message::WorkRequest { thread, finished });
         let reply = comm.receive(&[(Some(0), Some(Kind::Work.for_thread(thread)))], None);
         let Some(Ok(Message::Work { tile: Some(index), .. })) = reply.map(|r| r.message) else {
             break;
@@ -132,7 +125,6 @@ pub fn run(setup: &Setup<'_>) {
     }
     let sharer = Sharer {
         setup,
-        cache,
         lock: Mutex::new(()),
         intake: Intake::default(),
     };
@@ -167,27 +159,15 @@ pub fn run(setup: &Setup<'_>) {
 }
 
 /// The master's side of a traditional mode.
+#[derive(Default)]
 pub struct TraditionalSharing {
-    mode: Mode,
-    /// The threads that ask for tiles on each worker.
-    threads_per_worker: usize,
     /// Broadcast: workers whose last batch has arrived.
     ended: usize,
 }
 
-impl TraditionalSharing {
-    pub fn new(mode: Mode, threads_per_worker: usize) -> Self {
-        TraditionalSharing {
-            mode,
-            threads_per_worker,
-            ended: 0,
-        }
-    }
-}
-
 impl Sharing for TraditionalSharing {
     fn on_message(&mut self, core: &mut MasterCore<'_, '_>, source: i32, message: Message) -> Result<(), String> {
-        match (self.mode, message) {
+        match (core.setup.job_in.mode, message) {
             (Mode::Noshare, Message::FinalRecords(records)) => {
                 core.relay.keep(records);
             }
@@ -204,7 +184,9 @@ impl Sharing for TraditionalSharing {
     }
 
     fn finished(&self, core: &MasterCore<'_, '_>) -> bool {
-        let all_ended = self.mode != Mode::Broadcast || self.ended == core.workers();
-        core.turned_away == core.workers() * self.threads_per_worker && core.every_report_in() && all_ended
+        let job_in = core.setup.job_in;
+        let all_ended = job_in.mode != Mode::Broadcast || self.ended == core.workers();
+        let threads = job_in.threads.unwrap_or(1);
+        core.turned_away == core.workers() * threads && core.every_report_in() && all_ended
     }
 }

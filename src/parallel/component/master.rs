@@ -110,12 +110,9 @@ impl Sharing for ComponentSharing {
             .iter()
             .map(|r| format!("PR {r} (host {})", core.setup.hosts.of(*r)))
             .collect();
-        let list = |what: &str, items: &[String]| {
-            if items.is_empty() {
-                String::new()
-            } else {
-                format!("{what}: {}; ", items.join(", "))
-            }
+        let list = |what: &str, items: &[String]| match items {
+            [] => String::new(),
+            _ => format!("{what}: {}; ", items.join(", ")),
         };
         format!(
             "rank {} (host {}) has been silent for {:.0} s; {}{}missing: the indirect light of every pixel whose \

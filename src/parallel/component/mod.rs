@@ -14,9 +14,10 @@ pub mod pr;
 use crate::image::framebuffer::FrameBuffer;
 use crate::parallel::comm::Comm;
 use crate::parallel::protocol::Message;
+use crate::render::ThreadStats;
 use crate::sampling::Rng;
 use crate::shading::request::{AmbientRequest, RequestResult};
-use crate::shading::{Integrator, RayCounts, Work};
+use crate::shading::{Integrator, Work};
 
 /// Computes one request's indirect light (from the rank's cache or as a new record), adds it
 /// times the request's coefficient to the rank's image at the request's pixel, and keeps it in
@@ -25,12 +26,12 @@ pub fn compute_request(
     integrator: &Integrator<'_>,
     request: &AmbientRequest,
     seed: u64,
-    counts: &mut RayCounts,
+    stats: &mut ThreadStats,
     frame: &mut FrameBuffer,
     results: Option<&mut Vec<RequestResult>>,
 ) {
     let mut rng = Rng::new(seed, request.stream);
-    let mut work = Work::new(counts);
+    let mut work = Work::new(&mut stats.rays);
     work.sample.pixel = request.pixel;
     let light = integrator.ambient_for_request(request, &mut rng, &mut work) * request.coefficient;
     frame.add(request.pixel as usize, request.layer, light);
@@ -93,11 +94,8 @@ impl Roles {
                 many.iter().map(|x| x.to_string()).collect::<Vec<_>>().join(", ")
             ),
         };
-        format!(
-            "component mode: rank 0: master; {}; {}",
-            ranks("PA", &self.pas),
-            ranks("PR", &self.prs)
-        )
+        let (pas, prs) = (ranks("PA", &self.pas), ranks("PR", &self.prs));
+        format!("component mode: rank 0: master; {pas}; {prs}")
     }
 }
 

@@ -3,13 +3,12 @@
 //!
 //! Why: in arrival order a PA meets a tile's requests in scanline order, so each new record is
 //! made where the records before it run out and the next points extrapolate from one side, as a
-//! serial render does without its overture (see `render_tile`). Where a PA's queue holds many
-//! tiles' requests at once, this does what the overture does, over all of them: the records on
-//! an N-pixel grid first, after which most of the other requests interpolate between records on
-//! all sides. The paper credits such a reordering for component mode's fewer cache misses than
-//! the serial run (section 6). But the queue is often short (measured at 5 processes: empty at
-//! 55-93 % of a PA's syncs), and a PA can only reorder what has arrived; so the PRs also render
-//! the grid's pixels first (`render::render_tile`), and their requests arrive in this order.
+//! serial render does without its overture (see `render_tile`). This does what the overture
+//! does, over every tile in the queue: the records on an N-pixel grid first, then most other
+//! requests interpolate between records on all sides (the paper credits such a reordering for
+//! component mode's fewer cache misses than the serial run, section 6). But the queue is often
+//! short (5 processes: empty at 55-93 % of a PA's syncs), and a PA can only reorder what has
+//! arrived; so the PRs also render the grid's pixels first, and their requests arrive in order.
 
 use crate::render::pixel::on_image_grid;
 use crate::shading::request::AmbientRequest;
@@ -35,9 +34,8 @@ impl RequestQueue {
         }
     }
 
-    /// Whether the pixel is one of the grid's: the image's own grid (the serial overture counts
-    /// its blocks from each tile's corner instead; a PA's queue mixes tiles), the same grid whose
-    /// pixels the PRs render first.
+    /// Whether the pixel is on the image's grid, whose pixels the PRs render first (the serial
+    /// overture counts its blocks from each tile's corner instead; a PA's queue mixes tiles).
     fn on_grid(&self, pixel: u32) -> bool {
         on_image_grid(pixel % self.width, pixel / self.width, self.stride)
     }
@@ -65,9 +63,9 @@ impl RequestQueue {
         self.grid.pop_front().or_else(|| self.rest.pop_front())
     }
 
-    /// Up to `count` requests for a helper (an idle PR or a PA that ran dry): the newest, and of
-    /// those the off-grid ones first, so that the PA keeps making the grid's records (which the
-    /// helper's cache, fresh from the master, then answers the others from).
+    /// Up to `count` requests for a helper (an idle PR or a PA that ran dry): the newest, off-grid
+    /// ones first, so that the PA keeps making the grid's records (from which the helper's cache,
+    /// fresh from the master, then answers the others).
     pub fn take_newest(&mut self, count: usize) -> Vec<AmbientRequest> {
         let from_rest = count.min(self.rest.len());
         let mut taken: Vec<AmbientRequest> = self.rest.split_off(self.rest.len() - from_rest).into();

@@ -1,10 +1,8 @@
 //! A PA rank: owns indirect diffuse work. A communicating thread (the paper's communicator
-//! process) receives request buffers from PRs into a queue and carries out the master's
-//! forward orders; the computing thread takes requests (those at the overture's grid pixels
-//! first, see `order`), answers each from the PA's cache or computes a new record, multiplies
-//! by the request's coefficient and adds it to the PA's own image. Every --sync new records,
-//! and whenever its queue runs dry, it syncs with the master, reporting its queue length and
-//! how many requests it has computed.
+//! process) queues the PRs' request buffers and carries out the master's forward orders; the
+//! computing thread takes requests (grid pixels first, see `order`) and computes each into the
+//! PA's own image (`compute_request`). Every --sync new records, and whenever its queue runs
+//! dry, it syncs with the master, reporting its queue length and how many it has computed.
 
 use super::order::RequestQueue;
 use super::{compute_request, send_results};
@@ -29,8 +27,7 @@ struct Queued {
 
 /// What the communicating thread and the computing thread share.
 struct Shared<'a> {
-    /// The requests the communicating thread queues and the computing thread takes, and the
-    /// signal that some came (or FINISH did).
+    /// The queue, and the signal that requests (or FINISH) came.
     queued: Mutex<Queued>,
     ready: Condvar,
     /// Requests handed to helpers, and requests (or whole batches) refused as malformed.
@@ -38,11 +35,10 @@ struct Shared<'a> {
     rejected: AtomicU64,
     /// Nanoseconds spent decoding arriving request batches and queueing them.
     handling_ns: AtomicU64,
-    /// Where the master's replies to this PA's statuses go: the records the PA lacks. The PA
-    /// does not wait for them (a PA that waited for every reply spent its time polling MPI, as
-    /// CPU outside L_a and as idle time): the communicating thread takes them in as they come,
-    /// straight into the shared cache, and the computing thread takes in what is still owed at
-    /// the end. Taking them in promptly matters: a large reply goes by rendezvous, and the
+    /// Where the master's replies to this PA's statuses (the records it lacks) go. The PA does
+    /// not wait for them (one that did spent its time polling MPI, as CPU outside L_a and as
+    /// idle time): the communicating thread takes them in as they come, the computing thread
+    /// what is still owed at the end. Promptly: a large reply goes by rendezvous, and the
     /// master's send blocks until this rank receives it.
     cache: Option<&'a IrradianceCache>,
     /// Statuses sent whose reply has not been taken in.
@@ -80,12 +76,10 @@ impl Shared<'_> {
 }
 
 /// The communicating thread: requests in, forward orders out, the master's replies into the
-/// cache, until FINISH.
-/// While the queue holds `bound` requests or more, no request batch is taken in: the PRs'
-/// synchronous sends then wait (back-pressure), so the queue stays below `bound` plus one batch.
-/// A share goes out on a thread of its own, so that this thread never waits in a send: a share
-/// too large to go eagerly waits until its receiver takes it, and two PAs ordered to feed each
-/// other (each ran dry in turn) each waited in its send for the other, which was not receiving
+/// cache, until FINISH. While the queue holds `bound` requests or more, no request batch is
+/// taken in: the PRs' synchronous sends then wait (back-pressure). A share goes out on a thread
+/// of its own, so this thread never waits in a send: a share too large to go eagerly waits for
+/// its receiver, and two PAs ordered to feed each other each waited in its send for the other
 /// (seen once in the paper bench: conference room, 4 workers, the job hung).
 fn communicate(counters: &Counters, shared: &Shared<'_>, pixels: u32, bound: usize) {
     let comm = Comm::new(counters);
@@ -125,21 +119,18 @@ fn communicate(counters: &Counters, shared: &Shared<'_>, pixels: u32, bound: usi
                     q.longest = q.longest.max(q.requests.len());
                     drop(q);
                     shared.ready.notify_one();
-                    shared
-                        .handling_ns
-                        .fetch_add(handling.elapsed().as_nanos() as u64, Relaxed);
+                    let spent = handling.elapsed().as_nanos() as u64;
+                    shared.handling_ns.fetch_add(spent, Relaxed);
                 }
                 Ok(Message::ForwardOrder { to, count, to_pa }) => {
-                    // A PR waits for its share, empty or not; a PA that ran dry does not (see
-                    // component::balancer), and an empty share sent to it could arrive after FINISH.
-                    // The newest requests go: the PA keeps working through the oldest (see
-                    // RequestQueue::take_newest).
+                    // A PR waits for its share, empty or not; a PA that ran dry does not, and an
+                    // empty share sent to it could arrive after FINISH. The newest requests go
+                    // (see RequestQueue::take_newest).
                     let share = shared.lock().requests.take_newest(count as usize);
                     shared.forwarded.fetch_add(share.len() as u64, Relaxed);
                     if !(to_pa && share.is_empty()) {
-                        // Every share is received before the job ends (a PR waits for its own, and
-                        // a PA's are requests the master waits to see computed), so the scope's
-                        // end, after FINISH, never waits on one.
+                        // Every share is received before the job ends (a PR waits for its own; a
+                        // PA's are requests the master waits for), so the scope never waits on one.
                         let message = Message::Forwarded(Requests::from(share));
                         senders.spawn(move || Comm::new(counters).send(to as i32, &message));
                     }
@@ -207,9 +198,9 @@ pub fn run(setup: &Setup<'_>) {
             let left = match next {
                 Some(request) => {
                     let kept = journal.then_some(&mut results);
-                    compute_request(&integrator, &request, seed, &mut stats.rays, &mut frame, kept);
+                    compute_request(&integrator, &request, seed, &mut stats, &mut frame, kept);
                     done += 1;
-                    if !setup.sync.reached(cache.map_or(0, |c| c.outbox_len())) {
+                    if cache.map_or(0, |c| c.outbox_len()) < setup.sync {
                         continue;
                     }
                     shared.lock().requests.len()
@@ -226,13 +217,12 @@ pub fn run(setup: &Setup<'_>) {
             // requests, which the master's termination check relies on. The results go first
             // (the status counts them as done); the reply is not waited for (see `Shared`).
             send_results(&comm, &mut results);
-            let records = cache.map_or_else(Vec::new, |c| c.take_outbox());
             shared.pending.fetch_add(1, AcqRel);
             let status = Message::PaStatus {
                 queue: left as u64,
                 // Refused requests count as done: the PR counted them as sent.
                 done: done + shared.rejected.load(Relaxed),
-                records: Records::from(records),
+                records: Records::from(cache.map_or_else(Vec::new, |c| c.take_outbox())),
             };
             comm.send(0, &status);
             queue_samples.push((setup.start.elapsed().as_secs_f64(), left as u32));
@@ -243,14 +233,14 @@ pub fn run(setup: &Setup<'_>) {
     });
     // A status sent after FINISH (the last sync) still has its reply coming: the master answers
     // every status, also after FINISH.
-    while shared.pending.load(Acquire) > 0 {
-        match comm
-            .receive(&[kind(Some(0), Kind::RecordsDown)], None)
+    let reply = || {
+        comm.receive(&[kind(Some(0), Kind::RecordsDown)], None)
             .map(|r| r.message)
-        {
-            Some(Ok(Message::RecordsDown { records, .. })) => shared.take_reply(records),
-            _ => break,
-        }
+    };
+    while shared.pending.load(Acquire) > 0
+        && let Some(Ok(Message::RecordsDown { records, .. })) = reply()
+    {
+        shared.take_reply(records);
     }
 
     comm.send(0, &Message::Image(frame.to_floats()));

@@ -1,8 +1,7 @@
-//! A PR rank: renders the tiles the master hands out, everything but indirect diffuse light.
-//! Indirect diffuse values its local cache (records relayed by the master) can give are used at
-//! once; the others become requests, buffered (--send at a time) and sent to the PA of their tile.
-//! With no tile left it flushes its buffer and, when the master asks, computes requests
-//! forwarded from a loaded PA. Its image goes to the master only at the end.
+//! A PR rank: renders the tiles the master hands out, everything but the indirect diffuse light
+//! its cache (records relayed by the master) cannot give: that becomes requests, sent --send at
+//! a time to the PA of their tile. With no tile left it flushes its buffer and, when the master
+//! asks, computes requests forwarded from a loaded PA. Its image goes to the master at the end.
 
 use super::{Roles, compute_request, send_results};
 use crate::image::framebuffer::FrameBuffer;
@@ -23,11 +22,10 @@ use std::time::Instant;
 /// waits too.
 const BATCHES_IN_FLIGHT: usize = 16;
 
-/// Hands request batches to the courier. Every request of a tile goes to one PA, the tile's
-/// place in the image choosing it (`pa_of_tiles`): a PA then sees a tile's neighbouring points
-/// together and reuses its own records, where spreading one tile's batches over every PA had
-/// several PAs compute near-identical records for the same spot (measured on the Cornell box at
-/// 8 ranks: 934-968 records against 765-772, fewer than centralised or broadcast sharing).
+/// Hands request batches to the courier. Every request of a tile goes to one PA (`pa_of_tiles`),
+/// which then reuses its own records for the tile's neighbouring points; spreading a tile over
+/// every PA had several compute near-identical records for one spot (Cornell box, 8 ranks:
+/// 934-968 records against 765-772, fewer than centralised or broadcast sharing).
 struct Sender<'c> {
     outbox: Option<SyncSender<(i32, Message)>>,
     /// Where the renderer's waits for a full outbox are counted (its idle time).
@@ -70,13 +68,12 @@ impl Sender<'_> {
 const WINDOW: usize = 16;
 
 /// The courier thread: sends the request batches, and after every WINDOW batches to a PA a
-/// marker (an empty batch) as a synchronous send, which completes only once that PA has taken
-/// in everything before it. Before it sends the next marker to that PA it waits for the
-/// previous one, so at most 2 x WINDOW batches are ever waiting for a PA. A PA with a full
-/// queue takes nothing in: the courier waits, the outbox fills and the renderer waits
-/// (back-pressure from PA to PR), while a PA that keeps up costs the PR no waiting at all.
-/// The courier ends once every marker has been taken in, so nothing of this PR's is still on
-/// its way when it reports itself idle.
+/// marker (an empty batch) as a synchronous send, which completes once that PA has taken in
+/// everything before it; it waits for a PA's previous marker before sending the next, so at
+/// most 2 x WINDOW batches wait for a PA. A PA with a full queue takes nothing in: the courier
+/// waits, the outbox fills and the renderer waits (back-pressure), while a PA that keeps up
+/// costs the PR no waiting. It ends once every marker is taken in: nothing is still on its way
+/// when the PR reports itself idle.
 fn deliver(counters: &Counters, inbox: Receiver<(i32, Message)>) {
     let comm = Comm::new(counters);
     let mut windows: HashMap<i32, (usize, Option<Marker>)> = HashMap::new();
@@ -92,11 +89,10 @@ fn deliver(counters: &Counters, inbox: Receiver<(i32, Message)>) {
             *since = 0;
         }
     }
-    for (_, (_, marker)) in windows {
-        if let Some(marker) = marker {
-            comm.wait_marker(marker);
-        }
-    }
+    windows
+        .into_values()
+        .filter_map(|(_, m)| m)
+        .for_each(|m| comm.wait_marker(m));
 }
 
 /// A PR's work and what it has to show for it, through its two phases: rendering tiles, then
@@ -181,12 +177,11 @@ impl Pr<'_, '_> {
         tile
     }
 
-    /// Tiles until the master has none left, the requests they make going out through `sender`
-    /// every --send. A PR asks for its next tile as it starts the current one, so the
-    /// master's round trip overlaps the rendering instead of idling the PR between tiles (a
-    /// 16x16 tile is under a millisecond of work, the round trip a few tenths). The request
-    /// carries the report of the tile finished before (with --checkpoint); the records that
-    /// come with the next tile are one tile older than they would have been.
+    /// Tiles until the master has none left, their requests going out through `sender` every
+    /// --send. A PR asks for its next tile as it starts the current one, so the master's round
+    /// trip (a few tenths of a millisecond; a 16x16 tile is under one) overlaps the rendering;
+    /// the request carries the tile finished before (with --checkpoint), and the records that
+    /// come with the next tile are one tile older.
     fn render_tiles(&mut self, sender: &mut Sender<'_>, sink: &RequestBuffer) {
         let send_at = self.setup.job_in.send.max(1) as usize;
         self.ask(None);
@@ -225,56 +220,49 @@ impl Pr<'_, '_> {
         }
     }
 
-    /// Helping: computes what the master has a PA forward, until it says everything is done.
-    /// Each time it runs out it reports itself idle with the requests it `sent` and those it
-    /// helped with so far. How many it helped with.
+    /// Helping: computes what the master has a PA forward, until FINISH, reporting itself idle
+    /// each time it runs out (the requests it `sent` and those it helped with so far, which it
+    /// returns).
     fn help(&mut self, sent: u64) -> u64 {
-        let (seed, journal) = (self.setup.job_in.seed, self.setup.job_in.journal);
+        let (setup, comm, intake) = (self.setup, &self.comm, &self.intake);
+        let (seed, journal) = (setup.job_in.seed, setup.job_in.journal);
         let pixels = self.frame.width * self.frame.height;
         let mut results = Vec::new();
         let mut helped = 0u64;
         loop {
-            let records = self.setup.cache().map_or_else(Vec::new, |c| c.take_outbox());
-            send_results(&self.comm, &mut results);
+            send_results(comm, &mut results);
             let idle = Message::Idle {
                 sent,
                 helped,
-                records: Records::from(records),
+                records: Records::from(setup.cache().map_or_else(Vec::new, |c| c.take_outbox())),
             };
-            self.comm.send(0, &idle);
+            comm.send(0, &idle);
             // Forwarded requests from any PA, or the master's FINISH.
             let filters = [kind(Some(0), Kind::Finish), kind(None, Kind::Forwarded)];
-            let Some(msg) = self.comm.receive(&filters, None) else {
+            let Some(msg) = comm.receive(&filters, None) else {
                 break;
             };
             match msg.message {
                 Ok(Message::Forwarded(decoded)) => {
                     for request in decoded.requests.iter().filter(|r| r.pixel < pixels) {
                         let kept = journal.then_some(&mut results);
-                        compute_request(
-                            &self.integrator,
-                            request,
-                            seed,
-                            &mut self.stats.rays,
-                            &mut self.frame,
-                            kept,
-                        );
+                        compute_request(&self.integrator, request, seed, &mut self.stats, &mut self.frame, kept);
                         // A helper shares its records as often as a PA does.
-                        if let Some(cache) = self.setup.cache()
-                            && self.setup.sync.reached(cache.outbox_len())
+                        if let Some(cache) = setup.cache()
+                            && cache.outbox_len() >= setup.sync
                         {
-                            send_results(&self.comm, &mut results);
-                            self.intake.sync(&self.comm, 0, cache);
+                            send_results(comm, &mut results);
+                            intake.sync(comm, 0, cache);
                         }
                     }
                     // Refused requests are counted as computed (with nothing added) so the
                     // totals still close; the refusal is reported in the statistics.
                     let outside = decoded.requests.iter().filter(|r| r.pixel >= pixels).count();
                     helped += (decoded.requests.len() + decoded.rejected) as u64;
-                    self.intake.reject(decoded.rejected + outside);
+                    intake.reject(decoded.rejected + outside);
                 }
                 Ok(_) => break,
-                Err(_) => self.intake.reject(1),
+                Err(_) => intake.reject(1),
             }
         }
         helped
@@ -282,13 +270,12 @@ impl Pr<'_, '_> {
 }
 
 /// Which PA (an index below `pas`) each tile's requests go to: the image cut into as many
-/// vertical bands as there are PAs, a tile going to the band of its left edge; in horizontal
-/// bands where there are fewer tile columns than PAs, and tile by tile (tile i to PA i mod n)
-/// where there are fewer rows too. Only where two bands meet do two PAs make records for
-/// neighbouring points without having each other's yet. Tile i to PA i mod n, before, made
-/// every tile border such a seam: at 5 processes (two PAs) component mode made 770-836 records on
-/// scenes/cornell.gltf (128x128, -aa 0.2, 32x32 tiles, progressive) where one PA made 733-774;
-/// with bands 742-789 (six runs; broadcast 782-812 beside them).
+/// vertical bands as there are PAs, by a tile's left edge; horizontal bands where there are
+/// fewer tile columns than PAs, and tile i to PA i mod n where there are fewer rows too. Only
+/// where two bands meet do two PAs make records for neighbouring points without each other's.
+/// Tile i to PA i mod n made every tile border such a seam: at 5 processes (two PAs) 770-836
+/// records on scenes/cornell.gltf (128x128, -aa 0.2, 32x32 tiles, progressive), one PA 733-774,
+/// bands 742-789 (six runs; broadcast 782-812).
 fn pa_of_tiles(tiles: &[crate::tiles::Tile], pas: usize) -> Vec<usize> {
     let pas = pas.max(1);
     let distinct = |key: fn(&crate::tiles::Tile) -> u32| {

@@ -31,7 +31,8 @@ const RECORDS_DOWN_BASE: Tag = 2000;
 /// The most rendering threads a rank may have (their reply tags must not overlap).
 pub const MAX_THREADS: u32 = 999;
 
-/// Declares `Kind` from one table: each kind's MPI tag and its name in errors.
+/// Declares `Kind` from one table: each kind's MPI tag and its name in errors; each kind is
+/// the `Message` variant of the same name.
 macro_rules! kinds {
     ($($(#[$doc:meta])* $kind:ident = $tag:expr, $name:literal;)*) => {
         /// Every message's kind and its MPI tag, in one place.
@@ -46,6 +47,14 @@ macro_rules! kinds {
             fn name(self) -> &'static str {
                 match self {
                     $(Kind::$kind => $name,)*
+                }
+            }
+        }
+
+        impl Message {
+            pub fn kind(&self) -> Kind {
+                match self {
+                    $(Message::$kind { .. } => Kind::$kind,)*
                 }
             }
         }
@@ -178,40 +187,11 @@ pub enum Message {
     Results(Vec<RequestResult>),
 }
 
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[error("{0}")]
 pub struct ProtocolError(pub String);
 
-impl std::fmt::Display for ProtocolError {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(&self.0)
-    }
-}
-
 impl Message {
-    pub fn kind(&self) -> Kind {
-        match self {
-            Message::Heartbeat => Kind::Heartbeat,
-            Message::InitialRecords(_) => Kind::InitialRecords,
-            Message::PrepassStart(_) => Kind::PrepassStart,
-            Message::PrepassRound(_) => Kind::PrepassRound,
-            Message::WorkRequest { .. } => Kind::WorkRequest,
-            Message::Work { .. } => Kind::Work,
-            Message::RecordsUp { .. } => Kind::RecordsUp,
-            Message::RecordsDown { .. } => Kind::RecordsDown,
-            Message::RecordsBroadcast { .. } => Kind::RecordsBroadcast,
-            Message::FinalRecords(_) => Kind::FinalRecords,
-            Message::Stats(_) => Kind::Stats,
-            Message::Requests(_) => Kind::Requests,
-            Message::Forwarded(_) => Kind::Forwarded,
-            Message::Idle { .. } => Kind::Idle,
-            Message::PaStatus { .. } => Kind::PaStatus,
-            Message::ForwardOrder { .. } => Kind::ForwardOrder,
-            Message::Finish => Kind::Finish,
-            Message::Image(_) => Kind::Image,
-            Message::Results(_) => Kind::Results,
-        }
-    }
-
     /// The MPI tag the message travels with.
     pub fn tag(&self) -> Tag {
         match self {
@@ -261,18 +241,12 @@ impl Message {
             }
             Message::Stats(report) => out.extend(serde_json::to_vec(report.as_ref()).unwrap_or_default()),
             Message::Requests(r) | Message::Forwarded(r) => requests::put(&mut out, &r.requests),
-            Message::Idle {
-                sent: a,
-                helped: b,
-                records,
+            Message::Idle { sent, helped, records } => {
+                [*sent, *helped].into_iter().for_each(|v| out.put_u64(v));
+                put_records(&mut out, &records.records);
             }
-            | Message::PaStatus {
-                queue: a,
-                done: b,
-                records,
-            } => {
-                out.put_u64(*a);
-                out.put_u64(*b);
+            Message::PaStatus { queue, done, records } => {
+                [*queue, *done].into_iter().for_each(|v| out.put_u64(v));
                 put_records(&mut out, &records.records);
             }
             Message::ForwardOrder { to, count, to_pa } => {
@@ -357,21 +331,18 @@ impl Message {
             }
             Kind::Requests => Message::Requests(requests::take(&mut r)?),
             Kind::Forwarded => Message::Forwarded(requests::take(&mut r)?),
-            Kind::Idle => Message::Idle {
-                sent: r.u64()?,
-                helped: r.u64()?,
-                records: take_records(&mut r)?,
-            },
-            Kind::PaStatus => Message::PaStatus {
-                queue: r.u64()?,
-                done: r.u64()?,
-                records: take_records(&mut r)?,
-            },
-            Kind::ForwardOrder => Message::ForwardOrder {
-                to: r.u32()?,
-                count: r.u32()?,
-                to_pa: r.flag()?,
-            },
+            Kind::Idle => {
+                let (sent, helped, records) = (r.u64()?, r.u64()?, take_records(&mut r)?);
+                Message::Idle { sent, helped, records }
+            }
+            Kind::PaStatus => {
+                let (queue, done, records) = (r.u64()?, r.u64()?, take_records(&mut r)?);
+                Message::PaStatus { queue, done, records }
+            }
+            Kind::ForwardOrder => {
+                let (to, count, to_pa) = (r.u32()?, r.u32()?, r.flag()?);
+                Message::ForwardOrder { to, count, to_pa }
+            }
             Kind::Image => {
                 let count = r.count(4)?;
                 let floats: Vec<f32> = (0..count).map(|_| r.f32()).collect::<Result<_, _>>()?;
@@ -416,10 +387,7 @@ fn put_records(out: &mut Vec<u8>, records: &[Record]) {
 
 fn take_records(r: &mut Reader<'_>) -> Result<Records, ProtocolError> {
     let count = r.count(RECORD_BYTES)?;
-    let mut out = Records {
-        records: Vec::with_capacity(count),
-        rejected: 0,
-    };
+    let mut out = Records::from(Vec::with_capacity(count));
     for _ in 0..count {
         match codec::decode(r.take(RECORD_BYTES)?) {
             Ok(record) => out.records.push(record),
@@ -500,11 +468,8 @@ pub fn take_results(r: &mut Reader<'_>, count: usize) -> Result<Vec<RequestResul
                 .get(layer as usize)
                 .copied()
                 .ok_or_else(|| r.error(format_args!("layer {layer}")))?;
-            Ok(RequestResult {
-                pixel,
-                layer,
-                value: r.vec3()?,
-            })
+            let value = r.vec3()?;
+            Ok(RequestResult { pixel, layer, value })
         })
         .collect()
 }

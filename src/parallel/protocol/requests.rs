@@ -53,10 +53,7 @@ fn unit(v: Vec3) -> bool {
 
 pub fn take(reader: &mut Reader<'_>) -> Result<Requests, ProtocolError> {
     let count = reader.count(REQUEST_BYTES)?;
-    let mut out = Requests {
-        requests: Vec::with_capacity(count),
-        rejected: 0,
-    };
+    let mut out = Requests::from(Vec::with_capacity(count));
     for _ in 0..count {
         let pixel = reader.u32()?;
         let layer = match reader.u32()? {

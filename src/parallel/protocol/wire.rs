@@ -6,30 +6,25 @@ use super::ProtocolError;
 use glam::Vec3;
 
 /// Appends little-endian values.
-pub trait Put {
-    fn put_u8(&mut self, v: u8);
-    fn put_u32(&mut self, v: u32);
-    fn put_u64(&mut self, v: u64);
-    fn put_f32(&mut self, v: f32);
+pub trait Put: Extend<u8> {
+    fn put_u8(&mut self, v: u8) {
+        self.extend([v]);
+    }
+    fn put_u32(&mut self, v: u32) {
+        self.extend(v.to_le_bytes());
+    }
+    fn put_u64(&mut self, v: u64) {
+        self.extend(v.to_le_bytes());
+    }
+    fn put_f32(&mut self, v: f32) {
+        self.extend(v.to_le_bytes());
+    }
     fn put_vec3(&mut self, v: Vec3) {
         v.to_array().into_iter().for_each(|c| self.put_f32(c));
     }
 }
 
-impl Put for Vec<u8> {
-    fn put_u8(&mut self, v: u8) {
-        self.push(v);
-    }
-    fn put_u32(&mut self, v: u32) {
-        self.extend_from_slice(&v.to_le_bytes());
-    }
-    fn put_u64(&mut self, v: u64) {
-        self.extend_from_slice(&v.to_le_bytes());
-    }
-    fn put_f32(&mut self, v: f32) {
-        self.extend_from_slice(&v.to_le_bytes());
-    }
-}
+impl Put for Vec<u8> {}
 
 /// Reads a message front to back.
 pub struct Reader<'a> {
@@ -49,14 +44,9 @@ impl<'a> Reader<'a> {
     }
 
     pub fn take(&mut self, n: usize) -> Result<&'a [u8], ProtocolError> {
-        let end = self.at.checked_add(n).filter(|&end| end <= self.bytes.len());
-        let Some(end) = end else {
-            return Err(self.error(format_args!(
-                "ends after {} bytes, {} more needed at byte {}",
-                self.bytes.len(),
-                n,
-                self.at
-            )));
+        let (len, at) = (self.bytes.len(), self.at);
+        let Some(end) = at.checked_add(n).filter(|&end| end <= len) else {
+            return Err(self.error(format_args!("ends after {len} bytes, {n} more needed at byte {at}")));
         };
         let slice = &self.bytes[self.at..end];
         self.at = end;
@@ -115,11 +105,10 @@ impl<'a> Reader<'a> {
 
     /// The message must have been read exactly.
     pub fn finish(self) -> Result<(), ProtocolError> {
-        let left = self.bytes.len() - self.at;
-        if left > 0 {
-            return Err(self.error(format_args!("{left} bytes too many")));
+        match self.bytes.len() - self.at {
+            0 => Ok(()),
+            left => Err(self.error(format_args!("{left} bytes too many"))),
         }
-        Ok(())
     }
 }
 
