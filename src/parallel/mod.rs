@@ -11,7 +11,6 @@ pub mod master;
 pub mod prepass;
 pub mod protocol;
 pub mod pulse;
-pub mod relay;
 pub mod worker;
 
 use crate::checkpoint::{Checkpoint, Restored};
@@ -52,11 +51,10 @@ impl Mode {
         }
     }
 
-    /// The paper's synchronisation threshold without --sync: how many new records a rank
-    /// gathers before it shares them. In the traditional modes every share is a round trip
-    /// through the master (or a message to every rank), paid out of rendering time; component
-    /// mode's PAs and helping PRs make every record and share them sooner, so the other PAs,
-    /// and the PRs answering lookups themselves, work with fresher caches.
+    /// The paper's synchronisation threshold without --sync: new records a rank gathers before
+    /// sharing them. In the traditional modes every share is a round trip through the master (or
+    /// a message to every rank), paid out of rendering time; component mode's PAs and helping
+    /// PRs make every record and share sooner, so the others work with fresher caches.
     fn default_sync(self) -> usize {
         if self == Mode::Component { 8 } else { 50 }
     }
@@ -186,7 +184,6 @@ impl Intake {
         self.rejected.fetch_add(count as u64, Relaxed);
     }
 
-    /// Records received and refused so far.
     pub fn totals(&self) -> (u64, u64) {
         (self.received.load(Relaxed), self.rejected.load(Relaxed))
     }
@@ -201,14 +198,11 @@ pub struct Setup<'a> {
     /// Each rank's host, for messages that name a rank.
     pub hosts: Hosts,
     pub prepass: Option<PrepassOutcome>,
-    /// The master's --checkpoint journal and what an earlier run finished (those tiles are not
-    /// handed out).
+    /// The master's --checkpoint journal and what an earlier run finished.
     pub checkpoint: Option<(Checkpoint, Restored)>,
-    /// New records a rank gathers before it shares them (--sync, at least 1, or the mode's
-    /// default).
+    /// New records a rank gathers before sharing them (--sync, at least 1, or the mode's default).
     pub sync: usize,
-    /// The messages this rank sent and received before its role began (the prepass's), for
-    /// its report.
+    /// Messages this rank sent and received before its role began (the prepass's), for its report.
     pub traffic_before: &'a Counters,
     /// When the role began: its report's wall time.
     pub start: Instant,
@@ -233,10 +227,9 @@ impl Setup<'_> {
         }
     }
 
-    /// A worker's report: what its rendering `threads` did (with its share of the prepass),
-    /// the messages of `comm`, of its helper thread (`helper`) and of the prepass, and as idle
-    /// time the waiting of the rendering threads on `comm` (not of the helper, which waits by
-    /// design).
+    /// A worker's report: what its rendering `threads` did (with its share of the prepass), the
+    /// messages of `comm`, its `helper` thread and the prepass, and as idle time the rendering
+    /// threads' waiting on `comm` (not the helper's, which waits by design).
     pub fn report(&self, comm: &Comm<'_>, role: &str, mut threads: Vec<ThreadStats>, helper: &Counters) -> RankReport {
         crate::render::add_prepass_work(&mut threads, &self.job.prepass_threads);
         let idle_s = comm.counters.idle_s();
@@ -300,9 +293,8 @@ fn check_layout(job: &ParallelJob<'_>, size: i32, tile_count: usize, threads: us
 }
 
 /// Ends a job that every rank stops together: each rank says its `line` if it has one (for a
-/// verdict all ranks share, rank 0 alone has one), then all meet at a barrier before any exits.
-/// A rank that exits with an error first makes mpirun kill the job, rank 0 included, before its
-/// line is out.
+/// verdict all ranks share, rank 0 alone), then all meet at a barrier before any exits: a rank
+/// exiting with an error first makes mpirun kill the job, rank 0 included, before its line is out.
 fn stop_together(comm: &Comm<'_>, line: Option<&str>) -> CommandError {
     if let Some(line) = line {
         crate::commands::error(line);

@@ -22,10 +22,9 @@ pub fn run(comm: &Comm<'_>, job: &Job, timeout: Duration, hosts: &Hosts) -> Resu
     let integrator = Integrator::new(&job.scene, &job.tracer, &job.shading, Some(cache));
     let bad = |other: Result<Message, ProtocolError>| other.err().map_or_else(|| "not a round".into(), |e| e.0);
     if rank == 0 {
-        // Workers start from the master's records (its cache file), as the master does.
-        // A round can be too large to go eagerly, and a standard send to a rank whose host is
-        // gone never returns: the master would hang there while the others time out waiting
-        // for it, and nobody would name the lost rank. So every send waits at most --timeout.
+        // Workers start from the master's records (its cache file), as the master does. Every
+        // send waits at most --timeout (see `MasterCore::send`), or the master would hang on a
+        // gone rank while the others time out waiting for it, and nobody would name the lost one.
         let send = |worker: i32, message: &Message| {
             comm.send_within(worker, message, timeout, || -> std::convert::Infallible {
                 let line = format!(
@@ -46,11 +45,8 @@ pub fn run(comm: &Comm<'_>, job: &Job, timeout: Duration, hosts: &Hosts) -> Resu
                 match message.map(|m| m.message) {
                     Ok(Ok(Message::PrepassRound(records))) => round.extend(records),
                     Ok(other) => {
-                        let host = hosts.of(worker);
-                        return Err(format!(
-                            "prepass: rank {worker} on {host} sent a bad round: {}",
-                            bad(other)
-                        ));
+                        let (host, why) = (hosts.of(worker), bad(other));
+                        return Err(format!("prepass: rank {worker} on {host} sent a bad round: {why}"));
                     }
                     Err(lost) => {
                         return Err(format!(
@@ -84,10 +80,8 @@ pub fn run(comm: &Comm<'_>, job: &Job, timeout: Duration, hosts: &Hosts) -> Resu
     start.records.into_iter().for_each(|r| cache.insert_shared(r));
     let mut exchange = |mine: RoundRecords| -> Result<RoundRecords, String> {
         comm.send(0, &Message::PrepassRound(mine));
-        match comm
-            .receive(&[kind(Some(0), Kind::PrepassRound)], Some(patience))
-            .map(|m| m.message)
-        {
+        let round = [kind(Some(0), Kind::PrepassRound)];
+        match comm.receive(&round, Some(patience)).map(|m| m.message) {
             Some(Ok(Message::PrepassRound(round))) => Ok(round),
             Some(other) => Err(format!(
                 "rank {rank}: prepass: bad round from the master: {}",

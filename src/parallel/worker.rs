@@ -1,12 +1,10 @@
 //! The traditional modes (paper, section 4): a worker rank asks the master for tiles, renders
-//! them with its own cache, and shares new records the mode's way: not at all (noshare; with
-//! -af they come to the master at the end), through the master, which answers with the records
-//! the worker lacks (centralised), or with every other rank (broadcast, with a receiving thread
-//! that merges incoming records while the rendering threads go on; the master keeps them for
-//! the file). `TraditionalSharing` is the master's policy for them. In each, workers start from
-//! the cache file's records and the render is complete once every rendering thread has been
-//! told "no tile left" and every rank has reported (in broadcast mode, also once every worker's
-//! last batch has arrived).
+//! them with its own cache, and shares new records not at all (noshare; with -af they go to the
+//! master at the end), through the master, which answers with those the worker lacks
+//! (centralised), or with every other rank (broadcast: a receiving thread merges theirs while
+//! the rendering threads go on). `TraditionalSharing` is the master's policy: workers start from
+//! the cache file's records, and the render is complete once every rendering thread has been
+//! told "no tile left" and every rank has reported (broadcast: and sent its last batch).
 
 use super::comm::{Comm, Counters, kind};
 use super::master::{MasterCore, Sharing};
@@ -63,9 +61,8 @@ impl Sharer<'_> {
     }
 }
 
-/// Merges the records other workers broadcast until each of them has sent its end marker.
-/// It has counters of its own: its waiting is not the rank's idle time (the rendering threads
-/// go on meanwhile).
+/// Merges the records other workers broadcast until each has sent its end marker. Its waiting,
+/// on counters of its own, is not the rank's idle time (the rendering threads go on meanwhile).
 fn receive_broadcasts(counters: &Counters, cache: &IrradianceCache, peers: usize, intake: &Intake) {
     let comm = Comm::new(counters);
     let mut ends = 0;
@@ -144,8 +141,7 @@ pub fn run(setup: &Setup<'_>) {
             })
             .collect();
         let stats = renderers.into_iter().map(|r| r.join().unwrap_or_default()).collect();
-        // What is left to share goes out now; broadcast ends with the end marker so every
-        // receiver knows when it has everything.
+        // What is left to share goes out now, with broadcast's end marker.
         sharer.share(&comm, 0, true);
         if let Some(listener) = listener {
             let _ = listener.join();

@@ -1,17 +1,15 @@
-//! The load balancer of component mode's master: which PA's queue a helper takes a share of.
-//! An idle PR (the paper's helpers) and a PA that ran dry once every tile is out (beyond the
-//! paper: without it, PAs whose queues emptied sat idle while the last shares were worked
-//! through elsewhere; bench/icsim.py: 7-24 ms of a 74 ms render at 16 workers on the Cornell
-//! box) get 1/SHARE_DIVISOR of the longest queue other than their own.
+//! The load balancer of component mode's master: an idle PR (the paper's helpers) and a PA that
+//! ran dry once every tile is out get 1/SHARE_DIVISOR of the longest queue other than their own
+//! (the dry PAs beyond the paper: without it they sat idle while the last shares were worked
+//! through elsewhere; bench/icsim.py: 7-24 ms of a 74 ms render, 16 workers, Cornell box).
 
 use std::collections::{BTreeMap, BTreeSet};
 
 /// A share smaller than this is not worth forwarding.
 pub const MIN_SHARE: u64 = 2;
-/// A helper takes this fraction (1/SHARE_DIVISOR) of the longest PA queue. Half, the first
-/// choice, left the PA with nothing to do while the helper worked through its half (the
-/// simulation put component mode's idle time on the Cornell box at 29-52 % at 4-16 processors
-/// with halves, 9-26 % with eighths, which made it the fastest mode there).
+/// A helper takes 1/SHARE_DIVISOR of the longest PA queue. Half left the PA with nothing to do
+/// while the helper worked through it (simulated idle time, Cornell box, 4-16 processors:
+/// 29-52 % with halves, 9-26 % with eighths, which made component mode the fastest there).
 pub const SHARE_DIVISOR: u64 = 8;
 
 /// An order for PA `from` to hand `count` of its queued requests to rank `to`.

@@ -1,10 +1,9 @@
 //! The termination ledger: when may component mode's master say FINISH? Every request a PR
-//! makes goes to exactly one PA queue; from there it is either computed by that PA or forwarded
-//! once to a helper (an idle PR, or a PA that ran dry), which computes it. PRs report how many
-//! they sent once they have no tile left (cumulative, after every batch has reached its PA),
-//! PAs how many they computed whenever they sync or run dry, helping PRs how many they
-//! computed. When every PR has flushed, no forward order to a PR is outstanding, and sent ==
-//! computed, every request has been computed exactly once and nothing is in flight.
+//! makes goes to one PA queue, and is computed by that PA or forwarded once to a helper (an idle
+//! PR, or a PA that ran dry). PRs report how many they sent once they have no tile left (after
+//! every batch has reached its PA), PAs and helping PRs how many they computed. When every PR
+//! has flushed, no forward order to a PR is outstanding, and sent == computed, every request
+//! has been computed exactly once and nothing is in flight.
 
 use std::collections::BTreeMap;
 

@@ -90,46 +90,39 @@ impl Sharing for ComponentSharing {
     /// Which rank, who else went quiet, and what is missing (a lost PA takes its queue with
     /// it, a PR that never finished leaves its tiles' pixels undelivered).
     fn lost(&self, core: &MasterCore<'_, '_>, lost: &Silence) -> String {
+        let hosts = &core.setup.hosts;
         let quiet: Vec<String> = self
             .roles
             .pas
             .iter()
             .filter(|&&r| liveness::silent_for(r).as_secs_f64() >= lost.seconds * 0.9)
             .map(|&r| {
-                format!(
-                    "PA {r} (rank {r}, host {}, last queue {}, computed {})",
-                    core.setup.hosts.of(r),
-                    self.balancer.queue(r),
-                    self.ledger.computed_by(r)
-                )
+                let (host, queue, computed) = (hosts.of(r), self.balancer.queue(r), self.ledger.computed_by(r));
+                format!("PA {r} (rank {r}, host {host}, last queue {queue}, computed {computed})")
             })
             .collect();
         let unfinished: Vec<String> = self
             .ledger
             .unflushed()
             .iter()
-            .map(|r| format!("PR {r} (host {})", core.setup.hosts.of(*r)))
+            .map(|&r| format!("PR {r} (host {})", hosts.of(r)))
             .collect();
         let list = |what: &str, items: &[String]| match items {
             [] => String::new(),
             _ => format!("{what}: {}; ", items.join(", ")),
         };
+        let (silent, unfinished) = (list("silent", &quiet), list("unfinished", &unfinished));
+        let (rank, host, seconds) = (lost.rank, hosts.of(lost.rank), lost.seconds);
+        let (sent, computed) = (self.ledger.sent(), self.ledger.computed());
         format!(
-            "rank {} (host {}) has been silent for {:.0} s; {}{}missing: the indirect light of every pixel whose \
-             requests those ranks held, and the pixels of unfinished PRs (requests reported sent {}, computed {})",
-            lost.rank,
-            core.setup.hosts.of(lost.rank),
-            lost.seconds,
-            list("silent", &quiet),
-            list("unfinished", &unfinished),
-            self.ledger.sent(),
-            self.ledger.computed(),
+            "rank {rank} (host {host}) has been silent for {seconds:.0} s; {silent}{unfinished}missing: the indirect \
+             light of every pixel whose requests those ranks held, and the pixels of unfinished PRs (requests \
+             reported sent {sent}, computed {computed})"
         )
     }
 
-    /// Every request is computed: FINISH to every worker, then their images and statistics.
-    /// A PA may still send a status (its last sync) after FINISH; it gets its answer so it can
-    /// stop.
+    /// Every request is computed: FINISH to every worker, then their images and statistics. A PA
+    /// may still send a status (its last sync) after FINISH; it gets its answer so it can stop.
     fn gather(&mut self, core: &mut MasterCore<'_, '_>) -> Result<(), String> {
         let size = core.comm.size();
         for rank in 1..size {

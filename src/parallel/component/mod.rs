@@ -19,9 +19,8 @@ use crate::sampling::Rng;
 use crate::shading::request::{AmbientRequest, RequestResult};
 use crate::shading::{Integrator, Work};
 
-/// Computes one request's indirect light (from the rank's cache or as a new record), adds it
-/// times the request's coefficient to the rank's image at the request's pixel, and keeps it in
-/// `results` for the master's --checkpoint journal when given.
+/// Computes one request's indirect light (from the rank's cache or as a new record) times its
+/// coefficient into the rank's image at its pixel, and into `results` (for --checkpoint) if given.
 pub fn compute_request(
     integrator: &Integrator<'_>,
     request: &AmbientRequest,

@@ -233,12 +233,9 @@ pub fn run(setup: &Setup<'_>) {
     });
     // A status sent after FINISH (the last sync) still has its reply coming: the master answers
     // every status, also after FINISH.
-    let reply = || {
-        comm.receive(&[kind(Some(0), Kind::RecordsDown)], None)
-            .map(|r| r.message)
-    };
+    let down = [kind(Some(0), Kind::RecordsDown)];
     while shared.pending.load(Acquire) > 0
-        && let Some(Ok(Message::RecordsDown { records, .. })) = reply()
+        && let Some(Ok(Message::RecordsDown { records, .. })) = comm.receive(&down, None).map(|r| r.message)
     {
         shared.take_reply(records);
     }

@@ -128,7 +128,8 @@ pub fn run(setup: &Setup<'_>, roles: &Roles) {
     let mut sender = Sender {
         outbox: Some(outbox),
         idle_ns: &counters.idle_ns,
-        pa_of_tile: (pa_of_tiles(&setup.tiles, roles.pas.len()).into_iter())
+        pa_of_tile: pa_of_tiles(&setup.tiles, roles.pas.len())
+            .into_iter()
             .filter_map(|i| roles.pas.get(i).copied())
             .collect(),
         pa: None,

@@ -6,18 +6,16 @@
 //! dropped and counted), and nothing in it is a pointer or a process-local id (tiles are
 //! indices into the tile list every rank computes alike; records are self-contained values).
 
-mod requests;
 pub mod wire;
-
-pub use requests::Requests;
 
 use crate::image::components::Components;
 use crate::image::data::{DATA_VALUES, PixelData};
 use crate::image::framebuffer::{Layer, PixelValue};
 use crate::irradiance::codec::{self, RECORD_BYTES};
 use crate::irradiance::record::Record;
-use crate::shading::request::RequestResult;
+use crate::shading::request::{AmbientRequest, RequestResult};
 use crate::stats::RankReport;
+use glam::Vec3;
 use mpi::Tag;
 use std::sync::OnceLock;
 use wire::{Put, Reader};
@@ -121,6 +119,19 @@ pub struct Records {
 impl From<Vec<Record>> for Records {
     fn from(records: Vec<Record>) -> Self {
         Records { records, rejected: 0 }
+    }
+}
+
+/// Requests that passed the checks, and how many did not.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Requests {
+    pub requests: Vec<AmbientRequest>,
+    pub rejected: usize,
+}
+
+impl From<Vec<AmbientRequest>> for Requests {
+    fn from(requests: Vec<AmbientRequest>) -> Self {
+        Requests { requests, rejected: 0 }
     }
 }
 
@@ -240,7 +251,7 @@ impl Message {
                 put_records(&mut out, &records.records);
             }
             Message::Stats(report) => out.extend(serde_json::to_vec(report.as_ref()).unwrap_or_default()),
-            Message::Requests(r) | Message::Forwarded(r) => requests::put(&mut out, &r.requests),
+            Message::Requests(r) | Message::Forwarded(r) => put_requests(&mut out, &r.requests),
             Message::Idle { sent, helped, records } => {
                 [*sent, *helped].into_iter().for_each(|v| out.put_u64(v));
                 put_records(&mut out, &records.records);
@@ -329,8 +340,8 @@ impl Message {
                 let report = serde_json::from_slice(r.rest()).map_err(|e| ProtocolError(format!("statistics: {e}")))?;
                 Message::Stats(Box::new(report))
             }
-            Kind::Requests => Message::Requests(requests::take(&mut r)?),
-            Kind::Forwarded => Message::Forwarded(requests::take(&mut r)?),
+            Kind::Requests => Message::Requests(take_requests(&mut r)?),
+            Kind::Forwarded => Message::Forwarded(take_requests(&mut r)?),
             Kind::Idle => {
                 let (sent, helped, records) = (r.u64()?, r.u64()?, take_records(&mut r)?);
                 Message::Idle { sent, helped, records }
@@ -392,6 +403,82 @@ fn take_records(r: &mut Reader<'_>) -> Result<Records, ProtocolError> {
         match codec::decode(r.take(RECORD_BYTES)?) {
             Ok(record) => out.records.push(record),
             Err(_) => out.rejected += 1,
+        }
+    }
+    Ok(out)
+}
+
+pub const REQUEST_BYTES: usize = 100;
+
+/// L_a requests on the wire (PR -> PA, and PA -> helper when load balancing): a count, then
+/// fixed-size requests.
+fn put_requests(out: &mut Vec<u8>, requests: &[AmbientRequest]) {
+    out.reserve(4 + requests.len() * REQUEST_BYTES);
+    out.put_u32(requests.len() as u32);
+    for r in requests {
+        out.put_u32(r.pixel);
+        out.put_u32(r.layer.index() as u32);
+        out.put_u32(r.specular_depth);
+        for v in [
+            r.position,
+            r.geometric_normal,
+            r.normal,
+            r.facing_normal,
+            r.coefficient,
+            r.direction,
+        ] {
+            out.put_vec3(v);
+        }
+        out.put_f32(r.weight);
+        out.put_u32(r.material);
+        out.put_u64(r.stream);
+    }
+}
+
+fn unit(v: Vec3) -> bool {
+    v.is_finite() && (v.length() - 1.0).abs() < 1e-3
+}
+
+/// Every request is checked on arrival: a non-finite number, a normal that is not unit length or
+/// an unknown layer is refused and counted (whether its pixel lies in the image is for the
+/// receiver, which knows the image).
+fn take_requests(reader: &mut Reader<'_>) -> Result<Requests, ProtocolError> {
+    let count = reader.count(REQUEST_BYTES)?;
+    let mut out = Requests::from(Vec::with_capacity(count));
+    for _ in 0..count {
+        let pixel = reader.u32()?;
+        let layer = match reader.u32()? {
+            2 => Some(Layer::Specular),
+            3 => Some(Layer::Indirect),
+            _ => None,
+        };
+        let r = AmbientRequest {
+            pixel,
+            layer: layer.unwrap_or(Layer::Indirect),
+            specular_depth: reader.u32()?,
+            position: reader.vec3()?,
+            geometric_normal: reader.vec3()?,
+            normal: reader.vec3()?,
+            facing_normal: reader.vec3()?,
+            coefficient: reader.vec3()?,
+            direction: reader.vec3()?,
+            weight: reader.f32()?,
+            material: reader.u32()?,
+            stream: reader.u64()?,
+        };
+        let valid = layer.is_some()
+            && r.position.is_finite()
+            && unit(r.geometric_normal)
+            && unit(r.normal)
+            && unit(r.facing_normal)
+            && r.coefficient.is_finite()
+            && r.coefficient.min_element() >= 0.0
+            && r.direction.is_finite()
+            && r.weight.is_finite();
+        if valid {
+            out.requests.push(r);
+        } else {
+            out.rejected += 1;
         }
     }
     Ok(out)
