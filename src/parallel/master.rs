@@ -1,10 +1,8 @@
-//! The one master controller (rank 0), whatever the mode: hands out tiles on demand (the one
-//! `TileQueue`), takes finished tiles (into the image, or only into the --checkpoint journal),
-//! relays shared records (`RecordRelay`, which also keeps the -af file), gathers the ranks'
-//! statistics, and ends the job naming a rank that falls silent. It renders nothing itself.
-//! How records are shared, and when the render is complete, is the mode's `Sharing` policy:
-//! `worker` holds the traditional modes' (paper, section 4), `component::master` component
-//! mode's (section 5).
+//! The one master controller (rank 0) of every mode: hands out tiles on demand, takes finished
+//! tiles (into the image, or only into the --checkpoint journal), relays shared records (and
+//! keeps the -af file), gathers the ranks' statistics, and ends the job naming a rank that falls
+//! silent. It renders nothing. How records are shared, and when the render is complete, is the
+//! mode's `Sharing` policy (`worker::TraditionalSharing`, `component::master`).
 
 use super::comm::{Comm, Hosts};
 use super::component::{Roles, master::ComponentSharing};
@@ -23,13 +21,10 @@ use std::time::Instant;
 
 /// A mode's way of sharing records, as the master sees it.
 pub trait Sharing {
-    /// Before any tile: what the workers start from (by default, every worker the records of
-    /// the cache file it lacks).
+    /// Before any tile: what the workers start from (by default, the cache file's records).
     fn start(&mut self, core: &mut MasterCore<'_, '_>) {
         let initial = Message::InitialRecords(core.setup.initial_records());
-        for worker in 1..core.comm.size() {
-            core.send(worker, &initial);
-        }
+        (1..core.comm.size()).for_each(|worker| core.send(worker, &initial));
     }
     /// Whether a finished tile's pixels are the image's (they are not when the worker keeps
     /// part of its light to send with its whole image at the end).
@@ -97,11 +92,10 @@ impl<'a, 'c> MasterCore<'a, 'c> {
     pub fn send(&self, dest: i32, message: &Message) {
         let limit = self.setup.job_in.silence_limit;
         self.comm.send_within(dest, message, limit, || -> Infallible {
+            let (host, seconds) = (self.setup.hosts.of(dest), limit.as_secs_f64());
             let line = format!(
-                "rank {dest} (host {}) took no message from the master for {:.0} s: its host or link is gone, or \
-                 it hangs",
-                self.setup.hosts.of(dest),
-                limit.as_secs_f64()
+                "rank {dest} (host {host}) took no message from the master for {seconds:.0} s: its host or link is \
+                 gone, or it hangs"
             );
             end_job(self.comm, self.setup.cache(), &line)
         });
@@ -126,8 +120,7 @@ impl<'a, 'c> MasterCore<'a, 'c> {
         Ok((source, message))
     }
 
-    /// A sync of `source`'s rendering thread `thread`: its new records join the relay, and it
-    /// gets those of the others it lacks.
+    /// A sync of `source`'s rendering thread `thread`: its new records for those it lacks.
     pub fn sync(&mut self, source: i32, thread: u32, records: Records) {
         self.relay.share(source as usize, records);
         let records = self.relay.catch_up(source as usize);
@@ -181,9 +174,8 @@ impl<'a, 'c> MasterCore<'a, 'c> {
 }
 
 /// The record relay: every record a worker shares is counted, kept in the cache file and
-/// remembered with the rank it came from, so that each rank can be sent exactly the records it
-/// lacks (those of the other ranks since its last sync). Centralised mode, and component mode's
-/// PRs and PAs, sync through it.
+/// remembered with the rank it came from, so that each rank can be sent exactly those it lacks
+/// (the other ranks' since its last sync).
 pub struct RecordRelay<'a> {
     /// Every shared record, with the rank that made it (0: the cache file's).
     store: Vec<(usize, Record)>,
@@ -265,12 +257,10 @@ pub fn run(comm: &Comm<'_>, setup: &Setup<'_>, roles: Option<Roles>, wall: Insta
     {
         warn(&format!("cache file not fully written: {e}"));
     }
-    let mut stats = RenderStats {
-        threads,
-        ..job_in
-            .host
-            .job_stats(job, job_in.mode.name(), comm.size() as usize, render_s)
-    };
+    let mut stats = job_in
+        .host
+        .job_stats(job, job_in.mode.name(), comm.size() as usize, render_s);
+    stats.threads = threads;
     stats.tiles_restored = setup.checkpoint.as_ref().map_or(0, |(_, r)| r.count()) as u64;
     stats.add_ranks(ranks);
     if let Some(prepass) = &setup.prepass {
@@ -302,11 +292,8 @@ fn control(
         core.handle(sharing, source, message?)?;
     }
     if !core.queue.all_out() {
-        return Err(format!(
-            "only {} of {} tiles were rendered",
-            core.queue.handed_out(),
-            core.queue.len()
-        ));
+        let (out, all) = (core.queue.handed_out(), core.queue.len());
+        return Err(format!("only {out} of {all} tiles were rendered"));
     }
     let render_s = start.elapsed().as_secs_f64();
     sharing.gather(&mut core)?;
@@ -322,12 +309,10 @@ fn control(
 
 /// The line that ends a job when a rank has fallen silent.
 pub fn lost_rank(silence: &Silence, hosts: &Hosts) -> String {
+    let (rank, host, seconds) = (silence.rank, hosts.of(silence.rank), silence.seconds);
     format!(
-        "rank {} (host {}) has been silent for {:.0} s: its host or link is gone, or it hangs; the cache \
-         file keeps every record synced before",
-        silence.rank,
-        hosts.of(silence.rank),
-        silence.seconds
+        "rank {rank} (host {host}) has been silent for {seconds:.0} s: its host or link is gone, or it hangs; the \
+         cache file keeps every record synced before"
     )
 }
 

@@ -1,7 +1,6 @@
-//! Rendering under mpirun: a master controller on rank 0 hands out tiles on demand to worker
-//! ranks, which share irradiance cache records in one of the paper's ways (section 4): not at
-//! all, through the master, or by broadcast. The component-based mode (section 5) builds on
-//! the same master, tiles and record transport.
+//! Rendering under mpirun: a master on rank 0 hands out tiles on demand to worker ranks, which
+//! share cache records in one of the paper's ways (section 4): not at all, through the master,
+//! or by broadcast. Component mode (section 5) builds on the same master, tiles and transport.
 
 pub mod comm;
 pub mod component;
@@ -60,8 +59,8 @@ impl Mode {
     }
 }
 
-/// What a parallel run is given by the command that starts it: typed settings, and the
-/// command's own work (its options, outputs and checkpoint) behind `JobHost`.
+/// What the command that starts a parallel run gives it: typed settings, and its own work behind
+/// `JobHost`.
 pub struct ParallelJob<'a> {
     pub mode: Mode,
     pub width: u32,
@@ -93,8 +92,7 @@ pub trait JobHost: Sync {
     fn check_outputs(&self) -> Result<(), String>;
     /// Rank 0: opens the --checkpoint journal, if any, and what an earlier run finished.
     fn open_checkpoint(&self, tiles: &[Tile]) -> Result<Option<(Checkpoint, Restored)>, String>;
-    /// Loads the scene and prepares this rank's job with `threads` rendering threads; the
-    /// master's with the cache file, the others' without.
+    /// Loads the scene and prepares this rank's job (only the master's with the cache file).
     fn prepare(&self, master: bool, threads: usize) -> Result<Job, String>;
     /// Rank 0: the statistics of the job itself, for `ranks` ranks and `render_s` seconds.
     fn job_stats(&self, job: &Job, mode: &'static str, ranks: usize, render_s: f64) -> RenderStats;
@@ -142,13 +140,6 @@ pub fn under_mpirun() -> bool {
 
 /// The pid of the process that started this rank (mpirun, or Open MPI's daemon on a remote
 /// host), from the session directory Open MPI names after it: `.../pid.NNN/...`.
-fn launcher_pid() -> Option<u32> {
-    let dir = std::env::var("PMIX_SERVER_TMPDIR")
-        .or_else(|_| std::env::var("OMPI_FILE_LOCATION"))
-        .ok()?;
-    pid_in_session_dir(&dir)
-}
-
 fn pid_in_session_dir(dir: &str) -> Option<u32> {
     dir.split('/')
         .find_map(|part| part.strip_prefix("pid.").and_then(|p| p.parse().ok()))
@@ -169,8 +160,7 @@ impl Intake {
         records.records.into_iter().for_each(|r| cache.insert_shared(r));
     }
 
-    /// A sync of rendering thread `thread` through the master (centralised mode, helping PRs):
-    /// sends the records made here and takes in those of the others it answers with.
+    /// A sync of rendering thread `thread` through the master (centralised mode, helping PRs).
     pub fn sync(&self, comm: &Comm<'_>, thread: u32, cache: &IrradianceCache) {
         let records = Records::from(cache.take_outbox());
         comm.send(0, &Message::RecordsUp { thread, records });
@@ -189,8 +179,7 @@ impl Intake {
     }
 }
 
-/// This rank's part of the job once every rank has its job and the prepass (if any) is done:
-/// what the master controls and what a worker renders with.
+/// This rank's part of the job once the prepass (if any) is done, master or worker.
 pub struct Setup<'a> {
     pub job_in: &'a ParallelJob<'a>,
     pub job: Job,
@@ -270,8 +259,7 @@ fn check_threads(mode: Mode, threads: usize, granted: Threading) -> Result<(), S
     Ok(())
 }
 
-/// Checks that the layout can work; the same answer on every rank, so every rank can stop on
-/// its own and only rank 0 needs to say why.
+/// Checks that the layout can work: every rank alike, so only rank 0 needs to say why.
 fn check_layout(job: &ParallelJob<'_>, size: i32, tile_count: usize, threads: usize) -> Result<(), String> {
     if size < 2 {
         return Err(format!(
@@ -307,7 +295,9 @@ pub fn run(job_in: &ParallelJob<'_>) -> CommandResult {
     let wall = Instant::now();
     let host = job_in.host;
     // A rank never outlives its launcher (see sys::process).
-    crate::sys::process::die_with_parent(launcher_pid()).map_err(CommandError::input)?;
+    let session_dir = std::env::var("PMIX_SERVER_TMPDIR").or_else(|_| std::env::var("OMPI_FILE_LOCATION"));
+    let launcher = session_dir.ok().as_deref().and_then(pid_in_session_dir);
+    crate::sys::process::die_with_parent(launcher).map_err(CommandError::input)?;
     let Some((universe, granted)) = mpi::initialize_with_threading(Threading::Multiple) else {
         return Err(CommandError::failed("MPI could not be initialised".into()));
     };
@@ -349,8 +339,8 @@ pub fn run(job_in: &ParallelJob<'_>) -> CommandResult {
     };
     // Every rank checks --max-memory for the hungriest role, so they all reach one verdict.
     let prepared = host.prepare(rank == 0, threads);
-    // Who could not prepare: if rank 0 could not, it alone says why (the others most likely
-    // failed the same way on the same scene); else each failing rank says why. All then stop.
+    // If rank 0 could not prepare, it alone says why (the others most likely failed the same
+    // way); else each failing rank does. All then stop.
     let failed = comm.all_flags(prepared.is_err());
     let mut job = match prepared {
         Ok(job) if !failed.contains(&true) => job,
@@ -363,8 +353,8 @@ pub fn run(job_in: &ParallelJob<'_>) -> CommandResult {
             return Err(stop_together(&comm, line.as_deref()));
         }
     };
-    // The prepass: every rank ends it with the same complete cache; the modes then only read
-    // it (a gap's record stays with the pixel that needed it).
+    // Every rank ends the prepass with the same cache; the modes then only read it (a gap's
+    // record stays with the pixel that needed it).
     let prepass = job.settings.prepass.then(|| {
         prepass::run(&comm, &job, job_in.silence_limit, &hosts)
             .unwrap_or_else(|e| end_job(&comm, job.cache.as_ref(), &e))
@@ -410,8 +400,7 @@ fn work(comm: &Comm<'_>, mut setup: Setup<'_>, roles: Option<&Roles>) {
     }
 }
 
-/// The master's end of a failed job: keeps what the cache file already has, says why, and
-/// stops every rank.
+/// The master's end of a failed job: keeps what the cache file has, says why, stops every rank.
 pub(crate) fn end_job(comm: &Comm<'_>, cache: Option<&IrradianceCache>, message: &str) -> ! {
     if let Some(cache) = cache {
         let _ = cache.finish();

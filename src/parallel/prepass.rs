@@ -1,9 +1,8 @@
-//! The cache prepass under mpirun (see `crate::prepass`): before any tile is handed out, the
-//! workers share each round's sites (worker k of W takes sites k, k + W, ...), send the
-//! records they made to the master, and the master hands every worker the round's records
-//! from all of them in site order. Every rank, the master included, inserts the same records
-//! in the same order, so all caches hold the record set one process would have made, and the
-//! image is the same for any number of ranks and any mode.
+//! The cache prepass under mpirun (see `crate::prepass`): the workers share each round's sites
+//! (worker k of W takes sites k, k + W, ...) and send their records to the master, which hands
+//! every worker all of them in site order. Every rank, the master included, inserts the same
+//! records in the same order, so all caches hold the record set one process would have made,
+//! and the image is the same for any number of ranks and any mode.
 
 use super::comm::{Comm, Hosts, kind};
 use super::protocol::{Kind, Message, ProtocolError, Records};
@@ -27,11 +26,10 @@ pub fn run(comm: &Comm<'_>, job: &Job, timeout: Duration, hosts: &Hosts) -> Resu
         // gone rank while the others time out waiting for it, and nobody would name the lost one.
         let send = |worker: i32, message: &Message| {
             comm.send_within(worker, message, timeout, || -> std::convert::Infallible {
+                let (host, seconds) = (hosts.of(worker), timeout.as_secs_f64());
                 let line = format!(
-                    "prepass: rank {worker} on {} took no round from the master for {:.0} s: its host or link is \
-                     gone, or it hangs; the cache file keeps every record of the rounds before",
-                    hosts.of(worker),
-                    timeout.as_secs_f64()
+                    "prepass: rank {worker} on {host} took no round from the master for {seconds:.0} s: its host or \
+                     link is gone, or it hangs; the cache file keeps every record of the rounds before"
                 );
                 super::end_job(comm, Some(cache), &line)
             })
@@ -49,12 +47,10 @@ pub fn run(comm: &Comm<'_>, job: &Job, timeout: Duration, hosts: &Hosts) -> Resu
                         return Err(format!("prepass: rank {worker} on {host} sent a bad round: {why}"));
                     }
                     Err(lost) => {
+                        let (who, host, seconds) = (lost.rank, hosts.of(lost.rank), lost.seconds);
                         return Err(format!(
-                            "prepass: rank {} on {} has been silent for {:.0} s (lost, or stalled); the cache file keeps \
-                             every record of the rounds before",
-                            lost.rank,
-                            hosts.of(lost.rank),
-                            lost.seconds
+                            "prepass: rank {who} on {host} has been silent for {seconds:.0} s (lost, or stalled); the \
+                             cache file keeps every record of the rounds before"
                         ));
                     }
                 }
@@ -87,17 +83,15 @@ pub fn run(comm: &Comm<'_>, job: &Job, timeout: Duration, hosts: &Hosts) -> Resu
                 "rank {rank}: prepass: bad round from the master: {}",
                 bad(other)
             )),
-            None => Err(format!(
-                "rank {rank} on {}: prepass: nothing from the master (rank 0 on {}) for {} s",
-                hosts.of(rank),
-                hosts.of(0),
-                patience.as_secs()
-            )),
+            None => {
+                let (host, master, seconds) = (hosts.of(rank), hosts.of(0), patience.as_secs());
+                Err(format!(
+                    "rank {rank} on {host}: prepass: nothing from the master (rank 0 on {master}) for {seconds} s"
+                ))
+            }
         }
     };
-    let share = Share::Slice {
-        index: (rank - 1) as usize,
-        count: (size - 1) as usize,
-    };
+    let (index, count) = ((rank - 1) as usize, (size - 1) as usize);
+    let share = Share::Slice { index, count };
     run_shared(&integrator, &job.camera, &job.settings, share, &mut exchange)
 }

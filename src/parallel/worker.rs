@@ -14,8 +14,7 @@ use crate::irradiance::IrradianceCache;
 use crate::render::{ThreadClock, ThreadStats, render_tile};
 use std::sync::Mutex;
 
-/// How this worker's rendering threads share records: the mode's way, every --sync new
-/// records, one thread at a time; and the records that came back.
+/// How this worker's rendering threads share records: every --sync new ones, one at a time.
 struct Sharer<'a> {
     setup: &'a Setup<'a>,
     /// Held while a thread shares: the others render on instead of waiting to share too.
@@ -47,10 +46,8 @@ impl Sharer<'_> {
             }
             (Mode::Centralised, Some(cache)) if cache.outbox_len() > 0 => self.intake.sync(comm, thread, cache),
             (Mode::Broadcast, cache) if end || cache.is_some_and(|c| c.outbox_len() > 0) => {
-                let batch = Message::RecordsBroadcast {
-                    records: outbox(),
-                    last: end,
-                };
+                let (records, last) = (outbox(), end);
+                let batch = Message::RecordsBroadcast { records, last };
                 // The master is a recipient too: it keeps the cache file.
                 for rank in (0..comm.size()).filter(|&r| r != comm.rank()) {
                     comm.send(rank, &batch);
@@ -81,8 +78,7 @@ fn receive_broadcasts(counters: &Counters, cache: &IrradianceCache, peers: usize
     }
 }
 
-/// One rendering thread: tiles from the master until there are none left, each finished tile
-/// going back with the request for the next.
+/// One rendering thread: tiles until none is left, each going back with the request for the next.
 fn render_tiles(setup: &Setup<'_>, counters: &Counters, sharer: &Sharer<'_>, thread: u32) -> ThreadStats {
     let comm = Comm::new(counters);
     let integrator = setup.integrator();

@@ -43,8 +43,7 @@ impl LoadBalancer {
         self.queues.get(&pa).copied().unwrap_or(0)
     }
 
-    /// A PA's status: its queue now; with every tile out, an empty queue gets no new
-    /// requests but shares.
+    /// A PA's status: with every tile out, an empty queue gets no new requests but shares.
     pub fn report(&mut self, pa: i32, queue: u64, tiles_all_out: bool) {
         self.queues.insert(pa, queue);
         if queue == 0 && tiles_all_out {

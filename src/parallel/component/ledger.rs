@@ -36,12 +36,7 @@ impl TerminationLedger {
             .prs
             .get_mut(&pr)
             .ok_or_else(|| format!("rank {pr} is not a PR but reported as one"))?;
-        *account = PrAccount {
-            flushed: true,
-            sent,
-            helped,
-            awaiting_forward: false,
-        };
+        (account.flushed, account.sent, account.helped, account.awaiting_forward) = (true, sent, helped, false);
         Ok(())
     }
 

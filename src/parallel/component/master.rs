@@ -1,9 +1,8 @@
 //! Component mode's sharing policy for the one master (`parallel::master`): PRs get the records
 //! they lack with every tile, PAs and helpers sync through the record relay, the load balancer
-//! (`LoadBalancer`) sends idle PRs and dry PAs shares of the longest queue, the termination
-//! ledger (`TerminationLedger`) says when every request is computed, and then every worker's
-//! image is gathered and summed (a PR keeps its tiles' pixels, a PA the indirect light it
-//! computed).
+//! sends idle PRs and dry PAs shares of the longest queue, the termination ledger says when every
+//! request is computed, and then every worker's image (a PR's tiles, a PA's indirect light) is
+//! gathered and summed.
 
 use super::Roles;
 use super::balancer::{LoadBalancer, Share};
@@ -29,12 +28,8 @@ impl ComponentSharing {
     }
 
     fn order(&mut self, core: &MasterCore<'_, '_>, share: Share) {
-        let message = Message::ForwardOrder {
-            to: share.to as u32,
-            count: share.count as u32,
-            to_pa: share.to_pa,
-        };
-        core.send(share.from, &message);
+        let (to, count, to_pa) = (share.to as u32, share.count as u32, share.to_pa);
+        core.send(share.from, &Message::ForwardOrder { to, count, to_pa });
         if !share.to_pa {
             self.ledger.forward_ordered(share.to);
         }
@@ -125,11 +120,8 @@ impl Sharing for ComponentSharing {
     /// may still send a status (its last sync) after FINISH; it gets its answer so it can stop.
     fn gather(&mut self, core: &mut MasterCore<'_, '_>) -> Result<(), String> {
         let size = core.comm.size();
-        for rank in 1..size {
-            core.send(rank, &Message::Finish);
-        }
-        let mut has_image = vec![false; size as usize];
-        has_image[0] = true;
+        (1..size).for_each(|rank| core.send(rank, &Message::Finish));
+        let mut has_image: Vec<bool> = (0..size).map(|rank| rank == 0).collect();
         while has_image.contains(&false) || !core.every_report_in() {
             let reports = &core.reports;
             let awaited = |r: i32| !has_image[r as usize] || reports[r as usize].is_none();
@@ -146,11 +138,8 @@ impl Sharing for ComponentSharing {
                 common @ (Message::Stats(_) | Message::Results(_)) => core.handle(self, source, common)?,
                 Message::PaStatus { records, .. } => {
                     core.relay.keep(records);
-                    let reply = Message::RecordsDown {
-                        thread: 0,
-                        records: Records::default(),
-                    };
-                    core.send(source, &reply);
+                    let (thread, records) = (0, Records::default());
+                    core.send(source, &Message::RecordsDown { thread, records });
                 }
                 other => {
                     return Err(format!(

@@ -1,8 +1,7 @@
 //! The component-based parallel irradiance cache (Debattista, Santos & Chalmers 2006, section
-//! 5): PR ranks render everything except indirect diffuse light and send the cache misses as
-//! requests to PA ranks, which own the indirect diffuse work; the master hands out tiles,
-//! relays records, balances load by giving idle PRs (and PAs that ran dry, beyond the paper) a
-//! share of the longest PA queue, and sums every rank's image at the end.
+//! 5): PR ranks render all but indirect diffuse light and send their cache misses as requests
+//! to PA ranks; the master hands out tiles, relays records, gives idle PRs (and dry PAs, beyond
+//! the paper) shares of the longest PA queue, and sums every rank's image at the end.
 
 pub mod balancer;
 pub mod ledger;
@@ -32,19 +31,16 @@ pub fn compute_request(
     let mut rng = Rng::new(seed, request.stream);
     let mut work = Work::new(&mut stats.rays);
     work.sample.pixel = request.pixel;
-    let light = integrator.ambient_for_request(request, &mut rng, &mut work) * request.coefficient;
-    frame.add(request.pixel as usize, request.layer, light);
+    let (pixel, layer) = (request.pixel, request.layer);
+    let value = integrator.ambient_for_request(request, &mut rng, &mut work) * request.coefficient;
+    frame.add(pixel as usize, layer, value);
     if let Some(results) = results {
-        results.push(RequestResult {
-            pixel: request.pixel,
-            layer: request.layer,
-            value: light,
-        });
+        results.push(RequestResult { pixel, layer, value });
     }
 }
 
-/// With --checkpoint: sends the results gathered since the last call to the master (before
-/// the message that counts them as done), leaving `results` empty.
+/// With --checkpoint: sends the results gathered so far to the master (before the message that
+/// counts them as done).
 pub fn send_results(comm: &Comm<'_>, results: &mut Vec<RequestResult>) {
     if !results.is_empty() {
         comm.send(0, &Message::Results(std::mem::take(results)));

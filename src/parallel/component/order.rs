@@ -63,9 +63,8 @@ impl RequestQueue {
         self.grid.pop_front().or_else(|| self.rest.pop_front())
     }
 
-    /// Up to `count` requests for a helper (an idle PR or a PA that ran dry): the newest, off-grid
-    /// ones first, so that the PA keeps making the grid's records (from which the helper's cache,
-    /// fresh from the master, then answers the others).
+    /// Up to `count` requests for a helper: the newest, off-grid ones first, so that the PA keeps
+    /// making the grid's records (from which the helper's cache then answers the others).
     pub fn take_newest(&mut self, count: usize) -> Vec<AmbientRequest> {
         let from_rest = count.min(self.rest.len());
         let mut taken: Vec<AmbientRequest> = self.rest.split_off(self.rest.len() - from_rest).into();

@@ -12,7 +12,6 @@ use crate::parallel::comm::{Comm, Counters, kind};
 use crate::parallel::protocol::{Kind, Message, Records, Requests};
 use crate::parallel::{Intake, Setup, send_report};
 use crate::render::{ThreadClock, ThreadStats};
-use crate::shading::request::AmbientRequest;
 use std::sync::atomic::AtomicU64;
 use std::sync::atomic::Ordering::{AcqRel, Acquire, Relaxed};
 use std::sync::{Condvar, Mutex, MutexGuard};
@@ -51,8 +50,7 @@ impl Shared<'_> {
         self.queued.lock().unwrap_or_else(|e| e.into_inner())
     }
 
-    /// Waits until a request or FINISH is there, counting the wait in `idle_ns`; whether the PA
-    /// is done (FINISH came and nothing is left).
+    /// Waits (as idle time) for a request or FINISH; whether the PA is done (FINISH, nothing left).
     fn wait(&self, idle_ns: &AtomicU64) -> bool {
         let mut q = self.lock();
         let waited = Instant::now();
@@ -110,10 +108,10 @@ fn communicate(counters: &Counters, shared: &Shared<'_>, pixels: u32, bound: usi
                 Ok(Message::Requests(decoded)) | Ok(Message::Forwarded(decoded)) => {
                     let handling = Instant::now();
                     // Refused requests still count as done, so the master's totals close.
-                    let (inside, outside): (Vec<AmbientRequest>, Vec<AmbientRequest>) =
+                    let (inside, outside): (Vec<_>, Vec<_>) =
                         decoded.requests.into_iter().partition(|r| r.pixel < pixels);
-                    let rejected = decoded.rejected + outside.len();
-                    shared.rejected.fetch_add(rejected as u64, Relaxed);
+                    let refused = decoded.rejected + outside.len();
+                    shared.rejected.fetch_add(refused as u64, Relaxed);
                     let mut q = shared.lock();
                     q.requests.extend(inside);
                     q.longest = q.longest.max(q.requests.len());
@@ -183,7 +181,7 @@ pub fn run(setup: &Setup<'_>) {
     let bound = setup.job_in.pa_queue.max(1) as usize;
     let mut frame = FrameBuffer::new(width, height);
     let mut stats = ThreadStats::default();
-    let (mut done, mut reported) = (0u64, u64::MAX);
+    let (mut computed, mut reported) = (0u64, u64::MAX);
     let mut queue_samples = Vec::new();
     let mut results = Vec::new();
     std::thread::scope(|scope| {
@@ -192,20 +190,20 @@ pub fn run(setup: &Setup<'_>) {
         let clock = ThreadClock::start();
         loop {
             let next = shared.lock().requests.pop();
-            // The queue length to report: a sync every --sync new records, and before going
-            // idle, when the master must know everything done so far (the queue may also have
-            // been emptied by a forward order while a request was computed).
+            // The queue length to report: a sync every --sync new records, and before going idle,
+            // when the master must know everything done so far (a forward order may also have
+            // emptied the queue while a request was computed).
             let left = match next {
                 Some(request) => {
                     let kept = journal.then_some(&mut results);
                     compute_request(&integrator, &request, seed, &mut stats, &mut frame, kept);
-                    done += 1;
+                    computed += 1;
                     if cache.map_or(0, |c| c.outbox_len()) < setup.sync {
                         continue;
                     }
                     shared.lock().requests.len()
                 }
-                None if done == reported => {
+                None if computed == reported => {
                     if shared.wait(&counters.idle_ns) {
                         break;
                     }
@@ -213,20 +211,17 @@ pub fn run(setup: &Setup<'_>) {
                 }
                 None => 0,
             };
-            // The sync: new records up, and the queue length and the count of computed
-            // requests, which the master's termination check relies on. The results go first
-            // (the status counts them as done); the reply is not waited for (see `Shared`).
+            // The sync: new records, the queue length and the count of computed requests (for
+            // the master's termination check); the results go first, as the status counts them
+            // done, and the reply is not waited for (see `Shared`).
             send_results(&comm, &mut results);
             shared.pending.fetch_add(1, AcqRel);
-            let status = Message::PaStatus {
-                queue: left as u64,
-                // Refused requests count as done: the PR counted them as sent.
-                done: done + shared.rejected.load(Relaxed),
-                records: Records::from(cache.map_or_else(Vec::new, |c| c.take_outbox())),
-            };
-            comm.send(0, &status);
+            // Refused requests count as done: the PR counted them as sent.
+            let (queue, done) = (left as u64, computed + shared.rejected.load(Relaxed));
+            let records = Records::from(cache.map_or_else(Vec::new, |c| c.take_outbox()));
+            comm.send(0, &Message::PaStatus { queue, done, records });
             queue_samples.push((setup.start.elapsed().as_secs_f64(), left as u32));
-            reported = done;
+            reported = computed;
         }
         clock.stop(&mut stats);
         let _ = comm_thread.join();
@@ -244,7 +239,7 @@ pub fn run(setup: &Setup<'_>) {
     let mut report = setup.report(&comm, "pa", vec![stats], &comm_counters);
     report.records_received = shared.intake.totals().0;
     report.records_rejected = shared.rejected.load(Relaxed);
-    report.requests_computed = done;
+    report.requests_computed = computed;
     report.requests_forwarded = shared.forwarded.load(Relaxed);
     report.request_handling_s = shared.handling_ns.load(Relaxed) as f64 * 1e-9;
     report.queue_lengths = queue_samples;

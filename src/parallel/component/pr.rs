@@ -18,8 +18,7 @@ use std::sync::atomic::Ordering::Relaxed;
 use std::sync::mpsc::{Receiver, SyncSender, TrySendError, sync_channel};
 use std::time::Instant;
 
-/// Request batches wait here for the courier thread; when this many are waiting, the renderer
-/// waits too.
+/// Request batches waiting for the courier thread; at this many the renderer waits too.
 const BATCHES_IN_FLIGHT: usize = 16;
 
 /// Hands request batches to the courier. Every request of a tile goes to one PA (`pa_of_tiles`),
@@ -35,17 +34,11 @@ struct Sender<'c> {
     /// The PA of the tile being rendered.
     pa: Option<i32>,
     sent: u64,
-    /// Nanoseconds spent taking, encoding and queueing batches (waits for a full outbox not
-    /// included: those are idle time).
+    /// Nanoseconds spent taking, encoding and queueing batches (not waiting: that is idle time).
     handling_ns: u64,
 }
 
 impl Sender<'_> {
-    /// Requests from now on belong to this tile.
-    fn start_tile(&mut self, index: u32) {
-        self.pa = self.pa_of_tile.get(index as usize).copied();
-    }
-
     /// Sends the buffered requests to the current tile's PA.
     fn send(&mut self, sink: &RequestBuffer) {
         let handling = Instant::now();
@@ -79,24 +72,21 @@ fn deliver(counters: &Counters, inbox: Receiver<(i32, Message)>) {
     let mut windows: HashMap<i32, (usize, Option<Marker>)> = HashMap::new();
     for (pa, batch) in inbox {
         comm.send(pa, &batch);
-        let (since, marker) = windows.entry(pa).or_default();
-        *since += 1;
-        if *since >= WINDOW {
+        let (sent, marker) = windows.entry(pa).or_default();
+        *sent += 1;
+        if *sent % WINDOW == 0 {
             if let Some(previous) = marker.take() {
                 comm.wait_marker(previous);
             }
             *marker = Some(comm.send_marker(pa));
-            *since = 0;
         }
     }
-    windows
-        .into_values()
-        .filter_map(|(_, m)| m)
-        .for_each(|m| comm.wait_marker(m));
+    for marker in windows.into_values().filter_map(|(_, marker)| marker) {
+        comm.wait_marker(marker);
+    }
 }
 
-/// A PR's work and what it has to show for it, through its two phases: rendering tiles, then
-/// helping.
+/// A PR's work and what it has to show for it, rendering tiles, then helping.
 struct Pr<'a, 'c> {
     setup: &'a Setup<'a>,
     comm: Comm<'c>,
@@ -191,7 +181,7 @@ impl Pr<'_, '_> {
             while let Some(index) = self.answer() {
                 self.ask(finished.take());
                 let tile = &self.setup.tiles[index as usize];
-                sender.start_tile(index);
+                sender.pa = sender.pa_of_tile.get(index as usize).copied();
                 // The outgoing buffer is empty here (flushed at every tile's end), so what this
                 // tile sent is the change in the count sent.
                 let sent_before = sender.sent;
@@ -221,9 +211,8 @@ impl Pr<'_, '_> {
         }
     }
 
-    /// Helping: computes what the master has a PA forward, until FINISH, reporting itself idle
-    /// each time it runs out (the requests it `sent` and those it helped with so far, which it
-    /// returns).
+    /// Helping: computes what the master has a PA forward until FINISH, reporting itself idle
+    /// each time it runs out with the requests it `sent` and helped with (which it returns).
     fn help(&mut self, sent: u64) -> u64 {
         let (setup, comm, intake) = (self.setup, &self.comm, &self.intake);
         let (seed, journal) = (setup.job_in.seed, setup.job_in.journal);
@@ -232,12 +221,8 @@ impl Pr<'_, '_> {
         let mut helped = 0u64;
         loop {
             send_results(comm, &mut results);
-            let idle = Message::Idle {
-                sent,
-                helped,
-                records: Records::from(setup.cache().map_or_else(Vec::new, |c| c.take_outbox())),
-            };
-            comm.send(0, &idle);
+            let records = Records::from(setup.cache().map_or_else(Vec::new, |c| c.take_outbox()));
+            comm.send(0, &Message::Idle { sent, helped, records });
             // Forwarded requests from any PA, or the master's FINISH.
             let filters = [kind(Some(0), Kind::Finish), kind(None, Kind::Forwarded)];
             let Some(msg) = comm.receive(&filters, None) else {

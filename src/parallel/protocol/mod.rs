@@ -29,8 +29,7 @@ const RECORDS_DOWN_BASE: Tag = 2000;
 /// The most rendering threads a rank may have (their reply tags must not overlap).
 pub const MAX_THREADS: u32 = 999;
 
-/// Declares `Kind` from one table: each kind's MPI tag and its name in errors; each kind is
-/// the `Message` variant of the same name.
+/// Declares `Kind`, each the `Message` variant of its name, with its MPI tag and name in errors.
 macro_rules! kinds {
     ($($(#[$doc:meta])* $kind:ident = $tag:expr, $name:literal;)*) => {
         /// Every message's kind and its MPI tag, in one place.
@@ -97,14 +96,11 @@ impl Kind {
 
     /// The kind a tag names, and the thread for the per-thread kinds.
     pub fn of_tag(tag: Tag) -> Option<(Kind, u32)> {
-        if let Some(&kind) = Kind::ALL.iter().find(|k| k.tag() == tag) {
-            return Some((kind, 0));
-        }
-        [Kind::Work, Kind::RecordsDown].into_iter().find_map(|base| {
-            let thread = tag - base.tag();
-            (0..=MAX_THREADS as Tag)
-                .contains(&thread)
-                .then_some((base, thread as u32))
+        Kind::ALL.iter().find_map(|&kind| {
+            let thread = tag - kind.tag();
+            let per_thread =
+                matches!(kind, Kind::Work | Kind::RecordsDown) && (0..=MAX_THREADS as Tag).contains(&thread);
+            (thread == 0 || per_thread).then_some((kind, thread as u32))
         })
     }
 }
@@ -163,8 +159,7 @@ pub enum Message {
         thread: u32,
         finished: Option<FinishedTile>,
     },
-    /// MC -> the asking thread: a tile or none left, and (component mode) the records the
-    /// worker lacks.
+    /// MC -> the asking thread: a tile or none, and (component mode) the records it lacks.
     Work {
         thread: u32,
         tile: Option<u32>,
@@ -215,16 +210,15 @@ impl Message {
         let mut out = vec![PROTOCOL_VERSION];
         match self {
             Message::Heartbeat | Message::Finish => {}
-            Message::InitialRecords(r)
-            | Message::PrepassStart(r)
-            | Message::FinalRecords(r)
-            | Message::Work { records: r, .. }
-            | Message::RecordsDown { records: r, .. } => {
-                if let Message::Work { tile, .. } = self {
-                    put_option(&mut out, *tile);
-                }
-                put_records(&mut out, &r.records);
+            Message::InitialRecords(r) | Message::PrepassStart(r) | Message::FinalRecords(r) => {
+                put_records(&mut out, r)
             }
+            Message::Work { tile, records, .. } => {
+                out.put_u8(tile.is_some() as u8);
+                out.put_u32(tile.unwrap_or(0));
+                put_records(&mut out, records);
+            }
+            Message::RecordsDown { records, .. } => put_records(&mut out, records),
             Message::PrepassRound(round) => {
                 out.put_u32(round.len() as u32);
                 for (index, record) in round {
@@ -244,21 +238,21 @@ impl Message {
             }
             Message::RecordsUp { thread, records } => {
                 out.put_u32(*thread);
-                put_records(&mut out, &records.records);
+                put_records(&mut out, records);
             }
             Message::RecordsBroadcast { records, last } => {
                 out.put_u8(*last as u8);
-                put_records(&mut out, &records.records);
+                put_records(&mut out, records);
             }
             Message::Stats(report) => out.extend(serde_json::to_vec(report.as_ref()).unwrap_or_default()),
             Message::Requests(r) | Message::Forwarded(r) => put_requests(&mut out, &r.requests),
             Message::Idle { sent, helped, records } => {
                 [*sent, *helped].into_iter().for_each(|v| out.put_u64(v));
-                put_records(&mut out, &records.records);
+                put_records(&mut out, records);
             }
             Message::PaStatus { queue, done, records } => {
                 [*queue, *done].into_iter().for_each(|v| out.put_u64(v));
-                put_records(&mut out, &records.records);
+                put_records(&mut out, records);
             }
             Message::ForwardOrder { to, count, to_pa } => {
                 out.put_u32(*to);
@@ -319,11 +313,10 @@ impl Message {
                 };
                 Message::WorkRequest { thread, finished }
             }
-            Kind::Work => Message::Work {
-                thread,
-                tile: take_option(&mut r)?,
-                records: take_records(&mut r)?,
-            },
+            Kind::Work => {
+                let (tile, records) = (r.flag()?.then_some(r.u32()?), take_records(&mut r)?);
+                Message::Work { thread, tile, records }
+            }
             Kind::RecordsUp => Message::RecordsUp {
                 thread: r.u32()?,
                 records: take_records(&mut r)?,
@@ -379,21 +372,10 @@ pub fn empty_requests() -> &'static [u8] {
     EMPTY.get_or_init(|| Message::Requests(Requests::default()).encode())
 }
 
-fn put_option(out: &mut Vec<u8>, value: Option<u32>) {
-    out.put_u8(value.is_some() as u8);
-    out.put_u32(value.unwrap_or(0));
-}
-
-fn take_option(r: &mut Reader<'_>) -> Result<Option<u32>, ProtocolError> {
-    let some = r.flag()?;
-    let value = r.u32()?;
-    Ok(some.then_some(value))
-}
-
-fn put_records(out: &mut Vec<u8>, records: &[Record]) {
-    out.reserve(4 + records.len() * RECORD_BYTES);
-    out.put_u32(records.len() as u32);
-    records.iter().for_each(|record| codec::encode(record, out));
+fn put_records(out: &mut Vec<u8>, records: &Records) {
+    out.reserve(4 + records.records.len() * RECORD_BYTES);
+    out.put_u32(records.records.len() as u32);
+    records.records.iter().for_each(|record| codec::encode(record, out));
 }
 
 fn take_records(r: &mut Reader<'_>) -> Result<Records, ProtocolError> {
@@ -410,8 +392,7 @@ fn take_records(r: &mut Reader<'_>) -> Result<Records, ProtocolError> {
 
 pub const REQUEST_BYTES: usize = 100;
 
-/// L_a requests on the wire (PR -> PA, and PA -> helper when load balancing): a count, then
-/// fixed-size requests.
+/// L_a requests on the wire (PR -> PA, PA -> helper): a count, then fixed-size requests.
 fn put_requests(out: &mut Vec<u8>, requests: &[AmbientRequest]) {
     out.reserve(4 + requests.len() * REQUEST_BYTES);
     out.put_u32(requests.len() as u32);
