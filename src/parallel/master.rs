@@ -7,7 +7,7 @@
 use super::comm::{Comm, Hosts};
 use super::component::{Roles, master::ComponentSharing};
 use super::liveness::Silence;
-use super::protocol::{FinishedTile, Message, Records};
+use super::protocol::{FinishedTile, Message, ProtocolError, Records};
 use super::worker::TraditionalSharing;
 use super::{Setup, end_job};
 use crate::commands::{CommandError, CommandResult, warn};
@@ -114,10 +114,8 @@ impl<'a, 'c> MasterCore<'a, 'c> {
         let limit = self.setup.job_in.silence_limit;
         let envelope = self.comm.receive_live(&[(None, None)], limit, awaited)?;
         let source = envelope.source;
-        let message = envelope
-            .message
-            .map_err(|e| format!("rank {source} sent a malformed message: {e}"));
-        Ok((source, message))
+        let malformed = |e: ProtocolError| format!("rank {source} sent a malformed message: {e}");
+        Ok((source, envelope.message.map_err(malformed)))
     }
 
     /// A sync of `source`'s rendering thread `thread`: its new records for those it lacks.
@@ -176,6 +174,7 @@ impl<'a, 'c> MasterCore<'a, 'c> {
 /// The record relay: every record a worker shares is counted, kept in the cache file and
 /// remembered with the rank it came from, so that each rank can be sent exactly those it lacks
 /// (the other ranks' since its last sync).
+#[derive(Default)]
 pub struct RecordRelay<'a> {
     /// Every shared record, with the rank that made it (0: the cache file's).
     store: Vec<(usize, Record)>,
@@ -190,11 +189,9 @@ pub struct RecordRelay<'a> {
 impl<'a> RecordRelay<'a> {
     pub fn new(ranks: usize, cache: Option<&'a IrradianceCache>) -> Self {
         RecordRelay {
-            store: Vec::new(),
             seen: vec![0; ranks],
             cache,
-            received: 0,
-            rejected: 0,
+            ..Default::default()
         }
     }
 
@@ -235,7 +232,6 @@ impl<'a> RecordRelay<'a> {
 /// The master's part: the one master with the mode's policy, then the image, statistics, table.
 pub fn run(comm: &Comm<'_>, setup: &Setup<'_>, roles: Option<Roles>, wall: Instant) -> CommandResult {
     let (job_in, job) = (setup.job_in, &setup.job);
-    let threads = job_in.threads.unwrap_or(1);
     let mut sharing: Box<dyn Sharing> = match roles {
         None => Box::<TraditionalSharing>::default(),
         Some(roles) => {
@@ -260,7 +256,7 @@ pub fn run(comm: &Comm<'_>, setup: &Setup<'_>, roles: Option<Roles>, wall: Insta
     let mut stats = job_in
         .host
         .job_stats(job, job_in.mode.name(), comm.size() as usize, render_s);
-    stats.threads = threads;
+    stats.threads = job_in.threads.unwrap_or(1);
     stats.tiles_restored = setup.checkpoint.as_ref().map_or(0, |(_, r)| r.count()) as u64;
     stats.add_ranks(ranks);
     if let Some(prepass) = &setup.prepass {

@@ -309,19 +309,17 @@ pub fn run(job_in: &ParallelJob<'_>) -> CommandResult {
     check_threads(job_in.mode, threads, granted)
         .and_then(|()| host.validate())
         .map_err(&fail)?;
-    let (tile_width, tile_height) = job_in.tile;
-    let all_tiles = tiles(job_in.width, job_in.height, tile_width, tile_height);
+    let all_tiles = tiles(job_in.width, job_in.height, job_in.tile.0, job_in.tile.1);
     check_layout(job_in, size, all_tiles.len(), threads).map_err(&fail)?;
     let hosts = comm.host_names();
     // Heartbeats from here on (see `liveness`): every rank hears from its master and the master
     // from every rank while the job runs (the pulse needs MPI_THREAD_MULTIPLE). The pulse stops
     // before MPI is finalized (a tuple's fields drop in order): no thread may use MPI then.
     liveness::begin(size as usize);
+    let (own_host, master_host, seconds) = (hosts.of(rank), hosts.of(0), job_in.silence_limit.as_secs_f64());
     let lost_master = format!(
-        "rank {rank} on {}: no word from the master (rank 0 on {}) for {:.0} s: it is gone or hangs; this rank ends",
-        hosts.of(rank),
-        hosts.of(0),
-        job_in.silence_limit.as_secs_f64()
+        "rank {rank} on {own_host}: no word from the master (rank 0 on {master_host}) for {seconds:.0} s: it is \
+         gone or hangs; this rank ends"
     );
     let pulse = (granted == Threading::Multiple).then(|| pulse::Pulse::start(job_in.silence_limit, lost_master));
     let session = (pulse, universe);
@@ -366,6 +364,13 @@ pub fn run(job_in: &ParallelJob<'_>) -> CommandResult {
         Roles::choose(size, job_in.pa, needed)
     });
     let roles = roles.transpose().map_err(&fail)?;
+    // A worker that shares its records, or sends them for the -af file, keeps those it makes.
+    if rank != 0
+        && (job_in.mode != Mode::Noshare || job_in.cache_file)
+        && let Some(cache) = job.cache.as_mut()
+    {
+        cache.keep_outbox();
+    }
     let setup = Setup {
         job_in,
         job,
@@ -377,27 +382,14 @@ pub fn run(job_in: &ParallelJob<'_>) -> CommandResult {
         traffic_before: &counters,
         start: Instant::now(),
     };
-    if rank == 0 {
-        master::run(&comm, &setup, roles, wall)?;
-    } else {
-        work(&comm, setup, roles.as_ref());
+    match roles {
+        _ if rank == 0 => master::run(&comm, &setup, roles, wall)?,
+        None => worker::run(&setup),
+        Some(roles) if roles.pas.contains(&rank) => component::pa::run(&setup),
+        Some(roles) => component::pr::run(&setup, &roles),
     }
     drop(session);
     Ok(())
-}
-
-/// A worker rank's part: a traditional mode's worker, or component mode's PA or PR.
-fn work(comm: &Comm<'_>, mut setup: Setup<'_>, roles: Option<&Roles>) {
-    if (setup.job_in.mode != Mode::Noshare || setup.job_in.cache_file)
-        && let Some(cache) = setup.job.cache.as_mut()
-    {
-        cache.keep_outbox();
-    }
-    match roles {
-        None => worker::run(&setup),
-        Some(roles) if roles.pas.contains(&comm.rank()) => component::pa::run(&setup),
-        Some(roles) => component::pr::run(&setup, roles),
-    }
 }
 
 /// The master's end of a failed job: keeps what the cache file has, says why, stops every rank.

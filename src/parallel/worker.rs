@@ -124,12 +124,10 @@ pub fn run(setup: &Setup<'_>) {
     let threads = setup.job.settings.threads.max(1) as u32;
     let peers = comm.size() as usize - 2;
     let thread_stats: Vec<ThreadStats> = std::thread::scope(|scope| {
-        let listener = match (setup.job_in.mode, cache) {
-            (Mode::Broadcast, Some(cache)) => {
-                Some(scope.spawn(|| receive_broadcasts(&listener_counters, cache, peers, &sharer.intake)))
-            }
-            _ => None,
-        };
+        let (listening, intake) = (&listener_counters, &sharer.intake);
+        let listener = cache
+            .filter(|_| setup.job_in.mode == Mode::Broadcast)
+            .map(|cache| scope.spawn(move || receive_broadcasts(listening, cache, peers, intake)));
         let renderers: Vec<_> = (0..threads)
             .map(|thread| {
                 let (counters, sharer) = (&counters, &sharer);
@@ -168,9 +166,7 @@ impl Sharing for TraditionalSharing {
                 core.relay.keep(records);
                 self.ended += usize::from(last);
             }
-            (_, other) => {
-                return Err(format!("rank {source} sent an unexpected message ({:?})", other.kind()));
-            }
+            (_, other) => return Err(format!("rank {source} sent an unexpected message ({:?})", other.kind())),
         }
         Ok(())
     }

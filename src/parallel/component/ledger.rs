@@ -32,10 +32,8 @@ impl TerminationLedger {
 
     /// A PR has no tile left and has delivered every request: its totals so far.
     pub fn pr_idle(&mut self, pr: i32, sent: u64, helped: u64) -> Result<(), String> {
-        let account = self
-            .prs
-            .get_mut(&pr)
-            .ok_or_else(|| format!("rank {pr} is not a PR but reported as one"))?;
+        let not_pr = || format!("rank {pr} is not a PR but reported as one");
+        let account = self.prs.get_mut(&pr).ok_or_else(not_pr)?;
         (account.flushed, account.sent, account.helped, account.awaiting_forward) = (true, sent, helped, false);
         Ok(())
     }
@@ -49,11 +47,8 @@ impl TerminationLedger {
 
     /// A PA's count of requests computed (cumulative).
     pub fn pa_done(&mut self, pa: i32, done: u64) -> Result<(), String> {
-        let count = self
-            .pa_done
-            .get_mut(&pa)
-            .ok_or_else(|| format!("rank {pa} is not a PA but reported as one"))?;
-        *count = done;
+        let not_pa = || format!("rank {pa} is not a PA but reported as one");
+        *self.pa_done.get_mut(&pa).ok_or_else(not_pa)? = done;
         Ok(())
     }
 

@@ -39,8 +39,7 @@ impl ComponentSharing {
 impl Sharing for ComponentSharing {
     fn start(&mut self, core: &mut MasterCore<'_, '_>) {
         // The cache file's records: PAs get them now, PRs with their first tile.
-        let initial = core.setup.initial_records();
-        core.relay.preload(initial.records);
+        core.relay.preload(core.setup.initial_records().records);
         for &pa in &self.roles.pas {
             let records = core.relay.catch_up(pa as usize);
             core.send(pa, &Message::InitialRecords(records));

@@ -20,7 +20,6 @@ use std::time::{Duration, Instant};
 struct Queued {
     requests: RequestQueue,
     finish: bool,
-    /// The longest the queue has been.
     longest: usize,
 }
 

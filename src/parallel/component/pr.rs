@@ -104,12 +104,11 @@ pub fn run(setup: &Setup<'_>, roles: &Roles) {
     if !roles.pas.is_empty() {
         integrator = integrator.deferring(&sink);
     }
-    let (width, height) = (setup.job.camera.width, setup.job.camera.height);
     let mut pr = Pr {
         setup,
         comm: Comm::new(&counters),
         integrator,
-        frame: FrameBuffer::new(width, height),
+        frame: FrameBuffer::new(setup.job.camera.width, setup.job.camera.height),
         stats: ThreadStats::default(),
         intake: Intake::default(),
     };

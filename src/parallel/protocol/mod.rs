@@ -131,8 +131,7 @@ impl From<Vec<AmbientRequest>> for Requests {
     }
 }
 
-/// A tile a worker finished: its index, the requests it sent for it (component mode's PRs;
-/// 0 elsewhere) and its pixels.
+/// A tile a worker finished, with the requests it sent for it (component mode's PRs; else 0).
 #[derive(Clone, Debug, PartialEq)]
 pub struct FinishedTile {
     pub tile: u32,
@@ -198,7 +197,6 @@ pub enum Message {
 pub struct ProtocolError(pub String);
 
 impl Message {
-    /// The MPI tag the message travels with.
     pub fn tag(&self) -> Tag {
         match self {
             Message::Work { thread, .. } | Message::RecordsDown { thread, .. } => self.kind().for_thread(*thread),
@@ -300,9 +298,7 @@ impl Message {
             Kind::WorkRequest => {
                 let thread = r.u32()?;
                 let finished = if r.flag()? {
-                    let tile = r.u32()?;
-                    let requests = r.u32()?;
-                    let count = r.count(PIXEL_FLOATS * 4)?;
+                    let (tile, requests, count) = (r.u32()?, r.u32()?, r.count(PIXEL_FLOATS * 4)?);
                     let pixels = decode_pixels(r.take(count * PIXEL_FLOATS * 4)?);
                     if !pixels.iter().all(healthy) {
                         return Err(r.error("a pixel is negative or not finite"));
@@ -490,8 +486,7 @@ pub fn encode_pixels(pixels: &[PixelValue], out: &mut Vec<u8>) {
     }
 }
 
-/// The inverse of [`encode_pixels`] for a body of whole pixels (the caller checks the length);
-/// the values are not judged here.
+/// The inverse of [`encode_pixels`] for whole pixels (the caller checks the length and values).
 pub fn decode_pixels(body: &[u8]) -> Vec<PixelValue> {
     body.chunks_exact(PIXEL_FLOATS * 4)
         .map(|chunk| {
@@ -530,8 +525,7 @@ pub fn put_results(out: &mut Vec<u8>, results: &[RequestResult]) {
 pub fn take_results(r: &mut Reader<'_>, count: usize) -> Result<Vec<RequestResult>, ProtocolError> {
     (0..count)
         .map(|_| {
-            let pixel = r.u32()?;
-            let layer = r.u32()?;
+            let (pixel, layer) = (r.u32()?, r.u32()?);
             let layer = Layer::ALL
                 .get(layer as usize)
                 .copied()

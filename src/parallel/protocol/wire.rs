@@ -98,9 +98,7 @@ impl<'a> Reader<'a> {
 
     /// Everything not read yet.
     pub fn rest(&mut self) -> &'a [u8] {
-        let rest = &self.bytes[self.at..];
-        self.at = self.bytes.len();
-        rest
+        self.take(self.bytes.len() - self.at).expect("what is left")
     }
 
     /// The message must have been read exactly.
