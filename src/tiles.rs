@@ -58,13 +58,15 @@ pub fn tiles_in(
     out
 }
 
-/// Stores a rendered tile's pixels in the frame.
+/// Stores a rendered tile's pixels in the frame: their data as they are, their light added to
+/// what the frame holds there (nothing, or in component mode the indirect light PAs computed
+/// for the pixels, which may reach the master before the tile does).
 pub fn store_tile(frame: &mut FrameBuffer, tile: &Tile, values: &[PixelValue]) {
     let mut it = values.iter();
     for y in tile.y0..tile.y1 {
         for x in tile.x0..tile.x1 {
             if let Some(v) = it.next() {
-                frame.set(x, y, &v.components);
+                frame.add_at(x, y, &v.components);
                 frame.set_records(x, y, v.records);
                 frame.set_data(x, y, &v.data);
             }

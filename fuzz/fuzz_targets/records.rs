@@ -28,7 +28,6 @@ const KINDS: [(Kind, usize); 19] = [
     (Kind::PaStatus, 21),
     (Kind::ForwardOrder, 0),
     (Kind::Finish, 0),
-    (Kind::Image, 0),
     (Kind::Results, 0),
     (Kind::Work, 10),
     (Kind::RecordsDown, 5),

@@ -681,7 +681,6 @@ fn run_parallel(args: &RenderArgs, mode: Mode) -> CommandResult {
         pa_queue: args.pa_queue,
         silence_limit: std::time::Duration::from_secs_f64(args.timeout.max(1.0)),
         seed: args.seed,
-        journal: args.checkpoint.is_some(),
         cache_file: args.ambient_file.is_some(),
         quiet: args.quiet,
         host: &host,

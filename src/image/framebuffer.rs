@@ -1,7 +1,7 @@
 //! One float RGB plane per component layer; the composite is their sum.
 
 use crate::image::components::Components;
-use crate::image::data::{DATA_VALUES, PixelData};
+use crate::image::data::PixelData;
 use crate::image::window::PixelWindow;
 use glam::Vec3;
 
@@ -47,9 +47,6 @@ pub struct FrameBuffer {
     /// The data layers and Cryptomatte ranks of each pixel (`image::data`).
     data: Vec<PixelData>,
 }
-
-/// Floats of one pixel in `to_floats`: four RGB layers, then the data (IDs as their bits).
-const FRAME_FLOATS: usize = 12 + DATA_VALUES;
 
 impl FrameBuffer {
     /// A frame of the whole `width` x `height` image.
@@ -98,6 +95,13 @@ impl FrameBuffer {
         }
     }
 
+    pub fn add_at(&mut self, x: u32, y: u32, value: &Components) {
+        let i = self.at(x, y);
+        for (plane, v) in self.layers.iter_mut().zip(value.as_array()) {
+            plane[i] += v;
+        }
+    }
+
     pub fn set_records(&mut self, x: u32, y: u32, count: f32) {
         let i = self.at(x, y);
         self.records[i] = count;
@@ -129,41 +133,6 @@ impl FrameBuffer {
         if let Some(i) = self.window.index_of_pixel(pixel) {
             self.layers[layer.index()][i] += value;
         }
-    }
-
-    /// Every layer's values and the data layers, pixel after pixel (`FRAME_FLOATS` a pixel;
-    /// Cryptomatte IDs as the floats they are), for sending between ranks (whose frames are
-    /// whole images).
-    pub fn to_floats(&self) -> Vec<f32> {
-        let n = self.layers[0].len();
-        let mut out = Vec::with_capacity(n * FRAME_FLOATS);
-        for i in 0..n {
-            for layer in &self.layers {
-                out.extend_from_slice(&layer[i].to_array());
-            }
-            out.extend(self.data[i].to_words().map(f32::from_bits));
-        }
-        out
-    }
-
-    /// The inverse of `to_floats` for a whole image; None when the count does not fit the size.
-    pub fn from_floats(width: u32, height: u32, floats: &[f32]) -> Option<FrameBuffer> {
-        let n = width as usize * height as usize;
-        if floats.len() != n * FRAME_FLOATS {
-            return None;
-        }
-        let mut frame = FrameBuffer::new(width, height);
-        for (i, px) in floats.chunks_exact(FRAME_FLOATS).enumerate() {
-            for (l, layer) in frame.layers.iter_mut().enumerate() {
-                layer[i] = Vec3::new(px[3 * l], px[3 * l + 1], px[3 * l + 2]);
-            }
-            let words: [u32; DATA_VALUES] = std::array::from_fn(|k| px[12 + k].to_bits());
-            frame.data[i] = PixelData::from_words(&words);
-            if !frame.data[i].healthy() {
-                return None;
-            }
-        }
-        Some(frame)
     }
 
     /// Adds another frame's layers (and record counts) to this one's, pixel by pixel, and

@@ -26,11 +26,6 @@ pub trait Sharing {
         let initial = Message::InitialRecords(core.setup.initial_records());
         (1..core.comm.size()).for_each(|worker| core.send(worker, &initial));
     }
-    /// Whether a finished tile's pixels are the image's (they are not when the worker keeps
-    /// part of its light to send with its whole image at the end).
-    fn keeps_tiles(&self) -> bool {
-        true
-    }
     /// The records that go with a tile (or with "no tile left") to `rank`.
     fn records_with_work(&mut self, _core: &mut MasterCore<'_, '_>, _rank: i32) -> Records {
         Records::default()
@@ -125,8 +120,8 @@ impl<'a, 'c> MasterCore<'a, 'c> {
         self.send(source, &Message::RecordsDown { thread, records });
     }
 
-    /// A finished tile from `source`: into the journal, and into the image if `keep`.
-    fn take_tile(&mut self, source: i32, finished: FinishedTile, keep: bool) -> Result<(), String> {
+    /// A finished tile from `source`: into the journal and the image.
+    fn take_tile(&mut self, source: i32, finished: FinishedTile) -> Result<(), String> {
         let (index, pixels) = (finished.tile, finished.pixels);
         let tile = self
             .setup
@@ -140,9 +135,7 @@ impl<'a, 'c> MasterCore<'a, 'c> {
         if let Some((journal, _)) = &self.setup.checkpoint {
             journal.tile(index, finished.requests, &pixels);
         }
-        if keep {
-            store_tile(&mut self.frame, tile, &pixels);
-        }
+        store_tile(&mut self.frame, tile, &pixels);
         self.tiles_done[index as usize] = true;
         Ok(())
     }
@@ -152,7 +145,7 @@ impl<'a, 'c> MasterCore<'a, 'c> {
         match message {
             Message::WorkRequest { thread, finished } => {
                 if let Some(finished) = finished {
-                    self.take_tile(source, finished, sharing.keeps_tiles())?;
+                    self.take_tile(source, finished)?;
                 }
                 let tile = self.queue.next().map(|i| i as u32);
                 self.turned_away += usize::from(tile.is_none());
@@ -163,6 +156,11 @@ impl<'a, 'c> MasterCore<'a, 'c> {
             Message::Results(results) => {
                 if let Some((journal, _)) = &self.setup.checkpoint {
                     journal.results(&results);
+                }
+                // Indirect light computed elsewhere for a pixel, before or after its tile came
+                // (`store_tile` adds to what the pixel has).
+                for r in results {
+                    self.frame.add(r.pixel as usize, r.layer, r.value);
                 }
             }
             other => sharing.on_message(self, source, other)?,

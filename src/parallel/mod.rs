@@ -76,8 +76,6 @@ pub struct ParallelJob<'a> {
     /// How long a rank may be silent before it counts as lost (see `liveness`).
     pub silence_limit: Duration,
     pub seed: u64,
-    /// --checkpoint: finished tiles and computed requests are journalled by the master.
-    pub journal: bool,
     /// -af: the master keeps a cache file (noshare workers send their records at the end).
     pub cache_file: bool,
     pub quiet: bool,

@@ -1,13 +1,13 @@
 //! Component mode's sharing policy for the one master (`parallel::master`): PRs get the records
 //! they lack with every tile, PAs and helpers sync through the record relay, the load balancer
 //! sends idle PRs and dry PAs shares of the longest queue, the termination ledger says when every
-//! request is computed, and then every worker's image (a PR's tiles, a PA's indirect light) is
-//! gathered and summed.
+//! request is computed, and then the last results and every rank's statistics are gathered. A
+//! PR's finished tiles and the PAs' results (a pixel's indirect light) make the image as they
+//! come (`MasterCore`), so no rank sends a whole image.
 
 use super::Roles;
 use super::balancer::{LoadBalancer, Share};
 use super::ledger::TerminationLedger;
-use crate::image::framebuffer::FrameBuffer;
 use crate::parallel::liveness::{self, Silence};
 use crate::parallel::master::{MasterCore, Sharing, lost_rank};
 use crate::parallel::protocol::{Message, Records};
@@ -44,10 +44,6 @@ impl Sharing for ComponentSharing {
             let records = core.relay.catch_up(pa as usize);
             core.send(pa, &Message::InitialRecords(records));
         }
-    }
-
-    fn keeps_tiles(&self) -> bool {
-        false
     }
 
     fn records_with_work(&mut self, core: &mut MasterCore<'_, '_>, rank: i32) -> Records {
@@ -115,25 +111,17 @@ impl Sharing for ComponentSharing {
         )
     }
 
-    /// Every request is computed: FINISH to every worker, then their images and statistics. A PA
-    /// may still send a status (its last sync) after FINISH; it gets its answer so it can stop.
+    /// Every request is computed: FINISH to every worker, then their statistics (a rank's last
+    /// results come before them). A PA may still send a status (its last sync) after FINISH; it
+    /// gets its answer so it can stop.
     fn gather(&mut self, core: &mut MasterCore<'_, '_>) -> Result<(), String> {
-        let size = core.comm.size();
-        (1..size).for_each(|rank| core.send(rank, &Message::Finish));
-        let mut has_image: Vec<bool> = (0..size).map(|rank| rank == 0).collect();
-        while has_image.contains(&false) || !core.every_report_in() {
+        (1..core.comm.size()).for_each(|rank| core.send(rank, &Message::Finish));
+        while !core.every_report_in() {
             let reports = &core.reports;
-            let awaited = |r: i32| !has_image[r as usize] || reports[r as usize].is_none();
             let (source, message) = core
-                .receive(awaited)
-                .map_err(|lost| format!("{}; its image is missing", lost_rank(&lost, &core.setup.hosts)))?;
+                .receive(|r| reports[r as usize].is_none())
+                .map_err(|lost| format!("{}; its statistics are missing", lost_rank(&lost, &core.setup.hosts)))?;
             match message? {
-                Message::Image(floats) => {
-                    let part = FrameBuffer::from_floats(core.setup.job_in.width, core.setup.job_in.height, &floats)
-                        .ok_or_else(|| format!("rank {source} sent an image of the wrong size"))?;
-                    core.frame.accumulate(&part);
-                    has_image[source as usize] = true;
-                }
                 common @ (Message::Stats(_) | Message::Results(_)) => core.handle(self, source, common)?,
                 Message::PaStatus { records, .. } => {
                     core.relay.keep(records);

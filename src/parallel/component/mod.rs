@@ -1,7 +1,8 @@
 //! The component-based parallel irradiance cache (Debattista, Santos & Chalmers 2006, section
 //! 5): PR ranks render all but indirect diffuse light and send their cache misses as requests
 //! to PA ranks; the master hands out tiles, relays records, gives idle PRs (and dry PAs, beyond
-//! the paper) shares of the longest PA queue, and sums every rank's image at the end.
+//! the paper) shares of the longest PA queue, and puts the PRs' tiles and the requests' results
+//! (indirect light for a pixel) together into the image.
 
 pub mod balancer;
 pub mod ledger;
@@ -10,7 +11,6 @@ pub mod order;
 pub mod pa;
 pub mod pr;
 
-use crate::image::framebuffer::FrameBuffer;
 use crate::parallel::comm::Comm;
 use crate::parallel::protocol::Message;
 use crate::render::ThreadStats;
@@ -19,28 +19,23 @@ use crate::shading::request::{AmbientRequest, RequestResult};
 use crate::shading::{Integrator, Work};
 
 /// Computes one request's indirect light (from the rank's cache or as a new record) times its
-/// coefficient into the rank's image at its pixel, and into `results` (for --checkpoint) if given.
+/// coefficient, as a result for the master to add to the request's pixel.
 pub fn compute_request(
     integrator: &Integrator<'_>,
     request: &AmbientRequest,
     seed: u64,
     stats: &mut ThreadStats,
-    frame: &mut FrameBuffer,
-    results: Option<&mut Vec<RequestResult>>,
+    results: &mut Vec<RequestResult>,
 ) {
     let mut rng = Rng::new(seed, request.stream);
     let mut work = Work::new(&mut stats.rays);
     work.sample.pixel = request.pixel;
     let (pixel, layer) = (request.pixel, request.layer);
     let value = integrator.ambient_for_request(request, &mut rng, &mut work) * request.coefficient;
-    frame.add(pixel as usize, layer, value);
-    if let Some(results) = results {
-        results.push(RequestResult { pixel, layer, value });
-    }
+    results.push(RequestResult { pixel, layer, value });
 }
 
-/// With --checkpoint: sends the results gathered so far to the master (before the message that
-/// counts them as done).
+/// Sends the results gathered so far to the master (before the message that counts them done).
 pub fn send_results(comm: &Comm<'_>, results: &mut Vec<RequestResult>) {
     if !results.is_empty() {
         comm.send(0, &Message::Results(std::mem::take(results)));

@@ -6,7 +6,6 @@
 
 use super::order::RequestQueue;
 use super::{compute_request, send_results};
-use crate::image::framebuffer::FrameBuffer;
 use crate::irradiance::IrradianceCache;
 use crate::parallel::comm::{Comm, Counters, kind};
 use crate::parallel::protocol::{Kind, Message, Records, Requests};
@@ -176,9 +175,8 @@ pub fn run(setup: &Setup<'_>) {
         batch.records.into_iter().for_each(|r| cache.insert_shared(r));
     }
 
-    let (seed, journal) = (setup.job_in.seed, setup.job_in.journal);
+    let seed = setup.job_in.seed;
     let bound = setup.job_in.pa_queue.max(1) as usize;
-    let mut frame = FrameBuffer::new(width, height);
     let mut stats = ThreadStats::default();
     let (mut computed, mut reported) = (0u64, u64::MAX);
     let mut queue_samples = Vec::new();
@@ -194,8 +192,7 @@ pub fn run(setup: &Setup<'_>) {
             // emptied the queue while a request was computed).
             let left = match next {
                 Some(request) => {
-                    let kept = journal.then_some(&mut results);
-                    compute_request(&integrator, &request, seed, &mut stats, &mut frame, kept);
+                    compute_request(&integrator, &request, seed, &mut stats, &mut results);
                     computed += 1;
                     if cache.map_or(0, |c| c.outbox_len()) < setup.sync {
                         continue;
@@ -234,7 +231,6 @@ pub fn run(setup: &Setup<'_>) {
         shared.take_reply(records);
     }
 
-    comm.send(0, &Message::Image(frame.to_floats()));
     let mut report = setup.report(&comm, "pa", vec![stats], &comm_counters);
     report.records_received = shared.intake.totals().0;
     report.records_rejected = shared.rejected.load(Relaxed);

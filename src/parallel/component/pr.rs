@@ -1,17 +1,16 @@
 //! A PR rank: renders the tiles the master hands out, everything but the indirect diffuse light
 //! its cache (records relayed by the master) cannot give: that becomes requests, sent --send at
 //! a time to the PA of their tile. With no tile left it flushes its buffer and, when the master
-//! asks, computes requests forwarded from a loaded PA. Its image goes to the master at the end.
+//! asks, computes requests forwarded from a loaded PA. Each finished tile goes to the master with
+//! the next tile's request, and what it computes for PAs as results.
 
 use super::{Roles, compute_request, send_results};
-use crate::image::framebuffer::FrameBuffer;
 use crate::parallel::comm::{Comm, Counters, Marker, kind};
 use crate::parallel::protocol::{FinishedTile, Kind, Message, Records, Requests};
 use crate::parallel::{Intake, Setup, send_report};
 use crate::render::{ThreadClock, ThreadStats, render_tile};
 use crate::shading::Integrator;
 use crate::shading::request::RequestBuffer;
-use crate::tiles::store_tile;
 use std::collections::HashMap;
 use std::sync::atomic::AtomicU64;
 use std::sync::atomic::Ordering::Relaxed;
@@ -91,7 +90,6 @@ struct Pr<'a, 'c> {
     setup: &'a Setup<'a>,
     comm: Comm<'c>,
     integrator: Integrator<'a>,
-    frame: FrameBuffer,
     stats: ThreadStats,
     intake: Intake,
 }
@@ -108,7 +106,6 @@ pub fn run(setup: &Setup<'_>, roles: &Roles) {
         setup,
         comm: Comm::new(&counters),
         integrator,
-        frame: FrameBuffer::new(setup.job.camera.width, setup.job.camera.height),
         stats: ThreadStats::default(),
         intake: Intake::default(),
     };
@@ -140,7 +137,6 @@ pub fn run(setup: &Setup<'_>, roles: &Roles) {
     let helped = pr.help(sender.sent);
     clock.stop(&mut pr.stats);
 
-    pr.comm.send(0, &Message::Image(pr.frame.to_floats()));
     let mut report = setup.report(&pr.comm, "pr", vec![pr.stats], &courier_counters);
     (report.records_received, report.records_rejected) = pr.intake.totals();
     report.requests_sent = sender.sent;
@@ -170,7 +166,7 @@ impl Pr<'_, '_> {
     /// Tiles until the master has none left, their requests going out through `sender` every
     /// --send. A PR asks for its next tile as it starts the current one, so the master's round
     /// trip (a few tenths of a millisecond; a 16x16 tile is under one) overlaps the rendering;
-    /// the request carries the tile finished before (with --checkpoint), and the records that
+    /// the request carries the tile finished before, and the records that
     /// come with the next tile are one tile older.
     fn render_tiles(&mut self, sender: &mut Sender<'_>, sink: &RequestBuffer) {
         let send_at = self.setup.job_in.send.max(1) as usize;
@@ -192,15 +188,12 @@ impl Pr<'_, '_> {
                 });
                 // The tile's last requests go to its PA now, not with the next tile's.
                 sender.send(sink);
-                if self.setup.job_in.journal {
-                    let requests = (sender.sent - sent_before) as u32;
-                    finished = Some(FinishedTile {
-                        tile: index,
-                        requests,
-                        pixels: pixels.clone(),
-                    });
-                }
-                store_tile(&mut self.frame, tile, &pixels);
+                let requests = (sender.sent - sent_before) as u32;
+                finished = Some(FinishedTile {
+                    tile: index,
+                    requests,
+                    pixels,
+                });
                 self.stats.tiles += 1;
             }
             // The last tile's report still has to reach the master: one more request (its
@@ -214,8 +207,8 @@ impl Pr<'_, '_> {
     /// each time it runs out with the requests it `sent` and helped with (which it returns).
     fn help(&mut self, sent: u64) -> u64 {
         let (setup, comm, intake) = (self.setup, &self.comm, &self.intake);
-        let (seed, journal) = (setup.job_in.seed, setup.job_in.journal);
-        let pixels = self.frame.width * self.frame.height;
+        let seed = setup.job_in.seed;
+        let pixels = setup.job.camera.width * setup.job.camera.height;
         let mut results = Vec::new();
         let mut helped = 0u64;
         loop {
@@ -230,8 +223,7 @@ impl Pr<'_, '_> {
             match msg.message {
                 Ok(Message::Forwarded(decoded)) => {
                     for request in decoded.requests.iter().filter(|r| r.pixel < pixels) {
-                        let kept = journal.then_some(&mut results);
-                        compute_request(&self.integrator, request, seed, &mut self.stats, &mut self.frame, kept);
+                        compute_request(&self.integrator, request, seed, &mut self.stats, &mut results);
                         // A helper shares its records as often as a PA does.
                         if let Some(cache) = setup.cache()
                             && cache.outbox_len() >= setup.sync

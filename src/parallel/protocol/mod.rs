@@ -21,7 +21,7 @@ use std::sync::OnceLock;
 use wire::{Put, Reader};
 
 /// The first byte of every message; a rank of another build is refused, not misread.
-pub const PROTOCOL_VERSION: u8 = 3;
+pub const PROTOCOL_VERSION: u8 = 4;
 
 /// Replies to one rendering thread carry the thread in their tag: base + thread.
 const WORK_BASE: Tag = 1000;
@@ -74,7 +74,6 @@ kinds! {
     PaStatus = 13, "PA status";
     ForwardOrder = 14, "forward order";
     Finish = 15, "finish";
-    Image = 16, "image";
     Results = 17, "results";
     /// Tags WORK_BASE + thread.
     Work = WORK_BASE as isize, "work";
@@ -184,11 +183,10 @@ pub enum Message {
     PaStatus { queue: u64, done: u64, records: Records },
     /// MC -> PA: hand `count` queued requests to rank `to` (a PA when `to_pa`).
     ForwardOrder { to: u32, count: u32, to_pa: bool },
-    /// MC -> every worker (component mode): every request is computed; send your image.
+    /// MC -> every worker (component mode): every request is computed; send your statistics.
     Finish,
-    /// Worker -> MC (component mode): the rank's image, every layer.
-    Image(Vec<f32>),
-    /// PA or helper -> MC (with --checkpoint): indirect light computed for requests.
+    /// PA or helper -> MC (component mode): indirect light computed for requests, which the
+    /// master adds to their pixels (and journals, with --checkpoint).
     Results(Vec<RequestResult>),
 }
 
@@ -256,10 +254,6 @@ impl Message {
                 out.put_u32(*to);
                 out.put_u32(*count);
                 out.put_u8(*to_pa as u8);
-            }
-            Message::Image(floats) => {
-                out.put_u32(floats.len() as u32);
-                floats.iter().for_each(|&f| out.put_f32(f));
             }
             Message::Results(results) => {
                 out.put_u32(results.len() as u32);
@@ -342,14 +336,6 @@ impl Message {
             Kind::ForwardOrder => {
                 let (to, count, to_pa) = (r.u32()?, r.u32()?, r.flag()?);
                 Message::ForwardOrder { to, count, to_pa }
-            }
-            Kind::Image => {
-                let count = r.count(4)?;
-                let floats: Vec<f32> = (0..count).map(|_| r.f32()).collect::<Result<_, _>>()?;
-                if !floats.iter().all(|v| v.is_finite()) {
-                    return Err(r.error("a value is not finite"));
-                }
-                Message::Image(floats)
             }
             Kind::Results => {
                 let count = r.count(RESULT_BYTES)?;
@@ -531,6 +517,9 @@ pub fn take_results(r: &mut Reader<'_>, count: usize) -> Result<Vec<RequestResul
                 .copied()
                 .ok_or_else(|| r.error(format_args!("layer {layer}")))?;
             let value = r.vec3()?;
+            if !value.is_finite() {
+                return Err(r.error("a value is not finite"));
+            }
             Ok(RequestResult { pixel, layer, value })
         })
         .collect()

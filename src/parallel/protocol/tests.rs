@@ -124,7 +124,6 @@ fn every_message() -> Vec<Message> {
             to_pa: true,
         },
         Message::Finish,
-        Message::Image(vec![0.0, 1.5, 3.25]),
         Message::Results(vec![RequestResult {
             pixel: 9,
             layer: Layer::Specular,
@@ -226,7 +225,7 @@ fn bad_requests_are_refused_one_by_one() {
 }
 
 #[test]
-fn unhealthy_pixels_and_images_are_refused() {
+fn unhealthy_pixels_and_results_are_refused() {
     let request = |v: f32| Message::WorkRequest {
         thread: 0,
         finished: Some(FinishedTile {
@@ -248,12 +247,16 @@ fn unhealthy_pixels_and_images_are_refused() {
             f.pixels[0].data.object[0].coverage = bad;
         }
         assert!(Message::decode(Kind::WorkRequest.tag(), &with_bad_data.encode()).is_err());
-        assert!(
-            Message::decode(
-                Kind::Image.tag(),
-                &Message::Image(vec![1.0, bad.abs() * f32::NAN]).encode()
-            )
-            .is_err()
+        // A result's light may not be NaN or infinite (it is added to a pixel as it is).
+        let value = Vec3::new(1.0, bad, 1.0);
+        let result = Message::Results(vec![RequestResult {
+            pixel: 1,
+            layer: Layer::Indirect,
+            value,
+        }]);
+        assert_eq!(
+            Message::decode(Kind::Results.tag(), &result.encode()).is_err(),
+            !bad.is_finite()
         );
     }
     let results = Message::Results(vec![RequestResult {
