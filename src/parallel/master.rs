@@ -8,12 +8,11 @@ use super::comm::{Comm, Hosts};
 use super::component::{Roles, master::ComponentSharing};
 use super::liveness::Silence;
 use super::protocol::{FinishedTile, Message, ProtocolError, Records};
+use super::relay::RecordRelay;
 use super::worker::TraditionalSharing;
 use super::{Setup, end_job};
 use crate::commands::{CommandError, CommandResult, warn};
 use crate::image::framebuffer::FrameBuffer;
-use crate::irradiance::IrradianceCache;
-use crate::irradiance::record::Record;
 use crate::stats::{RankReport, RenderStats};
 use crate::tiles::{TileQueue, store_tile};
 use std::convert::Infallible;
@@ -169,64 +168,6 @@ impl<'a, 'c> MasterCore<'a, 'c> {
     }
 }
 
-/// The record relay: every record a worker shares is counted, kept in the cache file and
-/// remembered with the rank it came from, so that each rank can be sent exactly those it lacks
-/// (the other ranks' since its last sync).
-#[derive(Default)]
-pub struct RecordRelay<'a> {
-    /// Every shared record, with the rank that made it (0: the cache file's).
-    store: Vec<(usize, Record)>,
-    /// Per rank, how far into `store` it has been brought up to date.
-    seen: Vec<usize>,
-    /// Where shared records are kept for the -af file.
-    cache: Option<&'a IrradianceCache>,
-    pub received: u64,
-    pub rejected: u64,
-}
-
-impl<'a> RecordRelay<'a> {
-    pub fn new(ranks: usize, cache: Option<&'a IrradianceCache>) -> Self {
-        RecordRelay {
-            seen: vec![0; ranks],
-            cache,
-            ..Default::default()
-        }
-    }
-
-    /// Records every rank is to be brought (the cache file's, which came from no rank).
-    pub fn preload(&mut self, records: Vec<Record>) {
-        self.store.extend(records.into_iter().map(|r| (0, r)));
-    }
-
-    /// Counts records that arrived and keeps them in the cache file, without relaying them
-    /// (broadcast mode's, which their sender sends everyone itself, and the last ones).
-    pub fn keep(&mut self, records: Records) -> Vec<Record> {
-        self.received += records.records.len() as u64;
-        self.rejected += records.rejected as u64;
-        if let Some(cache) = self.cache {
-            records.records.iter().for_each(|r| cache.insert(r.clone()));
-        }
-        records.records
-    }
-
-    /// Takes records from rank `from` to relay to the others.
-    pub fn share(&mut self, from: usize, records: Records) {
-        let records = self.keep(records);
-        self.store.extend(records.into_iter().map(|r| (from, r)));
-    }
-
-    /// The records rank `rank` lacks, which it now has.
-    pub fn catch_up(&mut self, rank: usize) -> Records {
-        let missing: Vec<Record> = self.store[self.seen[rank]..]
-            .iter()
-            .filter(|(from, _)| *from != rank)
-            .map(|(_, r)| r.clone())
-            .collect();
-        self.seen[rank] = self.store.len();
-        Records::from(missing)
-    }
-}
-
 /// The master's part: the one master with the mode's policy, then the image, statistics, table.
 pub fn run(comm: &Comm<'_>, setup: &Setup<'_>, roles: Option<Roles>, wall: Instant) -> CommandResult {
     let (job_in, job) = (setup.job_in, &setup.job);
@@ -337,35 +278,5 @@ fn print_table(stats: &RenderStats) {
             "{rank:>4} {:>6} {:>6} {:>9} {:>9} {:>8.2} {:>9.2} {:>8.2} {:>8} {:>11}",
             r.role, r.tiles, r.records_computed, r.lookups, r.t_amb_s, r.t_notamb_s, r.idle_s, r.messages, r.bytes
         );
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::irradiance::record::tests::flat_record;
-
-    #[test]
-    fn each_rank_gets_the_others_records_once() {
-        let mut relay = RecordRelay::new(4, None);
-        relay.preload(vec![flat_record(9.0, 1.0)]);
-        assert_eq!(relay.catch_up(1).records.len(), 1);
-        relay.share(1, Records::from(vec![flat_record(1.0, 1.0)]));
-        relay.share(2, Records::from(vec![flat_record(2.0, 1.0), flat_record(3.0, 1.0)]));
-        let values = |r: Records| r.records.iter().map(|r| r.value.x).collect::<Vec<_>>();
-        // Rank 1 has the preloaded record already and made its own.
-        assert_eq!(values(relay.catch_up(1)), vec![2.0, 3.0]);
-        assert!(relay.catch_up(1).records.is_empty());
-        assert_eq!(values(relay.catch_up(3)), vec![9.0, 1.0, 2.0, 3.0]);
-        relay.share(3, Records::from(vec![flat_record(4.0, 1.0)]));
-        assert_eq!(values(relay.catch_up(1)), vec![4.0]);
-        assert_eq!(relay.received, 4);
-        let kept = relay.keep(Records {
-            records: vec![flat_record(5.0, 1.0)],
-            rejected: 2,
-        });
-        assert_eq!((kept.len(), relay.received, relay.rejected), (1, 5, 2));
-        // Rank 2 never synced: every record but its own, and not the kept one.
-        assert_eq!(values(relay.catch_up(2)), vec![9.0, 1.0, 4.0]);
     }
 }

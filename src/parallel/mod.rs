@@ -10,6 +10,7 @@ pub mod master;
 pub mod prepass;
 pub mod protocol;
 pub mod pulse;
+pub mod relay;
 pub mod worker;
 
 use crate::checkpoint::{Checkpoint, Restored};
