@@ -5,11 +5,9 @@
 //! mode's `Sharing` policy (`worker::TraditionalSharing`, `component::master`).
 
 use super::comm::{Comm, Hosts};
-use super::component::{Roles, master::ComponentSharing};
 use super::liveness::Silence;
 use super::protocol::{FinishedTile, Message, ProtocolError, Records};
 use super::relay::RecordRelay;
-use super::worker::TraditionalSharing;
 use super::{Setup, end_job};
 use crate::commands::{CommandError, CommandResult, warn};
 use crate::image::framebuffer::FrameBuffer;
@@ -169,24 +167,10 @@ impl<'a, 'c> MasterCore<'a, 'c> {
 }
 
 /// The master's part: the one master with the mode's policy, then the image, statistics, table.
-pub fn run(comm: &Comm<'_>, setup: &Setup<'_>, roles: Option<Roles>, wall: Instant) -> CommandResult {
+pub fn run(comm: &Comm<'_>, setup: &Setup<'_>, sharing: &mut dyn Sharing, wall: Instant) -> CommandResult {
     let (job_in, job) = (setup.job_in, &setup.job);
-    let mut sharing: Box<dyn Sharing> = match roles {
-        None => Box::<TraditionalSharing>::default(),
-        Some(roles) => {
-            if !job_in.quiet {
-                eprintln!("icrender: {}", roles.describe());
-                if roles.pas.is_empty() {
-                    eprintln!(
-                        "icrender: the scene has no indirect diffuse work (-ab 0 or no diffuse surface): no PA is needed"
-                    );
-                }
-            }
-            Box::new(ComponentSharing::new(roles))
-        }
-    };
     let (mut frame, ranks, render_s) =
-        control(comm, setup, sharing.as_mut()).unwrap_or_else(|e| end_job(comm, setup.cache(), &e));
+        control(comm, setup, sharing).unwrap_or_else(|e| end_job(comm, setup.cache(), &e));
     if let Some(cache) = setup.cache()
         && let Err(e) = cache.finish()
     {

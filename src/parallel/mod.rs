@@ -382,7 +382,24 @@ pub fn run(job_in: &ParallelJob<'_>) -> CommandResult {
         start: Instant::now(),
     };
     match roles {
-        _ if rank == 0 => master::run(&comm, &setup, roles, wall)?,
+        _ if rank == 0 => {
+            let mut sharing: Box<dyn master::Sharing> = match roles {
+                None => Box::<worker::TraditionalSharing>::default(),
+                Some(roles) => {
+                    if !job_in.quiet {
+                        eprintln!("icrender: {}", roles.describe());
+                        if roles.pas.is_empty() {
+                            eprintln!(
+                                "icrender: the scene has no indirect diffuse work (-ab 0 or no diffuse surface): no PA \
+                                 is needed"
+                            );
+                        }
+                    }
+                    Box::new(component::master::ComponentSharing::new(roles))
+                }
+            };
+            master::run(&comm, &setup, sharing.as_mut(), wall)?
+        }
         None => worker::run(&setup),
         Some(roles) if roles.pas.contains(&rank) => component::pa::run(&setup),
         Some(roles) => component::pr::run(&setup, &roles),
