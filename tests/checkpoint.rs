@@ -254,7 +254,17 @@ fn kill_and_resume(
                 err < tolerance,
                 "run {i}: the image a killed render left is not the whole image (relMSE {err:.3e})"
             );
+            // The statistics are written after the image: they may be there too, and the
+            // restart would refuse to replace them.
             std::fs::remove_file(&out).unwrap();
+            if stats_path.exists() {
+                std::fs::remove_file(&stats_path).unwrap();
+            }
+        } else {
+            assert!(
+                !stats_path.exists(),
+                "run {i}: a killed render left statistics without the image they describe"
+            );
         }
 
         let child = launch
