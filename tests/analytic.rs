@@ -165,6 +165,85 @@ fn diffuse_plane_under_a_point_light_matches_the_analytic_radiance() {
     assert!(worst < 0.01, "largest relative error {worst}");
 }
 
+/// A floor under a ceiling that three point lights of different strengths light, at -ab 1 by
+/// brute force: the floor's indirect light is the ceiling's direct light seen through the
+/// floor's hemisphere, which a quadrature over the ceiling gives independently. Away from the
+/// eye path one light is picked per hit in proportion to its light there (`direct.rs`); the
+/// estimate must stay unbiased. (Forgetting the pick's probability reads about a third.)
+#[test]
+fn indirect_light_from_several_point_lights_matches_quadrature() {
+    let dir = tempfile::tempdir().unwrap();
+    let (rho_floor, rho_ceiling, height, half) = (0.5f64, 0.8f64, 1.0f64, 1.5f64);
+    let lights = [
+        ([0.3, 0.5, 0.2], 4.0),
+        ([-0.8, 0.3, -0.4], 1.0),
+        ([0.5, 0.8, -1.0], 0.25),
+    ];
+    let mut b = GltfBuilder::new();
+    let floor = b.material(lambertian("floor", [rho_floor as f32; 3]));
+    let ceiling = b.material(lambertian("ceiling", [rho_ceiling as f32; 3]));
+    let (h, s) = (height as f32, half as f32);
+    b.quad(
+        facing(
+            [[-s, 0.0, -s], [s, 0.0, -s], [s, 0.0, s], [-s, 0.0, s]],
+            [0.0, 1.0, 0.0],
+        ),
+        Some(floor),
+    );
+    b.quad(
+        facing([[-s, h, -s], [s, h, -s], [s, h, s], [-s, h, s]], [0.0, -1.0, 0.0]),
+        Some(ceiling),
+    );
+    for (position, intensity) in lights {
+        b.point_light(position, intensity);
+    }
+    let scene = b.write(dir.path(), "lit-ceiling");
+    let out = dir.path().join("lit-ceiling.exr");
+    // A view 1e-3 wide onto the floor's centre, from just below the ceiling: every pixel shows
+    // the same point to within a hair.
+    let mut args: Vec<String> = ["render", scene.to_str().unwrap(), "-o", out.to_str().unwrap(), "-q"]
+        .map(String::from)
+        .to_vec();
+    args.extend(
+        "-x 8 -y 8 -ab 1 -aa 0 -ad 4096 --spp 4"
+            .split_whitespace()
+            .map(String::from),
+    );
+    args.extend(view_down(0.0, 0.99, 1e-3));
+    run_ok(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    let got = mean(&rgb(&read_exr(&out), "indirect").concat());
+
+    // The ceiling's radiance at (x, h, z), and its irradiance at the floor's centre, by the
+    // midpoint rule over the ceiling.
+    let ceiling_radiance = |x: f64, z: f64| -> f64 {
+        lights
+            .iter()
+            .map(|&(p, intensity)| {
+                let d = [x - p[0] as f64, height - p[1] as f64, z - p[2] as f64];
+                let d2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+                rho_ceiling / std::f64::consts::PI * intensity as f64 * (d[1] / d2.sqrt()) / d2
+            })
+            .sum()
+    };
+    let n = 600;
+    let cell = 2.0 * half / n as f64;
+    let mut irradiance = 0.0;
+    for i in 0..n {
+        for j in 0..n {
+            let (x, z) = (-half + (i as f64 + 0.5) * cell, -half + (j as f64 + 0.5) * cell);
+            let r2 = x * x + z * z + height * height;
+            irradiance += ceiling_radiance(x, z) * height * height / (r2 * r2) * cell * cell;
+        }
+    }
+    let expected = rho_floor / std::f64::consts::PI * irradiance;
+    eprintln!("indirect {got}, quadrature {expected}");
+    assert!(
+        (got - expected).abs() / expected < 0.005,
+        "indirect {got}, quadrature {expected} ({:+.2} %)",
+        100.0 * (got / expected - 1.0)
+    );
+}
+
 /// A plane (albedo rho) lit by an emissive square of half-side a and radiance L at height h
 /// straight above it, optionally with an opaque square of half-side `blocker` halfway between;
 /// rendered through a tiny parallel view of the point under the light's centre, seen from below
