@@ -228,18 +228,23 @@ fn the_ceiling_above_a_hanging_plate_is_not_lit_by_the_open_ceilings_records() {
     );
 }
 
-/// At -ab 2 a record's hemisphere rays end on surfaces whose own indirect light is the last
-/// bounce: by default read from the last bounce's grid (`irradiance::last_bounce`) instead of
-/// one more traced ray and shadow ray each. On the ceiling room, looking up at the ceiling
-/// (lit by the floor and walls, which the lamp lights): the grid's image keeps brute force's
-/// indirect light within 2 % over three seeds, closer than tracing the last bounce does, for
-/// half the hemisphere and shadow rays (measured 0.51x).
+/// At -ab 2 a record's hemisphere rays end on surfaces whose own light is the last bounce's:
+/// by default read from the last bounce's grid (`irradiance::last_bounce`: the light those
+/// surfaces receive, direct and indirect) instead of a light pick, a shadow ray and one more
+/// traced path each. On the ceiling room, looking up at the ceiling (lit by the floor and
+/// walls, which the lamp lights): the grid's image keeps brute force's indirect light within
+/// 2 % over eight seeds (measured mean -0.9 %, tracing the last bounce +0.6 %) for half the
+/// hemisphere and shadow rays (measured 0.51x). At 48x48 pixels, a quarter of the sites, the
+/// grid's cells are sampled thinly and one cell's outlier moves many records: with three seeds
+/// a change of random stream alone moved the mean from +0.2 % to +5.1 %, hence the size and
+/// the seeds.
 #[test]
 fn the_last_bounce_grid_keeps_the_indirect_light_for_fewer_rays() {
+    const SEEDS: usize = 8;
     let dir = tempfile::tempdir().unwrap();
     let scene = ceiling_room(dir.path());
     let common = [
-        &["-x", "48", "-y", "48", "-ab", "2", "-ad", "256", "--threads", "2"][..],
+        &["-x", "96", "-y", "96", "-ab", "2", "-ad", "256", "--threads", "2"][..],
         &LOOK_UP[..],
     ]
     .concat();
@@ -250,19 +255,21 @@ fn the_last_bounce_grid_keeps_the_indirect_light_for_fewer_rays() {
     for deep in ["paths", "grid"] {
         let mut biases = Vec::new();
         let mut rays = 0;
-        for seed in ["1", "2", "3"] {
+        for seed in 1..=SEEDS {
             let name = format!("{deep}-{seed}");
-            let args = [&common[..], &["--ic-deep", deep, "--seed", seed]].concat();
+            let seed = seed.to_string();
+            let args = [&common[..], &["--ic-deep", deep, "--seed", &seed]].concat();
             let (image, stats) = render_to(dir.path(), &scene, &name, &args);
             let cells = stats["last_bounce_cells"].as_u64().unwrap();
             assert_eq!(cells > 0, deep == "grid", "{deep}: {cells} cells");
             rays += stats["rays"]["ambient"].as_u64().unwrap() + stats["rays"]["shadow"].as_u64().unwrap();
             biases.push(indirect(&image) / truth - 1.0);
         }
-        let bias = biases.iter().sum::<f64>() / 3.0;
+        let bias = biases.iter().sum::<f64>() / SEEDS as f64;
         println!("--ic-deep {deep}: bias by seed {biases:?}, {rays} ambient and shadow rays");
-        // Measured: the grid -0.8, +3.0, -1.7 % (mean +0.2 %); paths +2.2, +5.6, +1.8 % (+3.2 %),
-        // the one-path samples' heavy tail making some records bright.
+        // Measured by seed: the grid -1.4, -2.3, +0.3, -2.7, +1.9, -1.4, +0.6, -2.3 %; paths
+        // +0.4, +1.0, -0.2, -0.4, -0.5, -0.5, +3.4, +1.5 %, the one-path samples' heavy tail
+        // making some records bright.
         let bound = if deep == "grid" { 0.02 } else { 0.05 };
         assert!(
             bias.abs() < bound,

@@ -1,14 +1,18 @@
 //! The samples of the last bounce's grid (`irradiance::last_bounce`): from the first diffuse
 //! surface seen through a pixel, cosine-weighted bounces down to the level whose indirect
-//! light is the last bounce (-ab minus one), and there that light sampled as a path would
-//! sample it. These are the surfaces a record's hemisphere rays meet, in proportion to how
-//! often they meet them (seen from the surfaces the image shows).
+//! light is the last bounce (-ab minus one), and there all the light the surface receives:
+//! its direct light by one shadow ray and its indirect light as a path would sample it. These
+//! are the surfaces a record's hemisphere rays meet, in proportion to how often they meet them
+//! (seen from the surfaces the image shows).
 
+use super::direct::{LightStrata, direct_light};
 use super::{Integrator, PathState, Work};
-use crate::irradiance::last_bounce::GridSample;
+use crate::irradiance::last_bounce::{GridSample, Received};
 use crate::sampling::{Rng, cosine_hemisphere};
+use crate::scene::material::SurfacePoint;
 use crate::scene::view::Camera;
 use crate::sys::embree::Coherence;
+use crate::tracer::SurfaceHit;
 use glam::Vec3;
 
 /// Sites started per pixel, and samples of the last bounce's light taken at each. Measured
@@ -25,6 +29,17 @@ impl Integrator<'_> {
     /// the hits of a record's hemisphere rays). None below -ab 2, where records hold it all.
     pub fn last_bounce_level(&self) -> Option<u32> {
         (self.options.ambient_bounces >= 2).then(|| self.options.ambient_bounces - 1)
+    }
+
+    /// What the grid holds for a diffuse point at `hit` on a path at `state`: the light it
+    /// receives (irradiance over pi), direct and indirect, where the point is at the grid's
+    /// level and its cell was sampled enough. None elsewhere: the point is shaded as a path.
+    pub fn last_bounce_received(&self, hit: &SurfaceHit, state: PathState) -> Option<Received> {
+        if state.level == 0 || Some(state.level) != self.last_bounce_level() {
+            return None;
+        }
+        let grid = self.cache?.last_bounce()?;
+        grid.lookup(hit.position, hit.normal)
     }
 
     /// The grid's samples from the sites of pixel (x, y), appended to `out`.
@@ -73,11 +88,22 @@ impl Integrator<'_> {
                 throughput: Vec3::ONE,
                 albedo_chain: false,
             };
+            // The direct light as a white diffuse surface there would reflect it (irradiance
+            // over pi, as the indirect part): the hit that reads the mean applies its albedo.
+            let white = SurfacePoint {
+                diffuse: Vec3::ONE,
+                specular: Vec3::ZERO,
+                alpha: 0.0,
+                opacity: 1.0,
+            };
             for _ in 0..SAMPLES_PER_SITE {
+                let indirect = self.brute_force_ambient(&hit, state, &mut rng, counts);
+                let strata = LightStrata::alone(1, &mut rng);
+                let direct = direct_light(self, &hit, hit.normal, &white, strata, &mut rng, counts).total();
                 out.push(GridSample {
                     position: hit.position,
                     normal: hit.normal,
-                    value: self.brute_force_ambient(&hit, state, &mut rng, counts),
+                    received: Received { direct, indirect },
                 });
             }
         }

@@ -18,6 +18,7 @@ use crate::irradiance::hemisphere::{CellSample, Frame, Hemisphere, cell_directio
 use crate::irradiance::record::Record;
 use crate::sampling::{Rng, basis, cosine_hemisphere, grid_side};
 use crate::scene::Scene;
+use crate::scene::material::SurfacePoint;
 use crate::sys::embree::Coherence;
 use crate::tracer::{SurfaceHit, Tracer};
 use direct::LightStrata;
@@ -505,7 +506,22 @@ impl<'a> Integrator<'a> {
         }
         let has_diffuse = surface.diffuse.max_element() > 0.0;
         let has_specular = surface.specular.max_element() > 0.0;
-        if has_diffuse || (has_specular && !self.scene.punctual_lights.is_empty()) {
+        // At the grid's level the diffuse part reads the light the surface receives, direct
+        // and indirect, from the grid (`irradiance::last_bounce`): no light pick, no shadow
+        // ray, no further path.
+        let grid = has_diffuse.then(|| self.last_bounce_received(hit, state)).flatten();
+        if let Some(grid) = grid {
+            c.direct = surface.diffuse * grid.direct;
+            if has_specular && !self.scene.punctual_lights.is_empty() {
+                // The glossy lobe's highlights of punctual lights: nothing else finds them.
+                let glossy = SurfacePoint {
+                    diffuse: Vec3::ZERO,
+                    ..*surface
+                };
+                let strata = LightStrata::alone(1, rng);
+                c.direct += direct::direct_light(self, hit, wo, &glossy, strata, rng, counts).total();
+            }
+        } else if has_diffuse || (has_specular && !self.scene.punctual_lights.is_empty()) {
             let strata = if state.level > 0 {
                 LightStrata::alone(1, rng)
             } else {
@@ -547,7 +563,9 @@ impl<'a> Integrator<'a> {
         if has_specular {
             c.specular = self.specular(hit, wo, surface, state, rng, counts);
         }
-        if has_diffuse {
+        if let Some(grid) = grid {
+            c.indirect = surface.diffuse * grid.indirect;
+        } else if has_diffuse {
             c.indirect = match self.defer {
                 // After a prepass the PR's cache is complete: a gap's record is made here, from
                 // the pixel's own random stream, as every other mode makes it.
@@ -684,12 +702,6 @@ impl<'a> Integrator<'a> {
     fn ambient_radiance(&self, hit: &SurfaceHit, state: PathState, rng: &mut Rng, counts: &mut Work<'_>) -> Vec3 {
         if state.level >= self.options.ambient_bounces {
             return self.options.ambient_value;
-        }
-        if state.level > 0 && Some(state.level) == self.last_bounce_level() {
-            let grid = self.cache.and_then(|c| c.last_bounce());
-            if let Some(mean) = grid.and_then(|g| g.lookup(hit.position, hit.normal)) {
-                return mean;
-            }
         }
         timed_ambient(counts, |counts| match self.cache {
             Some(cache) if state.level == 0 || !self.options.deep_paths => {
