@@ -8,7 +8,9 @@ at least 60 % of `icrender bench rays`).
 For each scene, one thread throughout, alternating the two measurements --repeats times and
 keeping each one's best (interference from other work only ever slows a run down):
   - Embree alone: `icrender bench rays --threads 1`, its incoherent rays (random origins in the
-    scene's bounds, random directions: rays that cross the scene, as hemisphere rays do);
+    scene's bounds, random directions: rays that cross the scene, as hemisphere rays do), and
+    its hemisphere rays (cosine-distributed from the surfaces the view sees, as a record casts
+    them: costlier for Embree than the incoherent ones, printed beside them);
   - the renderer: a render at the bench's quality (peers.py's highest conference setting) with
     --stats, its rays of every kind (primary, shadow, hemisphere) over the rendering thread's
     busy time (wall clock, as the Embree bench measures) and over its CPU time.
@@ -39,9 +41,10 @@ def embree_rate(scene, seconds):
     out = subprocess.run([common.BINARY, "bench", "rays", scene, "--threads", "1", "--seconds", str(seconds)],
                          capture_output=True, text=True, check=True).stdout
     match = re.search(r"1 thread\(s\).*incoherent ([0-9.]+) Mrays/s", out)
-    if not match:
-        raise RuntimeError(f"bench rays printed no one-thread incoherent rate:\n{out}")
-    return float(match.group(1))
+    hemisphere = re.search(r"1 thread\(s\)  hemisphere ([0-9.]+) Mrays/s", out)
+    if not match or not hemisphere:
+        raise RuntimeError(f"bench rays printed no one-thread incoherent or hemisphere rate:\n{out}")
+    return float(match.group(1)), float(hemisphere.group(1))
 
 
 def renderer_rate(scene, work):
@@ -49,7 +52,7 @@ def renderer_rate(scene, work):
     stats, _ = common.render(scene, out, RENDER)
     [thread] = stats["per_thread"]
     rays = stats["rays"]["total"]
-    return rays / thread["busy_s"] / 1e6, rays / thread["cpu_s"] / 1e6, stats["rays"]
+    return rays / thread["busy_s"] / 1e6, rays / thread["cpu_s"] / 1e6, stats["rays"], thread["busy_s"]
 
 
 def main():
@@ -65,18 +68,24 @@ def main():
     print(f"ray_rate: load average at start {load[0]:.2f} {load[1]:.2f} {load[2]:.2f} on {os.cpu_count()} cores")
     for name in args.scenes.split(","):
         scene = SCENES[name]
-        embree, wall, cpu, kinds = [], [], [], None
+        embree, hemisphere, wall, cpu, busy, kinds = [], [], [], [], [], None
         for _ in range(args.repeats):
-            embree.append(embree_rate(scene, args.seconds))
-            w, c, kinds = renderer_rate(scene, work)
+            incoherent, hemi = embree_rate(scene, args.seconds)
+            embree.append(incoherent)
+            hemisphere.append(hemi)
+            w, c, kinds, b = renderer_rate(scene, work)
             wall.append(w)
             cpu.append(c)
+            busy.append(b)
         best_embree, best_wall, best_cpu = max(embree), max(wall), max(cpu)
         print(f"ray_rate: {name}: Embree alone {best_embree:.2f} Mrays/s (runs {' '.join(f'{e:.2f}' for e in embree)}); "
               f"renderer {best_wall:.2f} Mrays/s by busy time (runs {' '.join(f'{w:.2f}' for w in wall)}), "
-              f"{best_cpu:.2f} by CPU time; rays {json.dumps(kinds)}")
+              f"{best_cpu:.2f} by CPU time, the render's busy time {min(busy):.2f} s; rays {json.dumps(kinds)}")
         print(f"ray_rate: {name}: the renderer's rate is {best_wall / best_embree * 100:.0f} % of Embree's "
               f"({best_cpu / best_embree * 100:.0f} % by CPU time; target 60 %)")
+        print(f"ray_rate: {name}: Embree alone on hemisphere rays from the surfaces the view sees "
+              f"{max(hemisphere):.2f} Mrays/s ({max(hemisphere) / best_embree * 100:.0f} % of its incoherent rate); "
+              f"the renderer's rate is {best_wall / max(hemisphere) * 100:.0f} % of that")
 
 
 if __name__ == "__main__":
