@@ -14,16 +14,21 @@ fn view_down(x: f64, y: f64, size: f64) -> Vec<String> {
     .to_vec()
 }
 
+/// A unit box whose walls all have albedo `rho` and emit radiance `e` from their inner side.
+fn emitting_furnace(dir: &std::path::Path, rho: f64, e: f64) -> std::path::PathBuf {
+    let mut b = GltfBuilder::new();
+    let m = b.material(emissive_lambertian("wall", [rho as f32; 3], e as f32));
+    inward_box(&mut b, [0.0; 3], [1.0; 3], m);
+    b.write(dir, "furnace")
+}
+
 /// A white furnace: a closed box whose walls all have albedo rho and all emit radiance E from
 /// their inner side. Every point then sees radiance E / (1 - rho) in every direction.
 #[test]
 fn white_furnace_converges_to_e_over_one_minus_rho() {
     let dir = tempfile::tempdir().unwrap();
     let (rho, e) = (0.5f64, 1.0f64);
-    let mut b = GltfBuilder::new();
-    let m = b.material(emissive_lambertian("wall", [rho as f32; 3], e as f32));
-    inward_box(&mut b, [0.0; 3], [1.0; 3], m);
-    let scene = b.write(dir.path(), "furnace");
+    let scene = emitting_furnace(dir.path(), rho, e);
     let out = dir.path().join("furnace.exr");
     let options = "-q -x 32 -y 32 -ab 10 -aa 0 -ad 256 --light-samples 64 -vp 0.5 0.5 0.5 -vd 0 0 -1 -vh 60 -vv 60";
     let mut args = vec!["render", scene.to_str().unwrap(), "-o", out.to_str().unwrap()];
@@ -110,18 +115,16 @@ fn every_deep_bounce_method_gives_the_grey_furnace_exactly() {
 /// `--ic-deep grid` a hemisphere ray's hit reads all the light its surface receives from the
 /// grid, its direct light E included: with the direct light left out of the grid's samples
 /// the indirect layer read 0.303 against 0.375 (19 % low; hits in cells sampled too little
-/// are traced as paths and keep theirs). Away from the eye path the direct light is sampled by area, and in a closed emitting
-/// box that estimate is heavy-tailed (a point near an edge sees the next wall's emitter at
-/// 1/d^2): at these sample counts every method reads 2-3 % low, brute force as well, so the
-/// bound is 5 % against the closed form and 3 % against brute force.
+/// are traced as paths and keep theirs). Away from the eye path the direct light is sampled
+/// by area, and in a closed emitting box that estimate is heavy-tailed (a point near an edge
+/// sees the next wall's emitter at 1/d^2): at these sample counts every method reads 2-3 %
+/// low, brute force as well, so the bound is 5 % against the closed form and 3 % against
+/// brute force.
 #[test]
 fn every_deep_bounce_method_gives_the_emitting_furnace() {
     let dir = tempfile::tempdir().unwrap();
     let (rho, e) = (0.5f64, 1.0f64);
-    let mut b = GltfBuilder::new();
-    let m = b.material(emissive_lambertian("wall", [rho as f32; 3], e as f32));
-    inward_box(&mut b, [0.0; 3], [1.0; 3], m);
-    let scene = b.write(dir.path(), "glowing");
+    let scene = emitting_furnace(dir.path(), rho, e);
     let expected = (rho.powi(2) + rho.powi(3)) * e;
     let view = "-x 32 -y 32 -ab 2 -vp 0.5 0.5 0.5 -vd 0.3 -0.2 -1 -vh 80 -vv 80";
     let indirect = |name: &str, options: &str| {
