@@ -20,6 +20,15 @@ use glam::Vec3;
 pub const SITES_PER_PIXEL: u32 = 1;
 pub const SAMPLES_PER_SITE: u32 = 2;
 
+/// The direct light is sampled as a white diffuse surface would reflect it (irradiance over pi,
+/// as the indirect part): the hit that reads the mean applies its own albedo.
+const WHITE: SurfacePoint = SurfacePoint {
+    diffuse: Vec3::ONE,
+    specular: Vec3::ZERO,
+    alpha: 0.0,
+    opacity: 1.0,
+};
+
 /// The random streams of the sites: apart from every stream a pixel's samples and the
 /// prepass's records use (those are below 2^33).
 const SITE_STREAM: u64 = 1 << 40;
@@ -35,7 +44,7 @@ impl Integrator<'_> {
     /// receives (irradiance over pi), direct and indirect, where the point is at the grid's
     /// level and its cell was sampled enough. None elsewhere: the point is shaded as a path.
     pub fn last_bounce_received(&self, hit: &SurfaceHit, state: PathState) -> Option<Received> {
-        if state.level == 0 || Some(state.level) != self.last_bounce_level() {
+        if Some(state.level) != self.last_bounce_level() {
             return None;
         }
         let grid = self.cache?.last_bounce()?;
@@ -88,18 +97,10 @@ impl Integrator<'_> {
                 throughput: Vec3::ONE,
                 albedo_chain: false,
             };
-            // The direct light as a white diffuse surface there would reflect it (irradiance
-            // over pi, as the indirect part): the hit that reads the mean applies its albedo.
-            let white = SurfacePoint {
-                diffuse: Vec3::ONE,
-                specular: Vec3::ZERO,
-                alpha: 0.0,
-                opacity: 1.0,
-            };
             for _ in 0..SAMPLES_PER_SITE {
                 let indirect = self.brute_force_ambient(&hit, state, &mut rng, counts);
                 let strata = LightStrata::alone(1, &mut rng);
-                let direct = direct_light(self, &hit, hit.normal, &white, strata, &mut rng, counts).total();
+                let direct = direct_light(self, &hit, hit.normal, &WHITE, strata, &mut rng, counts).total();
                 out.push(GridSample {
                     position: hit.position,
                     normal: hit.normal,
