@@ -221,11 +221,38 @@ impl EmitterSet {
     /// tall box's front face, whose plane cuts the lamp, read 12 % dark at 4 rays a point and
     /// 38 % at one that way.
     pub fn sample(&self, point: Vec3, normal: Vec3, u1: f32, u2: f32, u3: f32) -> Option<EmitterPoint> {
+        self.sampler(point, normal)?.sample(u1, u2, u3)
+    }
+
+    /// A sampler for several of `sample`'s points at one shading point, its picks sharing the
+    /// light tree's weighing (`LightTree::chooser`). None where the set has no power to sample.
+    pub fn sampler(&self, point: Vec3, normal: Vec3) -> Option<EmitterSampler<'_>> {
         if self.triangles.is_empty() || self.total_power.is_nan() || self.total_power <= 0.0 {
             return None;
         }
-        let (index, probability) = self.tree.pick(Receiver { point, normal }, u1 as f64)?;
-        let t = &self.triangles[index];
+        Some(EmitterSampler {
+            set: self,
+            point,
+            normal,
+            chooser: self.tree.chooser(Receiver { point, normal }),
+        })
+    }
+}
+
+/// `EmitterSet::sample` at one shading point, as many times as it is asked.
+pub struct EmitterSampler<'a> {
+    set: &'a EmitterSet,
+    point: Vec3,
+    normal: Vec3,
+    chooser: super::light_tree::Chooser<'a>,
+}
+
+impl EmitterSampler<'_> {
+    /// A point on an emitter for the shading point, as `EmitterSet::sample` gives it.
+    pub fn sample(&mut self, u1: f32, u2: f32, u3: f32) -> Option<EmitterPoint> {
+        let (point, normal) = (self.point, self.normal);
+        let (index, probability) = self.chooser.pick(u1 as f64)?;
+        let t = &self.set.triangles[index];
         let (position, area) = t.sample_above(point, normal, u2, u3)?;
         let pdf_area = (probability / area as f64) as f32;
         (pdf_area.is_finite() && pdf_area > 0.0).then_some(EmitterPoint {

@@ -319,12 +319,30 @@ impl LightTree {
     /// `u` is rescaled to the chosen one's); returns its index and the probability of having
     /// picked it. None where nothing can light the receiver.
     pub fn pick(&self, at: Receiver, u: f64) -> Option<(usize, f64)> {
+        self.pick_with(u, &mut |node| self.shares(node, at))
+    }
+
+    /// A chooser for several picks at one receiver: the slots' shares of each wide node are
+    /// weighed once and kept for the next picks, which mostly walk the same nodes (an eye-path
+    /// point's shadow rays: 16 picks by default, the root and its first level common to all).
+    pub fn chooser(&self, at: Receiver) -> Chooser<'_> {
+        Chooser {
+            tree: self,
+            at,
+            memo: [MemoEntry::EMPTY; MEMO],
+            next: 0,
+        }
+    }
+
+    /// The walk of `pick`, the shares of a wide node given by `shares`.
+    #[inline(always)]
+    fn pick_with(&self, u: f64, shares: &mut impl FnMut(usize) -> Option<([f64; WIDTH], f64)>) -> Option<(usize, f64)> {
         if self.wide.is_empty() {
             return None;
         }
         let (mut node, mut u, mut probability) = (0usize, u, 1.0f64);
         loop {
-            let (weights, total) = self.shares(node, at)?;
+            let (weights, total) = shares(node)?;
             let wide = &self.wide[node];
             // The slot whose interval holds u (the last lit one should rounding leave u past
             // every interval's end).
@@ -376,6 +394,53 @@ impl LightTree {
         } else {
             walk(self, 0, at, target, 1.0)
         }
+    }
+}
+
+/// How many wide nodes' shares a `Chooser` keeps: the root, its four children and a few of
+/// their children cover most of what 16 picks at one point walk in a tree of tens of emitters.
+const MEMO: usize = 8;
+
+#[derive(Clone, Copy)]
+struct MemoEntry {
+    node: u32,
+    shares: Option<([f64; WIDTH], f64)>,
+}
+
+impl MemoEntry {
+    const EMPTY: MemoEntry = MemoEntry {
+        node: u32::MAX,
+        shares: None,
+    };
+}
+
+/// Picks at one receiver that share the weighing of the nodes they walk (`LightTree::chooser`);
+/// each pick is exactly `LightTree::pick`'s, with the same probability.
+pub struct Chooser<'a> {
+    tree: &'a LightTree,
+    at: Receiver,
+    memo: [MemoEntry; MEMO],
+    /// The entry the next new node replaces (round robin).
+    next: usize,
+}
+
+impl Chooser<'_> {
+    /// `LightTree::pick` at the chooser's receiver.
+    pub fn pick(&mut self, u: f64) -> Option<(usize, f64)> {
+        let (tree, at) = (self.tree, self.at);
+        let (memo, next) = (&mut self.memo, &mut self.next);
+        tree.pick_with(u, &mut |node| {
+            if let Some(entry) = memo.iter().find(|e| e.node == node as u32) {
+                return entry.shares;
+            }
+            let shares = tree.shares(node, at);
+            memo[*next] = MemoEntry {
+                node: node as u32,
+                shares,
+            };
+            *next = (*next + 1) % MEMO;
+            shares
+        })
     }
 }
 
@@ -435,6 +500,23 @@ mod tests {
                 (c as f64 - expected).abs() <= 2.0,
                 "emitter {i}: {c} picks, expected {expected}"
             );
+        }
+    }
+
+    #[test]
+    fn a_chooser_picks_exactly_as_the_tree_does() {
+        // 200 emitters (more wide nodes than the chooser keeps), receivers over and beside
+        // them: every pick, in any order of u, the same emitter with the same probability.
+        let items: Vec<Item> = (0..200)
+            .map(|i| item((i % 20) as f32 * 0.7, 1.0 + (i % 7) as f64))
+            .collect();
+        let tree = LightTree::new(&items);
+        for at in [above(3.0, 1.0), above(-5.0, 0.0), above(12.0, 0.3)] {
+            let mut chooser = tree.chooser(at);
+            for k in 0..500 {
+                let u = ((k * 7919) % 500) as f64 / 500.0 + 0.0007;
+                assert_eq!(chooser.pick(u), tree.pick(at, u), "u {u}");
+            }
         }
     }
 

@@ -165,9 +165,10 @@ pub fn direct_light(
         // What the rays would bring if none were blocked, for the ratio estimator.
         let mut sum_unblocked = Vec3::ZERO;
         let side = crate::sampling::grid_side(strata.total.max(1));
+        let mut sampler = scene.emitters.sampler(hit.position, hit.normal);
         for k in 0..emitter_samples {
             let (u1, u2, u3) = strata.uniforms(k, side, rng);
-            let Some(light) = scene.emitters.sample(hit.position, hit.normal, u1, u2, u3) else {
+            let Some(light) = sampler.as_mut().and_then(|s| s.sample(u1, u2, u3)) else {
                 continue;
             };
             let offset = light.position - hit.position;
