@@ -163,7 +163,7 @@ pub fn cache_settings_line(args: &RenderArgs, scene: &Scene) -> String {
 
 /// Whether the job keeps an irradiance cache: indirect diffuse light to compute (-ab above 0 and a
 /// diffuse surface) and an accuracy that allows reuse (-aa above 0; -aa 0 is brute force).
-fn uses_cache(args: &RenderArgs, scene: &Scene) -> bool {
+pub fn uses_cache(args: &RenderArgs, scene: &Scene) -> bool {
     args.ambient_accuracy > 0.0 && args.ambient_bounces > 0 && scene.needs().diffuse
 }
 

@@ -234,6 +234,55 @@ fn a_reference_is_not_denoised() {
 }
 
 #[test]
+fn the_indirect_layer_is_denoised_without_the_cache_only() {
+    // With the cache (the default -aa) the indirect layer is records interpolated: written
+    // raw, and the denoised composite adds it up raw; with -aa 0 it is sampled per pixel and
+    // denoised like the direct light.
+    let dir = tempfile::tempdir().unwrap();
+    let scene = cornell();
+    for (accuracy, expected) in [
+        ("0.2", "direct.denoised specular.denoised denoised"),
+        ("0", "direct.denoised specular.denoised indirect.denoised denoised"),
+    ] {
+        let image = dir.path().join(format!("aa-{accuracy}.exr"));
+        run_ok(&[
+            "render",
+            &scene,
+            "-o",
+            image.to_str().unwrap(),
+            "-x",
+            "32",
+            "-y",
+            "32",
+            "-ab",
+            "1",
+            "-ad",
+            "32",
+            "-aa",
+            accuracy,
+            "--denoise",
+            "-q",
+            "--no-preview",
+        ]);
+        let read = read_image(&image, &["icrender/denoised"]).unwrap();
+        assert_eq!(read.attribute("icrender/denoised"), Some(expected), "-aa {accuracy}");
+        assert!(read.channel("indirect.R").is_some(), "-aa {accuracy}");
+        let indirect = if accuracy == "0" { "indirect.denoised" } else { "indirect" };
+        let planes: Vec<[Vec<f32>; 3]> = ["emission", "direct.denoised", "specular.denoised", indirect]
+            .iter()
+            .map(|l| rgb(&read, l))
+            .collect();
+        let denoised = rgb(&read, "denoised");
+        for c in 0..3 {
+            for (i, b) in denoised[c].iter().enumerate() {
+                let a: f32 = planes.iter().map(|p| p[c][i]).sum();
+                assert!((a - b).abs() <= 1e-5 * b.abs().max(1.0), "-aa {accuracy}: {a} against {b}");
+            }
+        }
+    }
+}
+
+#[test]
 fn denoise_under_mpirun_writes_the_denoised_layers_on_the_master() {
     let dir = tempfile::tempdir().unwrap();
     let image = dir.path().join("mpi.exr");
@@ -248,6 +297,9 @@ fn denoise_under_mpirun_writes_the_denoised_layers_on_the_master() {
             "32",
             "-ad",
             "64",
+            // Brute force: each pixel samples its own hemisphere, so `indirect` is denoised too.
+            "-aa",
+            "0",
             "--tile",
             "8x8",
             "--denoise",

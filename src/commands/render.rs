@@ -307,7 +307,17 @@ impl Outputs {
         let denoised = if args.denoise {
             let quality = denoise_quality(args);
             Some(
-                denoise::denoise_frame(frame, &layers, quality, args.threads, args.denoise_prefilter)
+                // Without the cache each pixel samples its own hemisphere: its indirect light
+                // is Monte Carlo noise too. (Read from the options: an MPI master holds no
+                // cache of its own whatever the mode.)
+                denoise::denoise_frame(
+                    frame,
+                    &layers,
+                    !crate::job::uses_cache(args, &job.scene),
+                    quality,
+                    args.threads,
+                    args.denoise_prefilter,
+                )
                     .map_err(CommandError::failed)?,
             )
         } else {

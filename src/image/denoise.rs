@@ -29,8 +29,22 @@ use crate::sys::oidn::{Device, RtFilter};
 use glam::Vec3;
 use std::time::Instant;
 
-/// The layers that carry Monte Carlo noise (see the module's comment), in the order written.
+/// The layers that may carry Monte Carlo noise (see the module's comment), in the order written.
 pub const NOISY_LAYERS: [Layer; 3] = [Layer::Direct, Layer::Specular, Layer::Indirect];
+
+/// The layers worth denoising among `written`: `direct` and `specular` always; `indirect` only
+/// where each pixel samples its own hemisphere (no irradiance cache: `-aa 0`). With the cache
+/// the indirect layer is records interpolated, smooth between them, with nothing for the
+/// filter to remove: on the conference room at -ab 2 (320x240, two settings, two seeds each)
+/// the composite with `indirect` denoised and the one with it raw had the same relMSE and 4x4
+/// relMSE to within 1 % (8.54e-3 / 8.54e-3, 4.96e-3 / 4.94e-3), and its filter was half the
+/// denoiser's time.
+pub fn layers_to_denoise(written: &[Layer], per_pixel_indirect: bool) -> Vec<Layer> {
+    NOISY_LAYERS
+        .into_iter()
+        .filter(|l| written.contains(l) && (per_pixel_indirect || *l != Layer::Indirect))
+        .collect()
+}
 
 /// The EXR layer a denoised layer is written as: `<layer>.denoised`, beside the raw one.
 pub fn denoised_name(layer: Layer) -> String {
@@ -203,11 +217,13 @@ fn keep_where_nothing_was_hit(denoised: &mut [Vec3], raw: &[Vec3], frame: &Frame
     }
 }
 
-/// Denoises the noisy ones of `written` (the layers the EXR will hold), and adds them and the
-/// raw emission up into the denoised composite.
+/// Denoises the noisy ones of `written` (the layers the EXR will hold; `indirect` only with
+/// `per_pixel_indirect`: `layers_to_denoise`), and adds them, the raw emission and any raw
+/// layer left up into the denoised composite.
 pub fn denoise_frame(
     frame: &FrameBuffer,
     written: &[Layer],
+    per_pixel_indirect: bool,
     quality: Quality,
     threads: Option<usize>,
     prefilter: bool,
@@ -219,7 +235,7 @@ pub fn denoise_frame(
     let guides = planes.as_ref().map(|(albedo, normal)| Guides { albedo, normal });
     let clean = guides.map(|g| denoiser.guides(g, w, h, prefilter)).transpose()?;
     let mut layers = Vec::new();
-    for layer in NOISY_LAYERS.into_iter().filter(|l| written.contains(l)) {
+    for layer in layers_to_denoise(written, per_pixel_indirect) {
         let mut plane = denoiser.denoise(frame.layer(layer), clean.as_ref(), w, h)?;
         keep_where_nothing_was_hit(&mut plane, frame.layer(layer), frame);
         layers.push((layer, plane));
@@ -295,6 +311,17 @@ mod tests {
     fn rmse(a: &[Vec3], b: &[Vec3]) -> f64 {
         let se: f64 = a.iter().zip(b).map(|(x, y)| (*x - *y).length_squared() as f64).sum();
         (se / (3 * a.len()) as f64).sqrt()
+    }
+
+    #[test]
+    fn the_indirect_layer_is_denoised_only_where_each_pixel_samples_it() {
+        let written = [Layer::Emission, Layer::Direct, Layer::Specular, Layer::Indirect];
+        assert_eq!(
+            layers_to_denoise(&written, true),
+            [Layer::Direct, Layer::Specular, Layer::Indirect]
+        );
+        assert_eq!(layers_to_denoise(&written, false), [Layer::Direct, Layer::Specular]);
+        assert_eq!(layers_to_denoise(&[Layer::Indirect], false), []);
     }
 
     #[test]
@@ -417,7 +444,7 @@ mod tests {
             }
         }
         let written = [Layer::Emission, Layer::Direct];
-        let denoised = denoise_frame(&frame, &written, Quality::Fast, Some(2), false).unwrap();
+        let denoised = denoise_frame(&frame, &written, true, Quality::Fast, Some(2), false).unwrap();
         assert_eq!(denoised.names(), ["direct.denoised", "denoised"]);
         assert!(
             denoised.guided,
