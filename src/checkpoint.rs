@@ -31,10 +31,14 @@ use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 
-/// The journal's format: 2 added the data layers to every pixel (`image::data`).
-const MAGIC: &[u8; 8] = b"ICRJRNL2";
-/// The formats before, refused with a message that says so.
-const OLD_MAGICS: [&[u8; 8]; 1] = [b"ICRJRNL1"];
+/// The journal's format: 2 added the data layers to every pixel (`image::data`), 3 the
+/// layers' noise among them (what `--denoise` weighs by).
+const MAGIC: &[u8; 8] = b"ICRJRNL3";
+/// The formats before and what they lack, refused with a message that says so.
+const OLD_MAGICS: [(&[u8; 8], &str); 2] = [
+    (b"ICRJRNL1", "without the data layers"),
+    (b"ICRJRNL2", "without the pixels' noise estimates"),
+];
 const KIND_START: u8 = 0;
 const KIND_TILE: u8 = 1;
 const KIND_RESULTS: u8 = 2;
@@ -259,9 +263,9 @@ impl Checkpoint {
             std::fs::write(&path, &ours).map_err(context)?;
             bytes = ours.clone();
             (Vec::new(), ours.len())
-        } else if OLD_MAGICS.iter().any(|old| bytes.starts_with(*old)) {
+        } else if let Some((_, lacks)) = OLD_MAGICS.iter().find(|(old, _)| bytes.starts_with(*old)) {
             return Err(format!(
-                "{}: a checkpoint of an older icrender (journal format {}, without the data layers); \
+                "{}: a checkpoint of an older icrender (journal format {}, {lacks}); \
                  it cannot be resumed by this version: delete it or give another --checkpoint directory",
                 path.display(),
                 char::from(bytes[7])
@@ -559,6 +563,15 @@ mod tests {
             .err()
             .unwrap();
         assert!(err.contains("older icrender") && err.contains("format 1"), "{err}");
+        // ... and of the format before the layers' noise.
+        let mut old = b"ICRJRNL2".to_vec();
+        old.extend_from_slice(&3u32.to_le_bytes());
+        old.extend_from_slice(b"job");
+        std::fs::write(dir.path().join("tiles.journal"), &old).unwrap();
+        let err = Checkpoint::open(dir.path(), "job", &all, PixelWindow::whole(4, 4))
+            .err()
+            .unwrap();
+        assert!(err.contains("format 2") && err.contains("noise"), "{err}");
     }
 
     #[test]
@@ -576,6 +589,11 @@ mod tests {
             material: crate::image::cryptomatte::id_of("oak"),
         };
         sum.add(Vec3::splat(0.25), Some(hit));
+        sum.set_noise(crate::image::data::LayerNoise {
+            direct: 0.5,
+            specular: 0.125,
+            indirect: 2.0,
+        });
         tile[5].data = sum.finish();
         journal.tile(0, 0, &tile);
         drop(journal);

@@ -314,11 +314,12 @@ impl Outputs {
                     frame,
                     &layers,
                     !crate::job::uses_cache(args, &job.scene),
+                    args.spp,
                     quality,
                     args.threads,
                     args.denoise_prefilter,
                 )
-                    .map_err(CommandError::failed)?,
+                .map_err(CommandError::failed)?,
             )
         } else {
             None

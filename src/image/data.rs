@@ -33,6 +33,43 @@ pub struct PixelData {
     pub position: Vec3,
     pub object: Ranks,
     pub material: Ranks,
+    /// How noisy the pixel's light layers are (`render::noise`): what `--denoise` weighs its
+    /// filter's output by. Not written as a layer.
+    pub noise: LayerNoise,
+}
+
+/// The variance of each noisy layer's pixel value (its luminance), from the pixel's samples:
+/// direct, specular, indirect. Zero where the samples tell nothing (a single sample).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct LayerNoise {
+    pub direct: f32,
+    pub specular: f32,
+    pub indirect: f32,
+}
+
+impl LayerNoise {
+    fn as_array(&self) -> [f32; 3] {
+        [self.direct, self.specular, self.indirect]
+    }
+
+    fn from_array([direct, specular, indirect]: [f32; 3]) -> LayerNoise {
+        LayerNoise {
+            direct,
+            specular,
+            indirect,
+        }
+    }
+
+    /// The variance of the layer `layer` (zero for a layer without noise: emission).
+    pub fn of(&self, layer: super::framebuffer::Layer) -> f32 {
+        use super::framebuffer::Layer;
+        match layer {
+            Layer::Direct => self.direct,
+            Layer::Specular => self.specular,
+            Layer::Indirect => self.indirect,
+            Layer::Emission => 0.0,
+        }
+    }
 }
 
 impl PixelData {
@@ -56,13 +93,17 @@ impl Default for PixelData {
             position: Vec3::ZERO,
             object: Ranks::default(),
             material: Ranks::default(),
+            noise: LayerNoise::default(),
         }
     }
 }
 
-/// Floats (4-byte values) of one pixel's data: albedo, normal, depth, position, and an ID and
-/// a coverage per rank of both Cryptomatte types.
-pub const DATA_VALUES: usize = 10 + 4 * cryptomatte::RANKS;
+/// Floats (4-byte values) of one pixel's data: albedo, normal, depth, position, the layers'
+/// noise, and an ID and a coverage per rank of both Cryptomatte types.
+pub const DATA_VALUES: usize = RANKS_AT + 4 * cryptomatte::RANKS;
+
+/// Where the Cryptomatte ranks start among a pixel's data values.
+const RANKS_AT: usize = 13;
 
 impl PixelData {
     /// The data of two partial frames as one (component mode's ranks, a reference's passes):
@@ -76,6 +117,11 @@ impl PixelData {
             position: nearer.position,
             object: cryptomatte::merge(&self.object, &other.object),
             material: cryptomatte::merge(&self.material, &other.material),
+            // Parts of one pixel's light from different ranks or passes are independent:
+            // their variances add.
+            noise: LayerNoise::from_array(std::array::from_fn(|i| {
+                self.noise.as_array()[i] + other.noise.as_array()[i]
+            })),
         }
     }
 
@@ -86,6 +132,8 @@ impl PixelData {
         for e in self.object.iter_mut().chain(self.material.iter_mut()) {
             e.coverage *= factor;
         }
+        // The light scaled by `factor`, its variance by its square.
+        self.noise = LayerNoise::from_array(self.noise.as_array().map(|v| v * factor * factor));
     }
 
     /// Whether the values could have come from a renderer: finite, non-negative albedo and
@@ -106,6 +154,7 @@ impl PixelData {
             && self.position.is_finite()
             && ranks_ok(&self.object)
             && ranks_ok(&self.material)
+            && self.noise.as_array().iter().all(|v| v.is_finite() && *v >= 0.0)
     }
 
     /// The values in a fixed order, IDs as their bits (for the wire and the journal).
@@ -117,13 +166,14 @@ impl PixelData {
             .into_iter()
             .chain(self.normal.to_array())
             .chain([self.depth])
-            .chain(self.position.to_array());
+            .chain(self.position.to_array())
+            .chain(self.noise.as_array());
         for (slot, f) in out.iter_mut().zip(floats) {
             *slot = f.to_bits();
         }
         for (i, e) in self.object.iter().chain(self.material.iter()).enumerate() {
-            out[10 + 2 * i] = e.id;
-            out[11 + 2 * i] = e.coverage.to_bits();
+            out[RANKS_AT + 2 * i] = e.id;
+            out[RANKS_AT + 1 + 2 * i] = e.coverage.to_bits();
         }
         out
     }
@@ -134,8 +184,8 @@ impl PixelData {
         let v = |i: usize| Vec3::new(f(i), f(i + 1), f(i + 2));
         let ranks = |first: usize| -> Ranks {
             std::array::from_fn(|r| Entry {
-                id: w[10 + 2 * (first + r)],
-                coverage: f(11 + 2 * (first + r)),
+                id: w[RANKS_AT + 2 * (first + r)],
+                coverage: f(RANKS_AT + 1 + 2 * (first + r)),
             })
         };
         PixelData {
@@ -145,6 +195,7 @@ impl PixelData {
             position: v(7),
             object: ranks(0),
             material: ranks(cryptomatte::RANKS),
+            noise: LayerNoise::from_array([f(10), f(11), f(12)]),
         }
     }
 }
@@ -197,6 +248,11 @@ impl PixelDataSum {
         };
         self.objects.push(entry(hit.object));
         self.materials.push(entry(hit.material));
+    }
+
+    /// The pixel's layers' noise, as its samples measured it.
+    pub fn set_noise(&mut self, noise: LayerNoise) {
+        self.data.noise = noise;
     }
 
     pub fn finish(mut self) -> PixelData {
@@ -341,10 +397,34 @@ mod tests {
         let mut sum = PixelDataSum::new(2);
         sum.add(Vec3::new(0.1, 0.2, 0.3), Some(hit(1.5, 7)));
         sum.add(Vec3::ZERO, Some(hit(2.5, 8)));
+        sum.set_noise(LayerNoise {
+            direct: 0.5,
+            specular: 0.25,
+            indirect: 2.0,
+        });
         let d = sum.finish();
         assert_eq!(PixelData::from_words(&d.to_words()), d);
         assert_eq!(d.merge(&PixelData::default()), d);
         assert_eq!(PixelData::default().merge(&d), d);
+    }
+
+    #[test]
+    fn independent_parts_add_their_noise_and_a_scaled_pixel_scales_it_squared() {
+        let part = |v| PixelData {
+            noise: LayerNoise {
+                direct: v,
+                specular: 2.0 * v,
+                indirect: 3.0 * v,
+            },
+            ..Default::default()
+        };
+        let mut both = part(1.0).merge(&part(3.0));
+        assert_eq!(both.noise, part(4.0).noise);
+        // The mean of the two: a quarter of the sum's variance.
+        both.scale(0.5);
+        assert_eq!(both.noise, part(1.0).noise);
+        let negative = part(-1.0);
+        assert!(!negative.healthy(), "a negative variance is damage");
     }
 
     #[test]

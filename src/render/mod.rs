@@ -2,6 +2,7 @@
 //! counter until none are left, and each pixel averages `spp` stratified (jittered) samples over
 //! its area, which is the box filter a converged reference integrates.
 
+pub mod noise;
 pub mod pixel;
 
 pub use pixel::{RenderSettings, ThreadClock, ThreadStats, pixel_offset, pixel_strata, render_pixel, render_tile};

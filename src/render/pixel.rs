@@ -5,6 +5,7 @@
 use crate::image::components::Components;
 use crate::image::data::{PixelData, PixelDataSum, SampleHit};
 use crate::image::framebuffer::PixelValue;
+use crate::render::noise::PixelNoise;
 use crate::sampling::Rng;
 use crate::scene::footprint::EmitterFootprint;
 use crate::scene::view::Camera;
@@ -165,19 +166,27 @@ pub fn render_pixel(
         light_cell_offset: pixel_rng.next_u32(),
     };
     let mut data = PixelDataSum::new(samples);
+    let mut noise = PixelNoise::default();
     for s in 0..samples {
         let mut rng = Rng::for_sample(settings.seed, pixel_index, s as u64);
         let (jx, jy) = pixel_offset(s, samples, settings.jitter, &mut rng);
         let (origin, dir) = camera.ray(x as f32 + jx, y as f32 + jy);
         work.sample.index = s;
         work.data = SampleData::default();
-        sum += if split_emission {
+        // The sample's own share of the pixel's shadow-ray pool, for its noise.
+        let pool = std::mem::take(&mut work.pixel_shadow_ratio);
+        let components = if split_emission {
             integrator.primary_without_first_emission(origin, dir, &mut rng, &mut work)
         } else {
             integrator.primary(origin, dir, &mut rng, &mut work)
         };
+        let pooled = std::mem::replace(&mut work.pixel_shadow_ratio, pool);
+        work.pixel_shadow_ratio += pooled;
+        noise.add(&components, pooled);
+        sum += components;
         data.add(work.data.albedo, sample_hit(integrator, camera, &work.data));
     }
+    data.set_noise(noise.finish());
     let mut pixel = sum * (1.0 / samples as f32);
     // The direct light's ratio estimate with its share taken over all the pixel's rays.
     pixel.direct += work.pixel_shadow_ratio.estimate() / samples as f32;

@@ -53,6 +53,11 @@ fn pixel_data() -> PixelData {
         };
         sum.add(Vec3::new(0.5, 0.25, 0.125), Some(hit));
     }
+    sum.set_noise(crate::image::data::LayerNoise {
+        direct: 0.75,
+        specular: 0.0625,
+        indirect: 3.5,
+    });
     sum.finish()
 }
 
