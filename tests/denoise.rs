@@ -108,7 +108,8 @@ fn the_denoised_direct_layer_is_closer_to_a_converged_reference_than_the_raw_one
         how.contains("Open Image Denoise 2.")
             && how.contains("quality fast")
             && how.contains("as rendered")
-            && how.contains("raw emission plus"),
+            && how.contains("raw emission plus")
+            && how.contains("one sample a pixel: no noise measured"),
         "{how}"
     );
     let seconds: f64 = read.attribute("icrender/denoise_time_s").unwrap().parse().unwrap();
@@ -300,12 +301,20 @@ fn the_indirect_layer_is_denoised_without_the_cache_only() {
             "32",
             "-aa",
             accuracy,
+            "--spp",
+            "4",
             "--denoise",
             "-q",
             "--no-preview",
         ]);
-        let read = read_image(&image, &["icrender/denoised"]).unwrap();
+        let read = read_image(&image, &["icrender/denoised", "icrender/denoise"]).unwrap();
         assert_eq!(read.attribute("icrender/denoised"), Some(expected), "-aa {accuracy}");
+        // Four samples a pixel measure their noise.
+        assert!(
+            read.attribute("icrender/denoise")
+                .unwrap()
+                .contains("weighed against the raw layer")
+        );
         assert!(read.channel("indirect.R").is_some(), "-aa {accuracy}");
         let indirect = if accuracy == "0" {
             "indirect.denoised"

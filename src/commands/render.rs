@@ -495,9 +495,10 @@ fn denoise_attributes(d: &denoise::DenoisedFrame, args: &RenderArgs) -> Vec<(Str
         (
             "icrender/denoise".to_string(),
             format!(
-                "{}, RT filter, quality {}, {}; layers {} each denoised into <layer>.denoised \
-                 (emission is not noisy and not denoised); the composite R G B is raw, and `denoised` \
-                 is the raw emission plus the denoised layers (not the composite denoised itself)",
+                "{}, RT filter, quality {}, {}; layers {} each denoised into <layer>.denoised{} \
+                 (emission is not noisy and not denoised; indirect only where each pixel samples it, \
+                 -aa 0); the composite R G B is raw, and `denoised` is the raw emission plus the \
+                 denoised layers and any raw one (not the composite denoised itself)",
                 d.denoiser,
                 quality_name(args),
                 guides_text(d),
@@ -505,7 +506,12 @@ fn denoise_attributes(d: &denoise::DenoisedFrame, args: &RenderArgs) -> Vec<(Str
                     "(none)".to_string()
                 } else {
                     raw.join(", ")
-                }
+                },
+                if d.weighed_by_noise {
+                    ", weighed against the raw layer by the noise each pixel's samples measured"
+                } else {
+                    " (one sample a pixel: no noise measured, the filter's output as it is)"
+                },
             ),
         ),
         ("icrender/denoise_time_s".to_string(), format!("{:.3}", d.seconds)),

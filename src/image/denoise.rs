@@ -185,6 +185,9 @@ pub struct DenoisedFrame {
     pub guided: bool,
     /// Whether the guides were prefiltered (`--denoise-prefilter`).
     pub prefiltered: bool,
+    /// Whether the filter's output was weighed against the raw layers by the pixels' noise
+    /// (`blend_by_noise`; not with one sample a pixel).
+    pub weighed_by_noise: bool,
     /// "Intel Open Image Denoise 2.5.1".
     pub denoiser: String,
     /// The denoiser's own time: its device, the guides' prefiltering and every filter.
@@ -346,6 +349,7 @@ pub fn denoise_frame(
         composite,
         guided: clean.is_some(),
         prefiltered: clean.is_some() && prefilter,
+        weighed_by_noise: samples_per_pixel >= 2 && frame.data().len() == (w * h) as usize,
         denoiser: denoiser.describe(),
         seconds: start.elapsed().as_secs_f64(),
     })
