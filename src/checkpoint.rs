@@ -554,24 +554,24 @@ mod tests {
             .err()
             .unwrap();
         assert!(err.contains("not an icrender checkpoint"), "{err}");
-        // A journal of the format before the data layers: refused, saying why.
-        let mut old = b"ICRJRNL1".to_vec();
-        old.extend_from_slice(&3u32.to_le_bytes());
-        old.extend_from_slice(b"job");
-        std::fs::write(dir.path().join("tiles.journal"), &old).unwrap();
-        let err = Checkpoint::open(dir.path(), "job", &all, PixelWindow::whole(4, 4))
-            .err()
-            .unwrap();
-        assert!(err.contains("older icrender") && err.contains("format 1"), "{err}");
-        // ... and of the format before the layers' noise.
-        let mut old = b"ICRJRNL2".to_vec();
-        old.extend_from_slice(&3u32.to_le_bytes());
-        old.extend_from_slice(b"job");
-        std::fs::write(dir.path().join("tiles.journal"), &old).unwrap();
-        let err = Checkpoint::open(dir.path(), "job", &all, PixelWindow::whole(4, 4))
-            .err()
-            .unwrap();
-        assert!(err.contains("format 2") && err.contains("noise"), "{err}");
+        // Journals of the formats before (the data layers, then the layers' noise): refused,
+        // saying which and what they lack.
+        for (magic, format, lacks) in [
+            (b"ICRJRNL1", "format 1", "data layers"),
+            (b"ICRJRNL2", "format 2", "noise"),
+        ] {
+            let mut old = magic.to_vec();
+            old.extend_from_slice(&3u32.to_le_bytes());
+            old.extend_from_slice(b"job");
+            std::fs::write(dir.path().join("tiles.journal"), &old).unwrap();
+            let err = Checkpoint::open(dir.path(), "job", &all, PixelWindow::whole(4, 4))
+                .err()
+                .unwrap();
+            assert!(
+                err.contains("older icrender") && err.contains(format) && err.contains(lacks),
+                "{err}"
+            );
+        }
     }
 
     #[test]
