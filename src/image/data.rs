@@ -59,17 +59,6 @@ impl LayerNoise {
             indirect,
         }
     }
-
-    /// The variance of the layer `layer` (zero for a layer without noise: emission).
-    pub fn of(&self, layer: super::framebuffer::Layer) -> f32 {
-        use super::framebuffer::Layer;
-        match layer {
-            Layer::Direct => self.direct,
-            Layer::Specular => self.specular,
-            Layer::Indirect => self.indirect,
-            Layer::Emission => 0.0,
-        }
-    }
 }
 
 impl PixelData {

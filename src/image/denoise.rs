@@ -23,6 +23,7 @@
 //! Guides are prefiltered once per image, as OIDN recommends for guides that may carry noise
 //! (each by an RT filter of its own), and every colour plane is then filtered with `cleanAux`.
 
+use super::data::LayerNoise;
 use super::framebuffer::{FrameBuffer, Layer};
 use crate::scene::light::luminance;
 pub use crate::sys::oidn::Quality;
@@ -221,6 +222,16 @@ fn keep_where_nothing_was_hit(denoised: &mut [Vec3], raw: &[Vec3], frame: &Frame
     }
 }
 
+/// The variance `noise` holds of the light layer `layer` (zero for one without noise: emission).
+fn noise_of(noise: &LayerNoise, layer: Layer) -> f32 {
+    match layer {
+        Layer::Direct => noise.direct,
+        Layer::Specular => noise.specular,
+        Layer::Indirect => noise.indirect,
+        Layer::Emission => 0.0,
+    }
+}
+
 /// Half the side of the square over which `blend_by_noise` averages the noise and the
 /// filter's change: the smallest (at least 1) whose pixels' samples give the variance 48
 /// degrees of freedom, a pixel's own `samples - 1`: 3 at 2 samples a pixel, 2 at 4, 1 from 8.
@@ -323,7 +334,7 @@ pub fn denoise_frame(
         let mut plane = denoiser.denoise(frame.layer(layer), clean.as_ref(), w, h)?;
         let data = frame.data();
         if samples_per_pixel >= 2 && data.len() == plane.len() {
-            let variance: Vec<f32> = data.iter().map(|d| d.noise.of(layer)).collect();
+            let variance: Vec<f32> = data.iter().map(|d| noise_of(&d.noise, layer)).collect();
             let size = (w as usize, h as usize);
             blend_by_noise(
                 &mut plane,
