@@ -356,6 +356,9 @@ fn denoise_under_mpirun_writes_the_denoised_layers_on_the_master() {
             // Brute force: each pixel samples its own hemisphere, so `indirect` is denoised too.
             "-aa",
             "0",
+            // Two samples a pixel: the workers' pixels carry their noise to the master.
+            "--spp",
+            "2",
             "--tile",
             "8x8",
             "--denoise",
@@ -376,7 +379,21 @@ fn denoise_under_mpirun_writes_the_denoised_layers_on_the_master() {
         read.attribute("icrender/denoised"),
         Some("direct.denoised specular.denoised indirect.denoised denoised")
     );
-    assert!(read.attribute("icrender/denoise").unwrap().contains("quality fast"));
+    let how = read.attribute("icrender/denoise").unwrap();
+    assert!(
+        how.contains("quality fast") && how.contains("weighed against the raw layer"),
+        "{how}"
+    );
     assert!(read.channel("indirect.denoised.R").is_some());
     assert!(stderr(&out).contains("icrender: denoised direct, specular, indirect"));
+    // Had the pixels' noise been lost on the way (zero everywhere), the weighing would have
+    // kept every raw value: the denoised layers would be the raw ones.
+    for layer in ["direct", "indirect"] {
+        let (raw, denoised) = (rgb(&read, layer), rgb(&read, &format!("{layer}.denoised")));
+        let changed = (0..3).any(|c| raw[c].iter().zip(&denoised[c]).any(|(a, b)| (a - b).abs() > 1e-4));
+        assert!(
+            changed,
+            "{layer}.denoised is the raw {layer}: no noise reached the master"
+        );
+    }
 }
