@@ -108,9 +108,10 @@ impl PixelData {
             material: cryptomatte::merge(&self.material, &other.material),
             // Parts of one pixel's light from different ranks or passes are independent:
             // their variances add.
-            noise: LayerNoise::from_array(std::array::from_fn(|i| {
-                self.noise.as_array()[i] + other.noise.as_array()[i]
-            })),
+            noise: {
+                let (a, b) = (self.noise.as_array(), other.noise.as_array());
+                LayerNoise::from_array(std::array::from_fn(|i| a[i] + b[i]))
+            },
         }
     }
 

@@ -38,9 +38,9 @@ pub const NOISY_LAYERS: [Layer; 3] = [Layer::Direct, Layer::Specular, Layer::Ind
 /// where each pixel samples its own hemisphere (no irradiance cache: `-aa 0`). With the cache
 /// the indirect layer is records interpolated, smooth between them, with nothing for the
 /// filter to remove: on the conference room at -ab 2 (320x240, two settings, two seeds each)
-/// the composite with `indirect` denoised and the one with it raw had the same relMSE and 4x4
-/// relMSE to within 1 % (8.54e-3 / 8.54e-3, 4.96e-3 / 4.94e-3), and its filter was half the
-/// denoiser's time.
+/// the composite with `indirect` denoised and the one with it raw had the same relMSE to
+/// within 1 % (8.54e-3 / 8.54e-3 at one setting, 4.96e-3 / 4.94e-3 at the other; the 4x4
+/// relMSE as close), and its filter was half the denoiser's time.
 pub fn layers_to_denoise(written: &[Layer], per_pixel_indirect: bool) -> Vec<Layer> {
     NOISY_LAYERS
         .into_iter()
@@ -329,12 +329,13 @@ pub fn denoise_frame(
     let planes = guide_planes(frame);
     let guides = planes.as_ref().map(|(albedo, normal)| Guides { albedo, normal });
     let clean = guides.map(|g| denoiser.guides(g, w, h, prefilter)).transpose()?;
+    // A frame with data layers carries its pixels' noise; one sample a pixel measured none.
+    let weigh = samples_per_pixel >= 2 && frame.data().len() == (w * h) as usize;
     let mut layers = Vec::new();
     for layer in layers_to_denoise(written, per_pixel_indirect) {
         let mut plane = denoiser.denoise(frame.layer(layer), clean.as_ref(), w, h)?;
-        let data = frame.data();
-        if samples_per_pixel >= 2 && data.len() == plane.len() {
-            let variance: Vec<f32> = data.iter().map(|d| noise_of(&d.noise, layer)).collect();
+        if weigh {
+            let variance: Vec<f32> = frame.data().iter().map(|d| noise_of(&d.noise, layer)).collect();
             let size = (w as usize, h as usize);
             blend_by_noise(
                 &mut plane,
@@ -360,7 +361,7 @@ pub fn denoise_frame(
         composite,
         guided: clean.is_some(),
         prefiltered: clean.is_some() && prefilter,
-        weighed_by_noise: samples_per_pixel >= 2 && frame.data().len() == (w * h) as usize,
+        weighed_by_noise: weigh,
         denoiser: denoiser.describe(),
         seconds: start.elapsed().as_secs_f64(),
     })

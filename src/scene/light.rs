@@ -232,25 +232,22 @@ impl EmitterSet {
         }
         Some(EmitterSampler {
             set: self,
-            point,
-            normal,
             chooser: self.tree.chooser(Receiver { point, normal }),
         })
     }
 }
 
-/// `EmitterSet::sample` at one shading point, as many times as it is asked.
+/// `EmitterSet::sample` at one shading point (the chooser's receiver), as many times as it is
+/// asked.
 pub struct EmitterSampler<'a> {
     set: &'a EmitterSet,
-    point: Vec3,
-    normal: Vec3,
     chooser: super::light_tree::Chooser<'a>,
 }
 
 impl EmitterSampler<'_> {
     /// A point on an emitter for the shading point, as `EmitterSet::sample` gives it.
     pub fn sample(&mut self, u1: f32, u2: f32, u3: f32) -> Option<EmitterPoint> {
-        let (point, normal) = (self.point, self.normal);
+        let Receiver { point, normal } = self.chooser.receiver();
         let (index, probability) = self.chooser.pick(u1 as f64)?;
         let t = &self.set.triangles[index];
         let (position, area) = t.sample_above(point, normal, u2, u3)?;

@@ -425,6 +425,11 @@ pub struct Chooser<'a> {
 }
 
 impl Chooser<'_> {
+    /// The shading point the picks are for.
+    pub fn receiver(&self) -> Receiver {
+        self.at
+    }
+
     /// `LightTree::pick` at the chooser's receiver.
     pub fn pick(&mut self, u: f64) -> Option<(usize, f64)> {
         let (tree, at) = (self.tree, self.at);
