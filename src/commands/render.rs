@@ -401,14 +401,19 @@ impl Outputs {
         if let Some(d) = &denoised
             && !args.quiet
         {
-            let what: Vec<&str> = d.layers.iter().map(|(l, _)| l.name()).collect();
+            let what: Vec<&str> = d.filtered().iter().map(|l| l.name()).collect();
             eprintln!(
-                "icrender: denoised {} (and their sum with the emission, layer `denoised`) in {:.3} s ({}, quality {}, {})",
-                what.join(", "),
+                "icrender: denoised {} (and their sum with the emission, layer `denoised`) in {:.3} s ({}, quality {}, {}){}",
+                if what.is_empty() {
+                    "no layer".to_string()
+                } else {
+                    what.join(", ")
+                },
                 d.seconds,
                 d.denoiser,
                 quality_name(args),
-                guides_text(d)
+                guides_text(d),
+                left_raw_text(d)
             );
         }
         Ok(())
@@ -487,9 +492,26 @@ pub(crate) fn check_denoiser(args: &RenderArgs) -> Result<(), CommandError> {
         .map_err(|e| CommandError::input(format!("--denoise: {e}")))
 }
 
+/// "; specular left as rendered in specular.denoised (0.16 % of the measured noise)" for the
+/// layers whose noise was too little to filter (`denoise::NEGLIGIBLE_NOISE_SHARE`).
+fn left_raw_text(d: &denoise::DenoisedFrame) -> String {
+    d.left_raw
+        .iter()
+        .map(|(layer, share)| {
+            format!(
+                "; {} left as rendered in {} ({:.2} % of the measured noise, under {} %)",
+                layer.name(),
+                denoise::denoised_name(*layer),
+                100.0 * share,
+                100.0 * denoise::NEGLIGIBLE_NOISE_SHARE
+            )
+        })
+        .collect()
+}
+
 /// The header's record of what was denoised, how, and the denoiser's time.
 fn denoise_attributes(d: &denoise::DenoisedFrame, args: &RenderArgs) -> Vec<(String, String)> {
-    let raw: Vec<&str> = d.layers.iter().map(|(l, _)| l.name()).collect();
+    let raw: Vec<&str> = d.filtered().iter().map(|l| l.name()).collect();
     vec![
         ("icrender/denoised".to_string(), d.names().join(" ")),
         (
@@ -497,7 +519,7 @@ fn denoise_attributes(d: &denoise::DenoisedFrame, args: &RenderArgs) -> Vec<(Str
             format!(
                 "{}, RT filter, quality {}, {}; layers {} each denoised into <layer>.denoised{} \
                  (emission is not noisy and not denoised; indirect only where each pixel samples it, \
-                 -aa 0); the composite R G B is raw, and `denoised` is the raw emission plus the \
+                 -aa 0){}; the composite R G B is raw, and `denoised` is the raw emission plus the \
                  denoised layers and any raw one (not the composite denoised itself)",
                 d.denoiser,
                 quality_name(args),
@@ -512,6 +534,7 @@ fn denoise_attributes(d: &denoise::DenoisedFrame, args: &RenderArgs) -> Vec<(Str
                 } else {
                     " (one sample a pixel: no noise measured, the filter's output as it is)"
                 },
+                left_raw_text(d),
             ),
         ),
         ("icrender/denoise_time_s".to_string(), format!("{:.3}", d.seconds)),
