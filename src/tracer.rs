@@ -28,6 +28,10 @@ pub struct SurfaceHit {
     /// The geometric normal turned to the side the ray came from.
     pub facing_normal: Vec3,
     pub uv: Option<[f32; 2]>,
+    /// Texture-coordinate units per unit of length on the triangle hit (the square root of
+    /// the ratio of its areas in texture and in world space): how wide in the texture a
+    /// footprint is. 0 without texture coordinates.
+    pub uv_per_length: f32,
     pub material: u32,
     /// The object (placed mesh: `WorldMesh::object`, `Placement::object`) hit.
     pub object: u32,
@@ -150,7 +154,8 @@ impl Tracer {
         } = triangle;
         let w = 1.0 - u - v;
         let position = w * pa + u * pb + v * pc;
-        let geometric_normal = (pb - pa).cross(pc - pa).try_normalize().unwrap_or(-dir);
+        let across = (pb - pa).cross(pc - pa);
+        let geometric_normal = across.try_normalize().unwrap_or(-dir);
         let toward_ray = if geometric_normal.dot(dir) > 0.0 { -1.0 } else { 1.0 };
         let facing_normal = geometric_normal * toward_ray;
         let mut normal = facing_normal;
@@ -164,6 +169,12 @@ impl Tracer {
         let uv = triangle
             .texcoords
             .map(|[ta, tb, tc]| [w * ta[0] + u * tb[0] + v * tc[0], w * ta[1] + u * tb[1] + v * tc[1]]);
+        let uv_per_length = triangle.texcoords.map_or(0.0, |[ta, tb, tc]| {
+            let (e1, e2) = ([tb[0] - ta[0], tb[1] - ta[1]], [tc[0] - ta[0], tc[1] - ta[1]]);
+            let uv_area = (e1[0] * e2[1] - e1[1] * e2[0]).abs();
+            let ratio = (uv_area / across.length()).sqrt();
+            if ratio.is_finite() { ratio } else { 0.0 }
+        });
         Some(SurfaceHit {
             position,
             distance: hit.t,
@@ -171,6 +182,7 @@ impl Tracer {
             normal,
             facing_normal,
             uv,
+            uv_per_length,
             material: triangle.material,
             object,
             prim_id: hit.prim_id,

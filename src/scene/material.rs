@@ -169,12 +169,23 @@ impl Material {
 
     /// The material's components at a point with texture coordinates `uv`.
     pub fn at(&self, uv: Option<[f32; 2]>, textures: &[Texture]) -> SurfacePoint {
+        self.over(uv, 0.0, textures)
+    }
+
+    /// The material's components averaged over a footprint `width` wide in texture
+    /// coordinates around `uv` (`Texture::sample_footprint`; 0: at the point). An alpha mask
+    /// is read at the point: averaged, its cut-outs would fill in or vanish.
+    pub fn over(&self, uv: Option<[f32; 2]>, width: f32, textures: &[Texture]) -> SurfacePoint {
         let mut base = self.base_color;
         let mut alpha = self.base_alpha;
         if let (Some(t), Some(uv)) = (self.base_color_texture.and_then(|i| textures.get(i)), uv) {
-            let texel = t.sample(uv);
+            let texel = t.sample_footprint(uv, width);
             base *= texel.truncate();
-            alpha *= texel.w;
+            alpha *= if self.alpha_mode == AlphaMode::Mask && width > 0.0 {
+                t.sample(uv).w
+            } else {
+                texel.w
+            };
         }
         let mut point = self.at_base(base);
         point.opacity = match self.alpha_mode {

@@ -66,7 +66,7 @@ impl Integrator<'_> {
         let mut rng = Rng::new(0, SITE_STREAM + pixel);
         for _ in 0..SITES_PER_PIXEL {
             let (origin, dir) = camera.ray(x as f32 + rng.next_f32(), y as f32 + rng.next_f32());
-            let Some((mut hit, mut surface)) = self.first_surface(origin, dir, Coherence::Incoherent) else {
+            let Some((mut hit, mut surface)) = self.first_surface(origin, dir, Coherence::Incoherent, 0.0) else {
                 continue;
             };
             let mut reached = true;
@@ -77,7 +77,7 @@ impl Integrator<'_> {
                     break;
                 }
                 let from = self.tracer.spawn_point(&hit, wi);
-                match self.first_surface(from, wi, Coherence::Incoherent) {
+                match self.first_surface(from, wi, Coherence::Incoherent, 0.0) {
                     Some(next) => (hit, surface) = next,
                     None => {
                         reached = false;
@@ -96,6 +96,7 @@ impl Integrator<'_> {
                 first_emission_elsewhere: false,
                 throughput: Vec3::ONE,
                 albedo_chain: false,
+                spread: 0.0,
             };
             for _ in 0..SAMPLES_PER_SITE {
                 let indirect = self.brute_force_ambient(&hit, state, &mut rng, counts);

@@ -197,6 +197,27 @@ pub struct PathState {
     /// This point is on the eye path's chain of mirrors and transparencies (no diffuse or
     /// glossy bounce yet): its reflectance goes to the albedo layer (`SampleData`).
     albedo_chain: bool,
+    /// How wide the ray's footprint grows per unit of distance (radians): 0 for a ray that
+    /// stands for itself; a ray standing for a whole cell of a hemisphere of n x n cells
+    /// covers the cell, sqrt(2 pi) / n (`cell_spread`). Textures are read averaged over it.
+    spread: f32,
+}
+
+/// The spread of a ray standing for one of `n` x `n` equal cells of the hemisphere (each 2 pi
+/// / n^2 steradians): the side of a cell.
+fn cell_spread(n: usize) -> f32 {
+    (2.0 * std::f32::consts::PI).sqrt() / n.max(1) as f32
+}
+
+/// How wide, in texture coordinates, the footprint of a ray along `dir` with `spread` is where
+/// it hits: its width across the ray (spread times distance), stretched by the slant to the
+/// side of a square of the ellipse's area, in texture units.
+fn texture_footprint(hit: &SurfaceHit, dir: Vec3, spread: f32) -> f32 {
+    if spread <= 0.0 || hit.uv_per_length <= 0.0 {
+        return 0.0;
+    }
+    let slant = dir.dot(hit.geometric_normal).abs().max(1e-3);
+    spread * hit.distance * hit.uv_per_length / slant.sqrt()
 }
 
 impl PathState {
@@ -211,6 +232,7 @@ impl PathState {
             first_emission_elsewhere,
             throughput: Vec3::ONE,
             albedo_chain: true,
+            spread: 0.0,
         }
     }
 }
@@ -308,7 +330,7 @@ impl<'a> Integrator<'a> {
             return;
         }
         counts.primary += 1;
-        if let Some((hit, surface)) = self.first_surface(origin, dir, Coherence::Coherent)
+        if let Some((hit, surface)) = self.first_surface(origin, dir, Coherence::Coherent, 0.0)
             && surface.diffuse.max_element() > 0.0
         {
             self.ambient_radiance(&hit, PathState::eye(false), rng, counts);
@@ -333,7 +355,7 @@ impl<'a> Integrator<'a> {
             } else {
                 Coherence::Incoherent
             };
-            let Some((hit, surface)) = self.first_surface(origin, dir, coherence) else {
+            let Some((hit, surface)) = self.first_surface(origin, dir, coherence, 0.0) else {
                 continue;
             };
             if surface.diffuse.max_element() > 0.0 {
@@ -386,11 +408,13 @@ impl<'a> Integrator<'a> {
         origin: Vec3,
         dir: Vec3,
         coherence: Coherence,
+        spread: f32,
     ) -> Option<(SurfaceHit, crate::scene::material::SurfacePoint)> {
         let mut origin = origin;
         for _ in 0..MAX_MASKED_PASSES {
             let hit = self.tracer.intersect(self.scene, origin, dir, coherence)?;
-            let surface = self.scene.materials[hit.material as usize].at(hit.uv, &self.scene.textures);
+            let material = &self.scene.materials[hit.material as usize];
+            let surface = material.over(hit.uv, texture_footprint(&hit, dir, spread), &self.scene.textures);
             if surface.opacity > 0.0 {
                 return Some((hit, surface));
             }
@@ -439,7 +463,7 @@ impl<'a> Integrator<'a> {
         rng: &mut Rng,
         counts: &mut Work<'_>,
     ) -> (Components, f32) {
-        let Some((hit, surface)) = self.first_surface(origin, dir, coherence) else {
+        let Some((hit, surface)) = self.first_surface(origin, dir, coherence, state.spread) else {
             return (Components::default(), f32::INFINITY);
         };
         if state.level == 0 && state.specular_depth == 0 {
@@ -681,6 +705,7 @@ impl<'a> Integrator<'a> {
             normal: request.normal,
             facing_normal: request.facing_normal,
             uv: None,
+            uv_per_length: 0.0,
             material: request.material,
             object: 0,
             prim_id: 0,
@@ -693,6 +718,7 @@ impl<'a> Integrator<'a> {
             first_emission_elsewhere: false,
             throughput: Vec3::ONE,
             albedo_chain: false,
+            spread: 0.0,
         };
         self.ambient_radiance(&hit, state, rng, counts)
     }
@@ -714,9 +740,12 @@ impl<'a> Integrator<'a> {
     /// Brute force (-aa 0): -ad stratified cosine-weighted samples at the first bounce, one per
     /// further bounce (an unbiased path continuation).
     fn brute_force_ambient(&self, hit: &SurfaceHit, state: PathState, rng: &mut Rng, counts: &mut Work<'_>) -> Vec3 {
+        // Each ray samples a point, textures included: brute force is the reference the
+        // records (whose rays read textures averaged over their cells) are measured against.
         let next = PathState {
             level: state.level + 1,
             count_emission: false,
+            spread: 0.0,
             ..state
         };
         let (side, count) = if state.level == 0 {
@@ -802,6 +831,7 @@ impl<'a> Integrator<'a> {
         let next = PathState {
             level: state.level + 1,
             count_emission: false,
+            spread: cell_spread(n),
             ..state
         };
         let sample = |i: usize, j: usize, rng: &mut Rng, counts: &mut Work<'_>| {
@@ -907,5 +937,51 @@ fn sanitize(c: Components, counts: &mut RayCounts) -> Components {
         direct: fix(c.direct, counts),
         specular: fix(c.specular, counts),
         indirect: fix(c.indirect, counts),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn hit_at(distance: f32, uv_per_length: f32) -> SurfaceHit {
+        SurfaceHit {
+            position: Vec3::ZERO,
+            distance,
+            geometric_normal: Vec3::Y,
+            normal: Vec3::Y,
+            facing_normal: Vec3::Y,
+            uv: Some([0.5, 0.5]),
+            uv_per_length,
+            material: 0,
+            object: 0,
+            prim_id: 0,
+        }
+    }
+
+    #[test]
+    fn a_cell_ray_spreads_by_the_side_of_its_cell() {
+        // n x n cells of 2 pi / n^2 steradians each: the side's square is the cell's solid angle.
+        for n in [1, 4, 16, 23] {
+            let side = cell_spread(n);
+            assert!((side * side * (n * n) as f32 - 2.0 * std::f32::consts::PI).abs() < 1e-4);
+        }
+    }
+
+    #[test]
+    fn a_footprint_grows_with_distance_and_slant_and_is_nothing_for_a_thin_ray() {
+        let straight = -Vec3::Y;
+        // 0.1 rad at 2 units: 0.2 units wide, 3 texture units a unit: 0.6.
+        assert!((texture_footprint(&hit_at(2.0, 3.0), straight, 0.1) - 0.6).abs() < 1e-6);
+        // At 60 degrees from the normal the ellipse is twice as long: sqrt(2) wider as a square.
+        let slanted = Vec3::new(3f32.sqrt() / 2.0, -0.5, 0.0);
+        let wide = texture_footprint(&hit_at(2.0, 3.0), slanted, 0.1);
+        assert!((wide - 0.6 * 2f32.sqrt()).abs() < 1e-5, "{wide}");
+        // A ray that stands for itself, or a surface without texture coordinates: a point.
+        assert_eq!(texture_footprint(&hit_at(2.0, 3.0), straight, 0.0), 0.0);
+        assert_eq!(texture_footprint(&hit_at(2.0, 0.0), straight, 0.1), 0.0);
+        // Grazing: bounded.
+        let grazing = texture_footprint(&hit_at(2.0, 3.0), Vec3::X, 0.1);
+        assert!(grazing.is_finite() && grazing > 0.6);
     }
 }
