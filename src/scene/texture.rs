@@ -230,16 +230,7 @@ mod tests {
     use super::*;
 
     fn checker() -> Texture {
-        // 2x1: black | white, repeat.
-        Texture::from_gltf(&GltfTexture {
-            name: "t".into(),
-            rgba: vec![0, 0, 0, 255, 255, 255, 255, 255],
-            width: 2,
-            height: 1,
-            wrap_s: 10497,
-            wrap_t: 10497,
-            srgb: true,
-        })
+        Texture::from_gltf(&checker_gltf())
     }
 
     #[test]
@@ -320,6 +311,7 @@ mod tests {
         );
     }
 
+    /// 2x1: black | white, repeat.
     fn checker_gltf() -> GltfTexture {
         GltfTexture {
             name: "t".into(),
