@@ -330,11 +330,11 @@ pub const NEGLIGIBLE_NOISE_SHARE: f64 = 0.01;
 /// `layers`. With the noise weighed in (`blend_by_noise`), filtering a layer can lower the
 /// composite's error by at most its variance, so a layer with a negligible share costs the
 /// filter's whole time for nothing measurable: Sibenik's nave at the peers bench's fastest
-/// setting (320x240, 4 samples a pixel) measured the specular layer at 0.16 % of the noise, and
-/// its filter took 62 ms (half the denoiser's time, 4.5 % of the render's) for a composite
-/// no better (relMSE 1.458e-2 with the layer denoised, 1.455e-2 with it raw). The squared luminance is floored at a hundredth of the squared
-/// mean, so that black pixels do not weigh without bound. All zero (nothing measured, or no
-/// noise anywhere) gives every share 0.
+/// setting (320x240, 4 samples a pixel) measured the specular layer at 0.13 % of the noise, and
+/// its filter took 62 ms (half the denoiser's time, 4.5 % of the render's) for a composite no
+/// better (relMSE 1.458e-2 with the layer denoised, 1.455e-2 with it raw). The squared
+/// luminance is floored at a hundredth of the squared mean, so that black pixels do not weigh
+/// without bound. All zero (nothing measured, or no noise anywhere) gives every share 0.
 fn noise_shares(frame: &FrameBuffer, layers: &[Layer]) -> Vec<f64> {
     let composite: Vec<f64> = (0..frame.data().len())
         .map(|i| {

@@ -75,12 +75,9 @@ fn from_unit16(t: [u16; 4]) -> Vec4 {
 /// the (up to) 2x2 above it; an odd last row or column is folded into its neighbour's mean.
 fn halve(width: u32, height: u32, texel: impl Fn(usize) -> Vec4) -> MipLevel {
     let (w, h) = ((width / 2).max(1), (height / 2).max(1));
-    let span = |i: u32, size: u32, half: u32| {
-        let lo = 2 * i;
-        // The last texel of the level takes what is left (3 above it where the size is odd).
-        let hi = if i + 1 == half { size } else { (2 * i + 2).min(size) };
-        lo..hi.max(lo + 1)
-    };
+    // Texel i of the level covers 2i and 2i + 1 above it; the last one takes what is left (3
+    // where the size is odd, the 1 of a size of 1).
+    let span = |i: u32, size: u32, half: u32| 2 * i..if i + 1 == half { size } else { 2 * i + 2 };
     let mut texels = Vec::with_capacity((w * h) as usize);
     for y in 0..h {
         for x in 0..w {
