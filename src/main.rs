@@ -33,17 +33,17 @@ fn main() -> ExitCode {
             exit: commands::Exit::Internal,
         })
     });
-    icrender::sys::image_io::settle();
-    match result {
-        Ok(()) => ExitCode::SUCCESS,
+    let status = match result {
+        Ok(()) => 0,
         Err(commands::CommandError { message, exit }) => {
             // An empty message: another rank already said why.
             if !message.is_empty() {
                 commands::error(&message);
             }
-            ExitCode::from(exit.status())
+            exit.status()
         }
-    }
+    };
+    icrender::sys::process::exit_finished(status)
 }
 
 fn run(cli: &cli::Cli) -> commands::CommandResult {

@@ -59,24 +59,9 @@ fn open_library() -> Result<abi::ImageLibrary, String> {
 /// the end: the opening (~0.3 s of CPU) then overlaps the scene load and the render instead of
 /// coming after them. A failure is reported by the first real use.
 pub fn open_in_background() {
-    OPENING_IN_BACKGROUND.store(true, std::sync::atomic::Ordering::SeqCst);
     std::thread::spawn(|| {
         let _ = library();
     });
-}
-
-/// Whether `open_in_background` was called (the library may be half loaded on that thread).
-static OPENING_IN_BACKGROUND: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
-
-/// Call before the process exits: waits for a background opening still under way. A command
-/// that fails early (a scene refused before its render) would otherwise exit while the
-/// library's static constructors run on the other thread, and its static destructors then
-/// abort the process (OpenImageIO asserts on a lock still held) instead of it exiting with
-/// its error. Does nothing when no background opening was started.
-pub fn settle() {
-    if OPENING_IN_BACKGROUND.load(std::sync::atomic::Ordering::SeqCst) {
-        let _ = library();
-    }
 }
 
 /// The image library, opened on first use and kept for the life of the process.

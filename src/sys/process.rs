@@ -30,6 +30,26 @@ pub fn die_with_parent(launcher: Option<u32>) -> Result<(), String> {
     Ok(())
 }
 
+/// Ends a finished command with `code` once its output is flushed, running no exit handlers.
+/// The libraries the image library loads start threads in their static constructors
+/// (log4cplus, through OpenImageIO's DICOM reader, starts a pool of four) and tear them down in
+/// their static destructors; a process exiting while those threads are still starting died by
+/// SIGSEGV (seen once in CI, after a refused scene had printed its error), and one exiting while
+/// the library was still loading on the background thread died by SIGABRT (OpenImageIO asserts
+/// on a lock held). Every file a command writes is closed, and an MPI rank's library finalised,
+/// before this is called, so those destructors have nothing left to do.
+pub fn exit_finished(code: u8) -> ! {
+    use std::io::Write;
+    let _ = std::io::stdout().flush();
+    let _ = std::io::stderr().flush();
+    // SAFETY: fflush(NULL) flushes every C stdio stream and takes no other argument; _exit takes
+    // any status and never returns.
+    unsafe {
+        libc::fflush(std::ptr::null_mut());
+        libc::_exit(i32::from(code))
+    }
+}
+
 /// Ends this process at once with `code`, running no exit handlers: a rank that has lost its
 /// master must not wait in the MPI library's own teardown, which may wait for the lost peer.
 pub fn exit_now(code: i32) -> ! {
