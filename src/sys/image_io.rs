@@ -57,7 +57,8 @@ fn open_library() -> Result<abi::ImageLibrary, String> {
 
 /// Opens the image library on a thread of its own, for a process that will write an image at
 /// the end: the opening (~0.3 s of CPU) then overlaps the scene load and the render instead of
-/// coming after them. A failure is reported by the first real use.
+/// coming after them. A failure is reported by the first real use. A command that ends before
+/// the opening has finished does not wait for it: `process::exit_finished` runs no destructors.
 pub fn open_in_background() {
     std::thread::spawn(|| {
         let _ = library();

@@ -33,10 +33,11 @@ pub fn die_with_parent(launcher: Option<u32>) -> Result<(), String> {
 /// Ends a finished command with `code` once its output is flushed, running no exit handlers.
 /// The libraries the image library loads start threads in their static constructors
 /// (log4cplus, through OpenImageIO's DICOM reader, starts a pool of four) and tear them down in
-/// their static destructors; a process exiting while those threads are still starting died by
-/// SIGSEGV (seen once in CI, after a refused scene had printed its error), and one exiting while
-/// the library was still loading on the background thread died by SIGABRT (OpenImageIO asserts
-/// on a lock held). Every file a command writes is closed, and an MPI rank's library finalised,
+/// their static destructors; a process whose `exit` ran them with those threads alive died by
+/// SIGSEGV (seen once in CI, after a refused scene had printed its error; not reproduced in
+/// 2,400 tries, so the likely cause rather than a proven one), and one exiting while the library
+/// was still loading on the background thread died by SIGABRT (OpenImageIO asserts on a lock
+/// held). Every file a command writes is closed, and an MPI rank's library finalised,
 /// before this is called, so those destructors have nothing left to do.
 pub fn exit_finished(code: u8) -> ! {
     use std::io::Write;
