@@ -85,25 +85,8 @@ pub struct GridSample {
 
 impl LastBounceGrid {
     /// The key at `level` (cells of side `cell` x 2^level) of point `p` facing along `normal`.
-    /// Every level's lattice lies half a finest cell behind the surface: a wall at a multiple
-    /// of `cell` (x = 1 in cells of 1/32) then keeps at least half a cell from every level's
-    /// cell boundaries, where float error would otherwise split its points between the cells on
-    /// either side, leaving each with half the samples (measured as -2.2 % of indirect light in
-    /// tests/cache_prepass.rs when hits took their points along the ray).
     pub fn key(cell: f32, level: usize, p: Vec3, normal: Vec3) -> CellKey {
-        let p = p - normal * (0.5 * cell);
-        let side_length = cell * (1 << level) as f32;
-        let q = |v: f32| ((v / side_length).floor() as i64 as u64) & 0xF_FFFF;
-        let a = normal.abs();
-        let axis = if a.x >= a.y && a.x >= a.z {
-            0
-        } else if a.y >= a.z {
-            1
-        } else {
-            2
-        };
-        let side = (axis * 2) as u64 + (normal[axis] < 0.0) as u64;
-        CellKey(q(p.x) | q(p.y) << 20 | q(p.z) << 40 | side << 60)
+        Place::of(cell, p, normal).key(level)
     }
 
     /// The grid with finest cells of side `cell` from `samples`, summed in the order given;
@@ -117,8 +100,9 @@ impl LastBounceGrid {
             if !direct.is_finite() || !indirect.is_finite() {
                 continue;
             }
+            let place = Place::of(cell, sample.position, sample.normal);
             for (level, sums) in sums.iter_mut().enumerate() {
-                let key = Self::key(cell, level, sample.position, sample.normal);
+                let key = place.key(level);
                 let entry = sums.entry(key).or_insert((DVec3::ZERO, DVec3::ZERO, 0));
                 entry.0 += direct.as_dvec3();
                 entry.1 += indirect.as_dvec3();
@@ -157,10 +141,11 @@ impl LastBounceGrid {
     /// The means of the finest cell `p` falls in on the side `normal` faces that was sampled
     /// enough, if any.
     pub fn lookup(&self, p: Vec3, normal: Vec3) -> Option<Received> {
+        let place = Place::of(self.cell, p, normal);
         self.levels
             .iter()
             .enumerate()
-            .find_map(|(level, means)| means.get(&Self::key(self.cell, level, p, normal)))
+            .find_map(|(level, means)| means.get(&place.key(level)))
             .copied()
     }
 
@@ -172,6 +157,47 @@ impl LastBounceGrid {
     /// Samples the grid was built from.
     pub fn samples(&self) -> u64 {
         self.samples
+    }
+}
+
+/// Where a point falls: its finest cell's integer coordinates and the side it faces. A coarser
+/// level's cell is the finest one's coordinates shifted right by the level, the same cell as
+/// dividing by the level's side (a power of two times the finest) would give, for one division
+/// and one rounding a lookup instead of one per level tried.
+///
+/// The lattice lies half a finest cell behind the surface: a wall at a multiple of the cell
+/// (x = 1 in cells of 1/32) then keeps at least half a cell from every level's cell boundaries,
+/// where float error would otherwise split its points between the cells on either side, leaving
+/// each with half the samples (measured as -2.2 % of indirect light in tests/cache_prepass.rs
+/// when hits took their points along the ray).
+#[derive(Clone, Copy)]
+struct Place {
+    cell: [i64; 3],
+    side: u64,
+}
+
+impl Place {
+    fn of(cell: f32, p: Vec3, normal: Vec3) -> Place {
+        let p = (p - normal * (0.5 * cell)) / cell;
+        let a = normal.abs();
+        let axis = if a.x >= a.y && a.x >= a.z {
+            0
+        } else if a.y >= a.z {
+            1
+        } else {
+            2
+        };
+        Place {
+            cell: [p.x, p.y, p.z].map(|v| v.floor() as i64),
+            side: (axis * 2) as u64 + (normal[axis] < 0.0) as u64,
+        }
+    }
+
+    /// The key of the cell at `level`: coordinates of 20 bits each, wrapping far out (cells a
+    /// million apart share a key), and the side.
+    fn key(&self, level: usize) -> CellKey {
+        let [x, y, z] = self.cell.map(|c| ((c >> level) as u64) & 0xF_FFFF);
+        CellKey(x | y << 20 | z << 40 | self.side << 60)
     }
 }
 
