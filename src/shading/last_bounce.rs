@@ -66,6 +66,8 @@ impl Integrator<'_> {
         let mut rng = Rng::new(0, SITE_STREAM + pixel);
         for _ in 0..SITES_PER_PIXEL {
             let (origin, dir) = camera.ray(x as f32 + rng.next_f32(), y as f32 + rng.next_f32());
+            // The site's own rays count as the render's: a camera ray, then a path's segments.
+            counts.primary += 1;
             let Some((mut hit, mut surface)) = self.first_surface(origin, dir, Coherence::Incoherent, 0.0) else {
                 continue;
             };
@@ -77,6 +79,7 @@ impl Integrator<'_> {
                     break;
                 }
                 let from = self.tracer.spawn_point(&hit, wi);
+                counts.ambient += 1;
                 match self.first_surface(from, wi, Coherence::Incoherent, 0.0) {
                     Some(next) => (hit, surface) = next,
                     None => {
