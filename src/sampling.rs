@@ -78,51 +78,9 @@ pub fn grid_side(n: u32) -> u32 {
     side.max(1)
 }
 
-/// Element `index` of a pseudo-random permutation of 0..n chosen by `seed`, computed alone
-/// (no table): a bijection on the enclosing power of two, walked until it lands below n.
-pub fn permute(index: u32, n: u32, seed: u32) -> u32 {
-    if n <= 1 {
-        return 0;
-    }
-    let mask = n.next_power_of_two() - 1;
-    let bits = mask.count_ones();
-    let mut x = index & mask;
-    loop {
-        // Each step is one-to-one on bits-wide words: xor and add of constants, multiplication
-        // by an odd number, and xor with the word's own high part shifted down.
-        x ^= seed & mask;
-        x = x.wrapping_mul(0x9e37_79b1) & mask;
-        x ^= x >> (bits / 2 + 1);
-        x = x.wrapping_add(seed >> 7) & mask;
-        x = x.wrapping_mul(0x85eb_ca6b | 1) & mask;
-        x ^= x >> (bits / 3 + 1);
-        if x < n {
-            return x;
-        }
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn permute_is_a_permutation_and_scatters() {
-        for n in [1u32, 2, 3, 7, 16, 17, 100, 1024, 1000] {
-            for seed in [0u32, 1, 0xdead_beef, 12345] {
-                let mut seen = vec![false; n as usize];
-                for i in 0..n {
-                    let p = permute(i, n, seed);
-                    assert!(p < n && !seen[p as usize], "n {n} seed {seed}: {p} twice");
-                    seen[p as usize] = true;
-                }
-            }
-        }
-        // Different seeds give different orders.
-        let a: Vec<u32> = (0..16).map(|i| permute(i, 16, 1)).collect();
-        let b: Vec<u32> = (0..16).map(|i| permute(i, 16, 2)).collect();
-        assert_ne!(a, b);
-    }
 
     #[test]
     fn uniforms_are_in_range_and_streams_differ() {

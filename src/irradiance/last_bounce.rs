@@ -84,11 +84,6 @@ pub struct GridSample {
 }
 
 impl LastBounceGrid {
-    /// The key at `level` (cells of side `cell` x 2^level) of point `p` facing along `normal`.
-    pub fn key(cell: f32, level: usize, p: Vec3, normal: Vec3) -> CellKey {
-        Place::of(cell, p, normal).key(level)
-    }
-
     /// The grid with finest cells of side `cell` from `samples`, summed in the order given;
     /// cells with fewer than `MIN_SAMPLES` are left out. Non-finite samples are dropped.
     pub fn from_samples(cell: f32, samples: impl IntoIterator<Item = GridSample>) -> LastBounceGrid {
@@ -294,7 +289,7 @@ mod tests {
 
     #[test]
     fn neighbouring_cells_and_opposite_sides_have_their_own_keys() {
-        let key = |p: Vec3, n: Vec3| LastBounceGrid::key(2.0, 0, p, n);
+        let key = |p: Vec3, n: Vec3| Place::of(2.0, p, n).key(0);
         let p = Vec3::new(1.0, 1.0, 1.0);
         // Both half a cell (1.0) behind along their normals: in the cell [0, 2)^3.
         assert_eq!(key(p, Vec3::Y), key(Vec3::new(1.9, 1.9, 1.5), Vec3::new(0.3, 0.9, 0.1)));
@@ -314,7 +309,7 @@ mod tests {
             f32::from_bits(1.0f32.to_bits() + 1),
         );
         for level in 0..LEVELS {
-            let key = |x: f32| LastBounceGrid::key(cell, level, Vec3::new(x, 0.3, 0.3), -Vec3::X);
+            let key = |x: f32| Place::of(cell, Vec3::new(x, 0.3, 0.3), -Vec3::X).key(level);
             assert_eq!(key(below), key(1.0), "level {level}");
             assert_eq!(key(above), key(1.0), "level {level}");
         }
