@@ -42,13 +42,9 @@ pub fn die_with_parent(launcher: Option<u32>) -> Result<(), String> {
 pub fn exit_finished(code: u8) -> ! {
     use std::io::Write;
     let _ = std::io::stdout().flush();
-    let _ = std::io::stderr().flush();
-    // SAFETY: fflush(NULL) flushes every C stdio stream and takes no other argument; _exit takes
-    // any status and never returns.
-    unsafe {
-        libc::fflush(std::ptr::null_mut());
-        libc::_exit(i32::from(code))
-    }
+    // SAFETY: fflush(NULL) flushes every C stdio stream and takes no other argument.
+    unsafe { libc::fflush(std::ptr::null_mut()) };
+    exit_now(i32::from(code))
 }
 
 /// Ends this process at once with `code`, running no exit handlers: a rank that has lost its
