@@ -144,6 +144,14 @@ impl CacheSettings {
     }
 }
 
+/// What the records near a point make of it: their weighted mean, their total weight and the
+/// smallest radius among them.
+struct Interpolation {
+    value: Vec3,
+    weight: f32,
+    smallest_radius: f32,
+}
+
 pub struct IrradianceCache {
     pub settings: CacheSettings,
     index: RecordIndex,
@@ -254,7 +262,14 @@ impl IrradianceCache {
     /// The cached value (irradiance over pi) at a point with its headroom (see
     /// `Record::headroom`), or None when no record may be used.
     pub fn lookup(&self, point: Vec3, normal: Vec3, headroom: f32, level: u32) -> Option<Vec3> {
-        self.interpolate(point, normal, headroom, level, None).map(|(v, _)| v)
+        self.interpolate(point, normal, headroom, level, None).map(|i| i.value)
+    }
+
+    /// `lookup`'s value with the smallest radius among the records that gave it: how far from
+    /// the point the interpolation may change much.
+    pub fn lookup_with_scale(&self, point: Vec3, normal: Vec3, headroom: f32, level: u32) -> Option<(Vec3, f32)> {
+        self.interpolate(point, normal, headroom, level, None)
+            .map(|i| (i.value, i.smallest_radius))
     }
 
     /// A lock-free copy of the records as they are now, for asking `covered_in` many times
@@ -267,7 +282,7 @@ impl IrradianceCache {
     /// at least `FIRM_COVERAGE`.
     pub fn covered_in(&self, snapshot: &FrozenIndex, point: Vec3, normal: Vec3, headroom: f32, level: u32) -> bool {
         self.interpolate(point, normal, headroom, level, Some(snapshot))
-            .is_some_and(|(_, weight)| weight >= FIRM_COVERAGE)
+            .is_some_and(|i| i.weight >= FIRM_COVERAGE)
     }
 
     /// The weighted mean of the records that may be used at the point, from `snapshot`, else
@@ -279,8 +294,8 @@ impl IrradianceCache {
         headroom: f32,
         level: u32,
         snapshot: Option<&FrozenIndex>,
-    ) -> Option<(Vec3, f32)> {
-        let (mut sum, mut total) = (Vec3::ZERO, 0.0f32);
+    ) -> Option<Interpolation> {
+        let (mut sum, mut total, mut smallest_radius) = (Vec3::ZERO, 0.0f32, f32::INFINITY);
         let (metric, accuracy) = (self.settings.metric, self.settings.accuracy);
         let weigh = |r: &Record| {
             let (reach, distance_squared) = (r.reach(), (r.position - point).length_squared());
@@ -296,6 +311,7 @@ impl IrradianceCache {
             if let Some((value, w)) = weigh(r) {
                 sum += value;
                 total += w;
+                smallest_radius = smallest_radius.min(r.radii[0].min(r.radii[1]));
             }
         };
         match snapshot.or(self.frozen.get()) {
@@ -303,8 +319,12 @@ impl IrradianceCache {
             None => self.index.for_each_near(point, &mut add),
         }
         (total > 0.0)
-            .then(|| (sum / total, total))
-            .filter(|(v, _)| v.is_finite())
+            .then(|| Interpolation {
+                value: sum / total,
+                weight: total,
+                smallest_radius,
+            })
+            .filter(|i| i.value.is_finite())
     }
 
     /// Shrinks the records `revisable` picks whose extrapolation misses a neighbouring

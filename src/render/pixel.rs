@@ -164,6 +164,7 @@ pub fn render_pixel(
         pixel_samples: samples,
         light_offset: pixel_rng.next_u32(),
         light_cell_offset: pixel_rng.next_u32(),
+        centre_ray: (samples > 1).then(|| camera.ray(x as f32 + 0.5, y as f32 + 0.5)),
     };
     let mut data = PixelDataSum::new(samples);
     let mut noise = PixelNoise::default();

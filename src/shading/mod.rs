@@ -9,6 +9,7 @@
 pub mod direct;
 pub mod glossy;
 pub mod last_bounce;
+pub mod pixel_irradiance;
 pub mod request;
 
 use crate::image::components::Components;
@@ -23,6 +24,7 @@ use crate::sys::embree::Coherence;
 use crate::tracer::{SurfaceHit, Tracer};
 use direct::LightStrata;
 use glam::Vec3;
+use pixel_irradiance::{PixelIrradiance, on_plane};
 use request::{AmbientRequest, RequestBuffer};
 use std::time::Instant;
 
@@ -111,6 +113,9 @@ pub struct SampleContext {
     pub pixel_samples: u32,
     pub light_offset: u32,
     pub light_cell_offset: u32,
+    /// The camera ray through the pixel's centre (origin, direction), where the pixel's
+    /// samples share the cache's irradiance (`PixelIrradiance`); None: each looks up its own.
+    pub centre_ray: Option<(Vec3, Vec3)>,
 }
 
 /// What a camera sample's own rays found for the data layers (`image::data`), noted as the
@@ -132,6 +137,9 @@ pub struct Work<'a> {
     /// The ratio estimates' parts of the direct light at the pixel's camera-ray hits, pooled
     /// over its samples (`direct::ShadowRatio`), scaled by the hits' opacity.
     pub pixel_shadow_ratio: direct::ShadowRatio,
+    /// The cache's irradiance at the pixel's centre on the surface its samples last looked up,
+    /// for its other samples there (`pixel_irradiance`).
+    pub pixel_irradiance: Option<PixelIrradiance>,
 }
 
 impl<'a> Work<'a> {
@@ -141,6 +149,7 @@ impl<'a> Work<'a> {
             sample: SampleContext::default(),
             data: SampleData::default(),
             pixel_shadow_ratio: direct::ShadowRatio::default(),
+            pixel_irradiance: None,
         }
     }
 }
@@ -660,14 +669,18 @@ impl<'a> Integrator<'a> {
         state: PathState,
         counts: &mut Work<'_>,
     ) -> Vec3 {
-        counts.lookups += 1;
-        let cached = self.cache.and_then(|c| {
-            let headroom = self.headroom(c, hit, counts);
-            c.lookup(hit.position, hit.normal, headroom, state.level)
-        });
-        if let Some(value) = cached {
-            counts.hits += 1;
-            return surface.diffuse * value;
+        if let Some(cache) = self.cache {
+            let headroom = self.headroom(cache, hit, counts);
+            if let Some(value) = self.pixel_shared(cache, hit, headroom, state, counts) {
+                return surface.diffuse * value;
+            }
+            counts.lookups += 1;
+            if let Some(value) = cache.lookup(hit.position, hit.normal, headroom, state.level) {
+                counts.hits += 1;
+                return surface.diffuse * value;
+            }
+        } else {
+            counts.lookups += 1;
         }
         let layer = if state.specular_depth == 0 {
             Layer::Indirect
@@ -782,8 +795,63 @@ impl<'a> Integrator<'a> {
         rng: &mut Rng,
         counts: &mut Work<'_>,
     ) -> Vec3 {
-        counts.lookups += 1;
         let headroom = self.headroom(cache, hit, counts);
+        if let Some(value) = self.pixel_shared(cache, hit, headroom, state, counts) {
+            return value;
+        }
+        self.cached_ambient_lookup(cache, hit, headroom, state, rng, counts)
+    }
+
+    /// The irradiance the pixel's samples share on this surface (`pixel_irradiance`), if this
+    /// is a camera ray's hit near enough to the pixel's centre on it; looked up there for the
+    /// pixel's first sample on the surface. None: the hit looks up its own.
+    fn pixel_shared(
+        &self,
+        cache: &IrradianceCache,
+        hit: &SurfaceHit,
+        headroom: f32,
+        state: PathState,
+        counts: &mut Work<'_>,
+    ) -> Option<Vec3> {
+        // The cache's trace shows each lookup's would-be record: no sharing under it.
+        if state.level > 0 || state.specular_depth > 0 || cache.tracing() {
+            return None;
+        }
+        let shared = match counts.pixel_irradiance {
+            Some(shared) if shared.covers(hit, headroom) => shared,
+            // The centre's value on this surface is known, and too far from this sample.
+            Some(shared) if shared.same_surface(hit, headroom) => return None,
+            _ => {
+                let centre = counts.sample.centre_ray.and_then(|ray| on_plane(ray, hit))?;
+                let (value, scale) = cache.lookup_with_scale(centre, hit.normal, headroom, state.level)?;
+                let shared = PixelIrradiance::new(centre, hit, headroom, value, scale);
+                counts.pixel_irradiance = Some(shared);
+                if !shared.covers(hit, headroom) {
+                    return None;
+                }
+                shared
+            }
+        };
+        // Counted as one lookup that hit when a sample first takes it: a lookup either hits
+        // or makes a record, and the centre's value taken by no sample is neither.
+        if !shared.taken() {
+            counts.lookups += 1;
+            counts.hits += 1;
+            counts.pixel_irradiance = Some(shared.mark_taken());
+        }
+        Some(shared.value())
+    }
+
+    fn cached_ambient_lookup(
+        &self,
+        cache: &IrradianceCache,
+        hit: &SurfaceHit,
+        headroom: f32,
+        state: PathState,
+        rng: &mut Rng,
+        counts: &mut Work<'_>,
+    ) -> Vec3 {
+        counts.lookups += 1;
         if let Some(value) = cache.lookup(hit.position, hit.normal, headroom, state.level) {
             counts.hits += 1;
             if cache.tracing() {
