@@ -546,4 +546,25 @@ mod tests {
         assert!((view_only.min_radius_at(Vec3::new(0.0, 0.0, -50.0)) - 2.0).abs() < 1e-5);
         assert_eq!(view_only.min_radius_at(Vec3::new(0.0, 0.0, 1.0)), 0.0, "behind the eye");
     }
+
+    /// A lookup's scale is the smallest radius among the records that gave its value, and its
+    /// value is `lookup`'s.
+    #[test]
+    fn a_lookups_scale_is_its_smallest_records_radius() {
+        use record::tests::flat_record;
+        let cache = IrradianceCache::new(CacheSettings::new(0.2, 64, 16, 64, Metric::Hessian, 100.0));
+        cache.insert(flat_record(1.0, 2.0));
+        cache.insert(Record {
+            position: Vec3::new(0.2, 0.0, 0.0),
+            ..flat_record(3.0, 0.5)
+        });
+        let at = |x: f32| cache.lookup_with_scale(Vec3::new(x, 0.0, 0.0), Vec3::Z, 100.0, 0);
+        let (value, scale) = at(0.1).unwrap();
+        assert_eq!(scale, 0.5);
+        assert!(value.x > 1.0 && value.x < 3.0, "both records weigh in: {value}");
+        assert_eq!(Some(value), cache.lookup(Vec3::new(0.1, 0.0, 0.0), Vec3::Z, 100.0, 0));
+        // Beyond the small record's reach only the large one answers.
+        let (value, scale) = at(1.5).unwrap();
+        assert_eq!((value.x, scale), (1.0, 2.0));
+    }
 }
