@@ -842,6 +842,8 @@ impl<'a> Integrator<'a> {
         Some(shared.value())
     }
 
+    /// L_a at the hit from the records about it (with the hit's `headroom`), or from a record
+    /// made there when none may be used.
     fn cached_ambient_lookup(
         &self,
         cache: &IrradianceCache,
