@@ -671,12 +671,7 @@ impl<'a> Integrator<'a> {
     ) -> Vec3 {
         if let Some(cache) = self.cache {
             let headroom = self.headroom(cache, hit, counts);
-            if let Some(value) = self.pixel_shared(cache, hit, headroom, state, counts) {
-                return surface.diffuse * value;
-            }
-            counts.lookups += 1;
-            if let Some(value) = cache.lookup(hit.position, hit.normal, headroom, state.level) {
-                counts.hits += 1;
+            if let Some(value) = self.cached_value(cache, hit, headroom, state, counts) {
                 return surface.diffuse * value;
             }
         } else {
@@ -796,10 +791,54 @@ impl<'a> Integrator<'a> {
         counts: &mut Work<'_>,
     ) -> Vec3 {
         let headroom = self.headroom(cache, hit, counts);
-        if let Some(value) = self.pixel_shared(cache, hit, headroom, state, counts) {
+        if let Some(value) = self.cached_value(cache, hit, headroom, state, counts) {
+            if cache.tracing() {
+                // The record a miss here would make (for the trace only: its own random stream
+                // and counters, so the render and its statistics stay as without the trace).
+                let mut rng = Rng::new(!u64::from(counts.sample.pixel), counts.lookups);
+                let shadow =
+                    self.compute_record(cache, hit, state, &mut rng, &mut Work::new(&mut RayCounts::default()));
+                cache.trace(counts.sample.pixel, state.level, true, &shadow);
+            }
             return value;
         }
-        self.cached_ambient_lookup(cache, hit, headroom, state, rng, counts)
+        let record = self.compute_record(cache, hit, state, rng, counts);
+        cache.trace(counts.sample.pixel, state.level, false, &record);
+        counts.records_computed += 1;
+        if state.level == 0 {
+            counts.records_level0 += 1;
+        }
+        if self.frozen {
+            counts.gap_records += 1;
+            return record.value;
+        }
+        // Another thread may have covered this point while we sampled: the work was done twice.
+        if cache.lookup(hit.position, hit.normal, headroom, state.level).is_some() {
+            counts.duplicates += 1;
+        }
+        let value = record.value;
+        cache.insert(record);
+        value
+    }
+
+    /// The cache's value at a hit with its `headroom`: the one the pixel's samples share
+    /// (`pixel_shared`), else the records' about the hit; None when no record may be used.
+    /// Counted as a lookup either way, and as a hit when answered.
+    fn cached_value(
+        &self,
+        cache: &IrradianceCache,
+        hit: &SurfaceHit,
+        headroom: f32,
+        state: PathState,
+        counts: &mut Work<'_>,
+    ) -> Option<Vec3> {
+        if let Some(value) = self.pixel_shared(cache, hit, headroom, state, counts) {
+            return Some(value);
+        }
+        counts.lookups += 1;
+        let value = cache.lookup(hit.position, hit.normal, headroom, state.level)?;
+        counts.hits += 1;
+        Some(value)
     }
 
     /// The irradiance the pixel's samples share on this surface (`pixel_irradiance`), if this
@@ -840,49 +879,6 @@ impl<'a> Integrator<'a> {
             counts.pixel_irradiance = Some(shared.mark_taken());
         }
         Some(shared.value())
-    }
-
-    /// L_a at the hit from the records about it (with the hit's `headroom`), or from a record
-    /// made there when none may be used.
-    fn cached_ambient_lookup(
-        &self,
-        cache: &IrradianceCache,
-        hit: &SurfaceHit,
-        headroom: f32,
-        state: PathState,
-        rng: &mut Rng,
-        counts: &mut Work<'_>,
-    ) -> Vec3 {
-        counts.lookups += 1;
-        if let Some(value) = cache.lookup(hit.position, hit.normal, headroom, state.level) {
-            counts.hits += 1;
-            if cache.tracing() {
-                // The record a miss here would make (for the trace only: its own random stream
-                // and counters, so the render and its statistics stay as without the trace).
-                let mut rng = Rng::new(!u64::from(counts.sample.pixel), counts.lookups);
-                let shadow =
-                    self.compute_record(cache, hit, state, &mut rng, &mut Work::new(&mut RayCounts::default()));
-                cache.trace(counts.sample.pixel, state.level, true, &shadow);
-            }
-            return value;
-        }
-        let record = self.compute_record(cache, hit, state, rng, counts);
-        cache.trace(counts.sample.pixel, state.level, false, &record);
-        counts.records_computed += 1;
-        if state.level == 0 {
-            counts.records_level0 += 1;
-        }
-        if self.frozen {
-            counts.gap_records += 1;
-            return record.value;
-        }
-        // Another thread may have covered this point while we sampled: the work was done twice.
-        if cache.lookup(hit.position, hit.normal, headroom, state.level).is_some() {
-            counts.duplicates += 1;
-        }
-        let value = record.value;
-        cache.insert(record);
-        value
     }
 
     /// Samples the hemisphere over an n x n cosine-weighted grid (n from -ad and the level's
