@@ -315,8 +315,8 @@ pub struct RenderArgs {
     #[arg(long = "denoise-quality", value_enum, default_value_t = DenoiseQualityArg::Fast, requires = "denoise")]
     pub denoise_quality: DenoiseQualityArg,
     /// Prefilter the albedo and normal guides before they guide the filter (OIDN's way for
-    /// noisy guides; icrender's come from the camera samples' first hits and are noise-free, and
-    /// prefiltering them was worse, see README "Denoising").
+    /// noisy guides; icrender's come from the camera samples' first hits, free of Monte Carlo
+    /// noise, and prefiltering them was worse, see README "Denoising").
     #[arg(long = "denoise-prefilter", requires = "denoise")]
     pub denoise_prefilter: bool,
     /// No progress bar and no summary.

@@ -397,3 +397,85 @@ fn denoise_under_mpirun_writes_the_denoised_layers_on_the_master() {
         );
     }
 }
+
+/// A floor, a square blocker above it casting a hard shadow, lit by a point light or (with
+/// `area`) by an emitting square of about the same power in the same place.
+fn shadowed_floor(dir: &Path, area: bool) -> std::path::PathBuf {
+    let mut b = GltfBuilder::new();
+    let paint = b.material(lambertian("paint", [0.6, 0.6, 0.6]));
+    b.quad(
+        [[-4.0, 0.0, -4.0], [-4.0, 0.0, 4.0], [4.0, 0.0, 4.0], [4.0, 0.0, -4.0]],
+        Some(paint),
+    );
+    b.quad(
+        [[-1.0, 1.0, -1.0], [-1.0, 1.0, 1.0], [1.0, 1.0, 1.0], [1.0, 1.0, -1.0]],
+        Some(paint),
+    );
+    if area {
+        let lamp = b.material(emissive_lambertian("lamp", [0.0; 3], 40.0));
+        b.quad(
+            [
+                [-0.25, 3.0, -0.25],
+                [0.25, 3.0, -0.25],
+                [0.25, 3.0, 0.25],
+                [-0.25, 3.0, 0.25],
+            ],
+            Some(lamp),
+        );
+    } else {
+        b.point_light([0.3, 3.0, 0.2], 40.0);
+    }
+    b.write(dir, if area { "area" } else { "point" })
+}
+
+#[test]
+fn punctual_light_traced_exactly_leaves_nothing_to_denoise() {
+    // Four samples a pixel across the blocker's and its shadow's hard edges: their spread is
+    // the pixels' content, not noise (each point light has its own shadow ray), so no filter
+    // runs and `direct.denoised` is the raw layer; lit by an area light (sampled shadow rays,
+    // a penumbra) the same view's direct light is filtered.
+    let dir = tempfile::tempdir().unwrap();
+    for area in [false, true] {
+        let scene = shadowed_floor(dir.path(), area);
+        let image = dir.path().join(format!("area-{area}.exr"));
+        run_ok(&[
+            "render",
+            scene.to_str().unwrap(),
+            "-o",
+            image.to_str().unwrap(),
+            "-x",
+            "48",
+            "-y",
+            "48",
+            "-ab",
+            "0",
+            "--spp",
+            "4",
+            "--vp",
+            "0",
+            "5",
+            "4",
+            "--vd",
+            "0",
+            "-5",
+            "-4",
+            "--denoise",
+            "-q",
+            "--no-preview",
+        ]);
+        let read = read_image(&image, &["icrender/denoise"]).unwrap();
+        let said = read.attribute("icrender/denoise").unwrap().to_string();
+        let (raw, denoised) = (rgb(&read, "direct"), rgb(&read, "direct.denoised"));
+        if area {
+            assert!(said.contains("layers direct each denoised"), "{said}");
+            assert_ne!(raw, denoised, "the area light's direct layer is filtered");
+        } else {
+            assert!(
+                said.contains("layers (none) each denoised")
+                    && said.contains("direct left as rendered in direct.denoised (no Monte Carlo noise measured)"),
+                "{said}"
+            );
+            assert_eq!(raw, denoised);
+        }
+    }
+}

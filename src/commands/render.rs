@@ -478,7 +478,7 @@ fn guides_text(d: &denoise::DenoisedFrame) -> &'static str {
     if d.prefiltered {
         "guided by the albedo and normal layers, prefiltered"
     } else if d.guided {
-        "guided by the albedo and normal layers as rendered (noise-free)"
+        "guided by the albedo and normal layers as rendered (given as guides that may be noisy: at a few samples a pixel their edges are as coarse as the light's)"
     } else {
         "no guides"
     }
@@ -493,17 +493,28 @@ pub(crate) fn check_denoiser(args: &RenderArgs) -> Result<(), CommandError> {
 }
 
 /// "; specular left as rendered in specular.denoised (0.13 % of the measured noise, under 1 %)" for the
-/// layers whose noise was too little to filter (`denoise::NEGLIGIBLE_NOISE_SHARE`).
+/// layers the denoiser wrote as rendered, with why (`denoise::LeftRaw`).
 fn left_raw_text(d: &denoise::DenoisedFrame) -> String {
     d.left_raw
         .iter()
-        .map(|(layer, share)| {
+        .map(|(layer, why)| {
+            let why = match why {
+                denoise::LeftRaw::NoNoise => "no Monte Carlo noise measured".to_string(),
+                denoise::LeftRaw::Invisible(noise) => format!(
+                    "noise {:.2} % of the light, under {:.1} %",
+                    100.0 * noise.sqrt(),
+                    100.0 * denoise::NEGLIGIBLE_RELATIVE_NOISE.sqrt()
+                ),
+                denoise::LeftRaw::SmallShare(share) => format!(
+                    "{:.2} % of the measured noise, under {} %",
+                    100.0 * share,
+                    100.0 * denoise::NEGLIGIBLE_NOISE_SHARE
+                ),
+            };
             format!(
-                "; {} left as rendered in {} ({:.2} % of the measured noise, under {} %)",
+                "; {} left as rendered in {} ({why})",
                 layer.name(),
                 denoise::denoised_name(*layer),
-                100.0 * share,
-                100.0 * denoise::NEGLIGIBLE_NOISE_SHARE
             )
         })
         .collect()

@@ -20,8 +20,9 @@
 //! has 0.074 (the raw composite 0.077), for about the same relMSE (1.07e-2 and 1.14e-2; raw
 //! 2.5e-2).
 //!
-//! Guides are prefiltered once per image, as OIDN recommends for guides that may carry noise
-//! (each by an RT filter of its own), and every colour plane is then filtered with `cleanAux`.
+//! Guides are given to the filter as rendered, as guides that may carry noise (`cleanAux`
+//! off: `Denoiser::guides` says why), or with `--denoise-prefilter` prefiltered once per image
+//! (each by an RT filter of its own) and then given as clean.
 
 use super::data::LayerNoise;
 use super::framebuffer::{FrameBuffer, Layer};
@@ -87,10 +88,12 @@ fn vectors(floats: &[f32]) -> Vec<Vec3> {
     floats.chunks_exact(3).map(Vec3::from_slice).collect()
 }
 
-/// Guides after prefiltering, ready for every colour plane of the image.
-pub struct CleanGuides {
+/// Guides ready for every colour plane of the image.
+pub struct FilterGuides {
     albedo: Vec<f32>,
     normal: Vec<f32>,
+    /// Prefiltered, and so given to the filter as clean (`cleanAux`).
+    clean: bool,
 }
 
 /// A committed OIDN device and the quality its filters run at.
@@ -115,7 +118,7 @@ impl Denoiser {
     }
 
     /// Each guide denoised by a filter of its own (OIDN's prefiltering).
-    pub fn prefilter(&self, guides: Guides<'_>, width: u32, height: u32) -> Result<CleanGuides, String> {
+    pub fn prefilter(&self, guides: Guides<'_>, width: u32, height: u32) -> Result<FilterGuides, String> {
         let (albedo, normal) = (floats(guides.albedo), floats(guides.normal));
         let one = |albedo: Option<&[f32]>, normal: Option<&[f32]>| {
             self.device.run(&RtFilter {
@@ -129,9 +132,10 @@ impl Denoiser {
                 quality: self.quality,
             })
         };
-        Ok(CleanGuides {
+        Ok(FilterGuides {
             albedo: one(Some(&albedo), None)?,
             normal: one(None, Some(&normal))?,
+            clean: true,
         })
     }
 
@@ -143,13 +147,26 @@ impl Denoiser {
     /// / as rendered: Sibenik 2.96e-2 / 1.98e-2 (raw 2.03e-2: the prefilter blurred thin dark
     /// tracery into its bright surround, and the filter lit it), the conference room 1.96e-2 /
     /// 2.02e-2, the Cornell box (256x256) 7.4e-4 / 8.8e-4, for twice the denoiser's time.
-    pub fn guides(&self, guides: Guides<'_>, width: u32, height: u32, prefilter: bool) -> Result<CleanGuides, String> {
+    ///
+    /// As rendered they are still not the converged image's albedo and normal: at a few
+    /// samples a pixel an edge crossing it is resolved as coarsely in the guides as in the
+    /// light, and a filter told the guides are clean keeps what they show, that coarseness
+    /// included. So they go in as guides that may be noisy (`cleanAux` off), and the filter
+    /// smooths it with the noise. Measured (the peers bench's settings, two seeds each, relMSE /
+    /// 4x4 relMSE of the denoised composite, given as clean -> as may be noisy): the conference
+    /// room 8.50e-3 / 2.48e-3 -> 7.93e-3 / 2.40e-3 at 4 samples a pixel, 7.54e-3 / 1.78e-3 ->
+    /// 6.97e-3 / 1.69e-3 at 4, 5.04e-3 / 1.05e-3 -> 4.91e-3 / 1.04e-3 at 8; the Cornell box
+    /// 7.23e-4 -> 7.14e-4 at 2, 1.94e-4 -> 1.92e-4 at 8, 1.23e-4 -> 1.22e-4 at 16 (4x4 equal
+    /// or lower); Sibenik's nave 1.456e-2 -> 1.426e-2 and 1.301e-2 -> 1.270e-2 at 4, 7.14e-3
+    /// -> 7.08e-3 at 8.
+    pub fn guides(&self, guides: Guides<'_>, width: u32, height: u32, prefilter: bool) -> Result<FilterGuides, String> {
         if prefilter {
             return self.prefilter(guides, width, height);
         }
-        Ok(CleanGuides {
+        Ok(FilterGuides {
             albedo: floats(guides.albedo),
             normal: floats(guides.normal),
+            clean: false,
         })
     }
 
@@ -157,7 +174,7 @@ impl Denoiser {
     pub fn denoise(
         &self,
         color: &[Vec3],
-        guides: Option<&CleanGuides>,
+        guides: Option<&FilterGuides>,
         width: u32,
         height: u32,
     ) -> Result<Vec<Vec3>, String> {
@@ -169,7 +186,7 @@ impl Denoiser {
             albedo: guides.map(|g| g.albedo.as_slice()),
             normal: guides.map(|g| g.normal.as_slice()),
             hdr: true,
-            clean_aux: guides.is_some(),
+            clean_aux: guides.is_some_and(|g| g.clean),
             quality: self.quality,
         })?;
         Ok(vectors(&output))
@@ -180,9 +197,9 @@ impl Denoiser {
 pub struct DenoisedFrame {
     /// The noisy layers among those written, each denoised (or as rendered, if in `left_raw`).
     pub layers: Vec<(Layer, Vec<Vec3>)>,
-    /// Those of `layers` whose measured noise was a negligible share of the image's
-    /// (`NEGLIGIBLE_NOISE_SHARE`), with the share: written as rendered, not filtered.
-    pub left_raw: Vec<(Layer, f64)>,
+    /// Those of `layers` whose measured noise was none, too little to see or a negligible share
+    /// of the image's (`left_raw_because`), and why: written as rendered, not filtered.
+    pub left_raw: Vec<(Layer, LeftRaw)>,
     /// The raw emission plus the denoised layers.
     pub composite: Vec<Vec3>,
     /// Whether albedo and normal guides were used.
@@ -324,42 +341,83 @@ fn box_mean(values: &[f32], width: usize, height: usize, radius: usize) -> Vec<f
 /// Below this share of the image's measured noise a layer is left raw (`noise_shares`).
 pub const NEGLIGIBLE_NOISE_SHARE: f64 = 0.01;
 
-/// Each of `layers`' share of the noise the pixels' samples measured in the image, relative to
-/// the composite's light (the way relMSE weighs error): the sum over pixels of the layer's
-/// variance over the squared luminance of the raw composite, over the same sum for all
-/// `layers`. With the noise weighed in (`blend_by_noise`), filtering a layer can lower the
-/// composite's error by at most its variance, so a layer with a negligible share costs the
-/// filter's whole time for nothing measurable: Sibenik's nave at the peers bench's fastest
-/// setting (320x240, 4 samples a pixel) measured the specular layer at 0.13 % of the noise, and
-/// its filter took 62 ms (half the denoiser's time, 4.5 % of the render's) for a composite no
-/// better (relMSE 1.458e-2 with the layer denoised, 1.455e-2 with it raw). The squared
+/// Below this relative variance (`relative_noise`) a layer is left raw: a standard deviation
+/// of 0.3 % of the pixels' light, under one step of an 8-bit display at mid grey, which the
+/// filter could not make visibly better for its 0.7 microseconds a pixel (OIDN 2.5.1, fast, 2
+/// cores). Measured on the peers bench's scenes (their fastest and slowest settings): the
+/// Cornell box's direct light 9.2e-3 and 1.4e-4, the conference room's 1.3e-2 at its slowest;
+/// Sibenik's specular layer (with `--lambertian`, what its few transparent surfaces pass)
+/// 6.3e-6 and 1.4e-6, where filtering it gave a composite no better (relMSE 1.458e-2 with it
+/// denoised, 1.455e-2 raw).
+pub const NEGLIGIBLE_RELATIVE_NOISE: f64 = 1e-5;
+
+/// Why a noisy layer was written as rendered, not filtered.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum LeftRaw {
+    /// Its pixels' samples measured no Monte Carlo noise at all (a scene lit by punctual
+    /// lights alone, each traced exactly: `render::noise`).
+    NoNoise,
+    /// Its relative variance, under `NEGLIGIBLE_RELATIVE_NOISE`.
+    Invisible(f64),
+    /// Its share of the image's measured noise, under `NEGLIGIBLE_NOISE_SHARE`.
+    SmallShare(f64),
+}
+
+/// Each of `layers`' noise as the pixels' samples measured it, relative to the composite's
+/// light (the way relMSE weighs error): the mean over pixels of the layer's variance over the
+/// squared luminance of the raw composite. With the noise weighed in (`blend_by_noise`),
+/// filtering a layer can lower the composite's error by at most this much. The squared
 /// luminance is floored at a hundredth of the squared mean, so that black pixels do not weigh
-/// without bound. All zero (nothing measured, or no noise anywhere) gives every share 0.
-fn noise_shares(frame: &FrameBuffer, layers: &[Layer]) -> Vec<f64> {
+/// without bound.
+fn relative_noise(frame: &FrameBuffer, layers: &[Layer]) -> Vec<f64> {
     let composite: Vec<f64> = (0..frame.data().len())
         .map(|i| {
             let light: Vec3 = Layer::ALL.iter().map(|l| frame.layer(*l)[i]).sum();
             luminance(light) as f64
         })
         .collect();
-    let mean = composite.iter().sum::<f64>() / composite.len().max(1) as f64;
+    let pixels = composite.len().max(1) as f64;
+    let mean = composite.iter().sum::<f64>() / pixels;
     let floor = (0.1 * mean).powi(2).max(f64::MIN_POSITIVE);
-    let relative: Vec<f64> = layers
+    layers
         .iter()
         .map(|&layer| {
-            frame
+            let sum: f64 = frame
                 .data()
                 .iter()
                 .zip(&composite)
                 .map(|(d, c)| noise_of(&d.noise, layer) as f64 / (c * c).max(floor))
-                .sum()
+                .sum();
+            sum / pixels
         })
-        .collect();
-    let total: f64 = relative.iter().sum();
-    relative
+        .collect()
+}
+
+/// Each layer's share of `noise` (`relative_noise`), all zero where none was measured.
+/// A layer with a negligible share costs the filter's whole time for nothing measurable:
+/// Sibenik's nave at the peers bench's fastest setting (320x240, 4 samples a pixel) measured
+/// the specular layer at 0.13 % of the noise, and its filter took 62 ms (half the denoiser's
+/// time, 4.5 % of the render's) for a composite no better.
+fn noise_shares(noise: &[f64]) -> Vec<f64> {
+    let total: f64 = noise.iter().sum();
+    noise
         .iter()
         .map(|r| if total > 0.0 { r / total } else { 0.0 })
         .collect()
+}
+
+/// Whether a layer with relative variance `noise` and `share` of the image's noise is left
+/// raw, and why; None: it is filtered.
+fn left_raw_because(noise: f64, share: f64) -> Option<LeftRaw> {
+    if noise <= 0.0 {
+        Some(LeftRaw::NoNoise)
+    } else if noise < NEGLIGIBLE_RELATIVE_NOISE {
+        Some(LeftRaw::Invisible(noise))
+    } else if share < NEGLIGIBLE_NOISE_SHARE {
+        Some(LeftRaw::SmallShare(share))
+    } else {
+        None
+    }
 }
 
 /// Denoises the noisy ones of `written` (the layers the EXR will hold; `indirect` only with
@@ -382,20 +440,22 @@ pub fn denoise_frame(
     // A frame with data layers carries its pixels' noise; one sample a pixel measured none.
     let weigh = samples_per_pixel >= 2 && frame.data().len() == (w * h) as usize;
     let candidates = layers_to_denoise(written, per_pixel_indirect);
-    let shares = if weigh {
-        noise_shares(frame, &candidates)
+    let verdicts: Vec<Option<LeftRaw>> = if weigh {
+        let noise = relative_noise(frame, &candidates);
+        let shares = noise_shares(&noise);
+        noise.iter().zip(shares).map(|(n, s)| left_raw_because(*n, s)).collect()
     } else {
-        vec![1.0; candidates.len()]
+        vec![None; candidates.len()]
     };
     let planes = guide_planes(frame);
     let guides = planes.as_ref().map(|(albedo, normal)| Guides { albedo, normal });
     let mut clean = None;
     let mut layers = Vec::new();
     let mut left_raw = Vec::new();
-    for (layer, share) in candidates.into_iter().zip(shares) {
-        if share < NEGLIGIBLE_NOISE_SHARE {
+    for (layer, verdict) in candidates.into_iter().zip(verdicts) {
+        if let Some(why) = verdict {
             layers.push((layer, frame.layer(layer).to_vec()));
-            left_raw.push((layer, share));
+            left_raw.push((layer, why));
             continue;
         }
         if clean.is_none() {
@@ -595,7 +655,10 @@ mod tests {
         let denoiser = Denoiser::new(Quality::Fast, Some(2)).unwrap();
         let as_rendered = denoiser.guides(guides, W, H, false).unwrap();
         assert_eq!(as_rendered.albedo, floats(&albedo));
+        // As rendered they go to the filter as guides that may be noisy, prefiltered as clean.
+        assert!(!as_rendered.clean);
         let prefiltered = denoiser.guides(guides, W, H, true).unwrap();
+        assert!(prefiltered.clean);
         let flat = vec![Vec3::splat(0.5); (W * H) as usize];
         assert!(rmse(&vectors(&prefiltered.albedo), &flat) < rmse(&albedo, &flat) / 2.0);
     }
@@ -724,13 +787,50 @@ mod tests {
     #[test]
     fn noise_shares_are_each_layers_part_of_the_relative_variance() {
         let frame = frame_with_noise(&clean(), 0.03, 0.01);
-        let shares = noise_shares(&frame, &[Layer::Direct, Layer::Specular]);
+        let noise = relative_noise(&frame, &[Layer::Direct, Layer::Specular]);
+        let shares = noise_shares(&noise);
         assert!(
             (shares[0] - 0.75).abs() < 1e-9 && (shares[1] - 0.25).abs() < 1e-9,
             "{shares:?}"
         );
         let quiet = frame_with_noise(&clean(), 0.0, 0.0);
-        assert_eq!(noise_shares(&quiet, &[Layer::Direct, Layer::Specular]), [0.0, 0.0]);
+        let noise = relative_noise(&quiet, &[Layer::Direct, Layer::Specular]);
+        assert_eq!(noise, [0.0, 0.0]);
+        assert_eq!(noise_shares(&noise), [0.0, 0.0]);
+    }
+
+    #[test]
+    fn relative_noise_is_the_mean_variance_over_the_squared_light() {
+        // The direct layer is the whole composite (the specular light a tenth of it on top):
+        // a variance of 0.03 times the clean light squared is 0.03 / 1.1^2 of the composite's.
+        let frame = frame_with_noise(&clean(), 0.03, 0.0);
+        let noise = relative_noise(&frame, &[Layer::Direct]);
+        assert!((noise[0] - 0.03 / 1.21).abs() < 1e-4, "{noise:?}");
+    }
+
+    #[test]
+    fn a_layer_is_left_raw_without_noise_below_sight_or_with_a_negligible_share() {
+        assert_eq!(left_raw_because(0.0, 0.0), Some(LeftRaw::NoNoise));
+        assert_eq!(left_raw_because(2e-6, 1.0), Some(LeftRaw::Invisible(2e-6)));
+        assert_eq!(left_raw_because(1e-3, 0.005), Some(LeftRaw::SmallShare(0.005)));
+        assert_eq!(left_raw_because(1e-3, 0.5), None);
+    }
+
+    #[test]
+    fn a_frame_without_measured_noise_runs_no_filter() {
+        // Four samples a pixel that measured no noise (punctual lights traced exactly): the
+        // layers are written as rendered and the composite is the raw one.
+        let frame = frame_with_noise(&clean(), 0.0, 0.0);
+        let written = [Layer::Direct, Layer::Specular];
+        let denoised = denoise_frame(&frame, &written, false, 4, Quality::Fast, Some(2), false).unwrap();
+        assert!(denoised.filtered().is_empty());
+        assert_eq!(
+            denoised.left_raw,
+            [(Layer::Direct, LeftRaw::NoNoise), (Layer::Specular, LeftRaw::NoNoise)]
+        );
+        for (layer, plane) in &denoised.layers {
+            assert_eq!(plane.as_slice(), frame.layer(*layer));
+        }
     }
 
     #[test]
@@ -748,8 +848,11 @@ mod tests {
         );
         assert_eq!(denoised.filtered(), [Layer::Direct]);
         assert_eq!(denoised.left_raw.len(), 1);
-        let (layer, share) = denoised.left_raw[0];
-        assert!(layer == Layer::Specular && share < NEGLIGIBLE_NOISE_SHARE, "{share}");
+        let (layer, why) = denoised.left_raw[0];
+        assert!(
+            layer == Layer::Specular && matches!(why, LeftRaw::SmallShare(s) if s < NEGLIGIBLE_NOISE_SHARE),
+            "{why:?}"
+        );
         assert_eq!(denoised.layers[1].1, frame.layer(Layer::Specular));
         assert!(rmse(&denoised.layers[0].1, &clean()) < rmse(&direct, &clean()) / 2.0);
         // With the specular light as noisy as the direct, both are filtered.

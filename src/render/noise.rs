@@ -11,6 +11,15 @@
 //! of the mean is the estimate's. Where the light is wholly visible (p = u) or wholly hidden
 //! (p = 0) the shadow rays add none, as the ratio estimate has none there.
 //!
+//! Left out likewise: the light of punctual lights, each traced on the eye path
+//! (`shading::direct::DirectLight::exact`). It is exact at each sample's point, and what spread
+//! it shows over the pixel is the pixel's content (a hard shadow's edge, a texture) sampled
+//! over its area, stratified, as the term of `e` below. Counted, a scene lit only by punctual
+//! lights measured its pixels' spread as noise, and its filter ran for almost nothing: on
+//! Sibenik's nave (the peers bench's two fastest settings, two seeds) the denoised composite's
+//! relMSE was 1.426e-2 and 1.270e-2 against the raw 1.466e-2 and 1.312e-2 (2.7 and 3.2 %), for
+//! 7 % of the render's time, where the raw curve gains 10 % of its error for 8 % more time.
+//!
 //! The term of `e` itself (`R (e - mean(e))`: how the unshadowed light changes over the pixel's
 //! area) is left out: the samples are stratified over the pixel, so the mean's error from it is
 //! far below what their spread says, and counted it made an object's antialiased edge look
@@ -23,6 +32,7 @@ use crate::image::components::Components;
 use crate::image::data::LayerNoise;
 use crate::scene::light::luminance;
 use crate::shading::direct::ShadowRatio;
+use glam::Vec3;
 
 /// The quantities of one sample the direct layer's variance is made of: d, e, p, u.
 const DIRECT_TERMS: usize = 4;
@@ -81,13 +91,18 @@ pub struct PixelNoise {
 }
 
 impl PixelNoise {
-    /// One sample: its components (the direct light without its pooled shadow-ray share) and
-    /// the ratio estimate's parts it added to the pixel's pool.
-    pub fn add(&mut self, sample: &Components, pooled: ShadowRatio) {
+    /// One sample: its components (the direct light without its pooled shadow-ray share), the
+    /// ratio estimate's parts it added to the pixel's pool, and the part of its direct light
+    /// that is exact at its point (`exact`: punctual lights each traced), left out.
+    pub fn add(&mut self, sample: &Components, pooled: ShadowRatio, exact: Vec3) {
         self.samples += 1;
         let l = |v| luminance(v) as f64;
-        self.direct
-            .add([l(sample.direct), l(pooled.exact), l(pooled.passed), l(pooled.unblocked)]);
+        self.direct.add([
+            l(sample.direct - exact),
+            l(pooled.exact),
+            l(pooled.passed),
+            l(pooled.unblocked),
+        ]);
         self.specular.add([l(sample.specular)]);
         self.indirect.add([l(sample.indirect)]);
     }
@@ -115,7 +130,6 @@ impl PixelNoise {
 mod tests {
     use super::*;
     use crate::sampling::Rng;
-    use glam::Vec3;
 
     fn sample(direct: f32) -> Components {
         Components {
@@ -136,12 +150,12 @@ mod tests {
     fn a_plain_mean_has_the_sample_variance_over_its_count() {
         let mut noise = PixelNoise::default();
         for v in [1.0, 2.0, 3.0, 6.0] {
-            noise.add(&sample(v), ShadowRatio::default());
+            noise.add(&sample(v), ShadowRatio::default(), Vec3::ZERO);
         }
         // Sample variance 14 / 3, over 4 samples.
         assert!((noise.finish().direct - 14.0 / 12.0).abs() < 1e-6);
         let mut one = PixelNoise::default();
-        one.add(&sample(5.0), ShadowRatio::default());
+        one.add(&sample(5.0), ShadowRatio::default(), Vec3::ZERO);
         assert_eq!(one.finish().direct, 0.0, "one sample tells nothing");
     }
 
@@ -152,7 +166,7 @@ mod tests {
         for through in [1.0, 0.0] {
             let mut noise = PixelNoise::default();
             for u in [0.2, 1.7, 0.9, 3.1] {
-                noise.add(&sample(0.0), parts(2.0, u * through, u));
+                noise.add(&sample(0.0), parts(2.0, u * through, u), Vec3::ZERO);
             }
             assert!(noise.finish().direct.abs() < 1e-9, "share {through}");
         }
@@ -173,7 +187,7 @@ mod tests {
                 let u = 0.5 + rng.next_f32();
                 let p = if rng.next_f32() < 0.5 { u } else { 0.0 };
                 let part = parts(1.0, p, u);
-                noise.add(&sample(0.0), part);
+                noise.add(&sample(0.0), part, Vec3::ZERO);
                 pool += part;
             }
             estimates.push(luminance(pool.estimate()) as f64 / samples as f64);
@@ -185,6 +199,26 @@ mod tests {
         assert!(
             (estimated / spread - 1.0).abs() < 0.15,
             "estimated {estimated:.3e} against the estimates' spread {spread:.3e}"
+        );
+    }
+
+    #[test]
+    fn punctual_lights_traced_exactly_add_no_noise() {
+        // Half the samples fall in a point light's hard shadow: the spread is the pixel's
+        // content, not noise; only what was sampled on top of it counts.
+        let mut noise = PixelNoise::default();
+        for (k, lit) in [2.0, 0.0, 2.0, 0.0].into_iter().enumerate() {
+            let sampled = if k < 2 { 0.5 } else { 0.7 };
+            noise.add(&sample(lit + sampled), ShadowRatio::default(), Vec3::splat(lit));
+        }
+        let mut sampled_only = PixelNoise::default();
+        for sampled in [0.5, 0.5, 0.7, 0.7] {
+            sampled_only.add(&sample(sampled), ShadowRatio::default(), Vec3::ZERO);
+        }
+        let (with, without) = (noise.finish().direct, sampled_only.finish().direct);
+        assert!(
+            without > 0.0 && (with - without).abs() < 1e-6,
+            "{with} against {without}"
         );
     }
 }

@@ -174,6 +174,7 @@ pub fn render_pixel(
         let (origin, dir) = camera.ray(x as f32 + jx, y as f32 + jy);
         work.sample.index = s;
         work.data = SampleData::default();
+        work.sample_exact_direct = glam::Vec3::ZERO;
         // The sample's own share of the pixel's shadow-ray pool, for its noise.
         let pool = std::mem::take(&mut work.pixel_shadow_ratio);
         let components = if split_emission {
@@ -183,7 +184,7 @@ pub fn render_pixel(
         };
         let pooled = std::mem::replace(&mut work.pixel_shadow_ratio, pool);
         work.pixel_shadow_ratio += pooled;
-        noise.add(&components, pooled);
+        noise.add(&components, pooled, work.sample_exact_direct);
         sum += components;
         data.add(work.data.albedo, sample_hit(integrator, camera, &work.data));
     }

@@ -170,6 +170,11 @@ impl std::ops::AddAssign for ShadowRatio {
 pub struct DirectLight {
     pub sampled: Vec3,
     pub ratio: Option<ShadowRatio>,
+    /// Of `sampled`, the punctual lights' light where each light got its own shadow ray (on
+    /// the eye path): exact at the point, no Monte Carlo noise in it. It differs between a
+    /// pixel's samples only as the pixel's content does (a hard shadow's edge, a texture), and
+    /// the pixel's noise leaves it out (`render::noise`).
+    pub exact: Vec3,
 }
 
 impl DirectLight {
@@ -269,14 +274,16 @@ pub fn direct_light(
     }
 
     let lights = &scene.punctual_lights;
+    let mut exact = Vec3::ZERO;
     if strata.eye_path || lights.len() < 2 {
         // On the eye path every punctual light gets its ray: a pixel's few samples are its
         // direct light, and a light left out would be noise the image shows.
         for light in lights {
             if let Some(lit) = PunctualLit::at(light, hit, wo, surface, diffuse_brdf) {
-                total += lit.traced(integrator, hit, counts);
+                exact += lit.traced(integrator, hit, counts);
             }
         }
+        total += exact;
     } else if let Some((lit, probability)) = pick_punctual(lights, hit, wo, surface, diffuse_brdf, rng) {
         // Away from the eye path (a record's hemisphere rays, the paths below them) one light
         // is picked in proportion to its unshadowed light and its ray's result divided by that
@@ -289,6 +296,7 @@ pub fn direct_light(
     DirectLight {
         sampled: total,
         ratio: shadow_ratio,
+        exact,
     }
 }
 

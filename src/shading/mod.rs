@@ -137,6 +137,10 @@ pub struct Work<'a> {
     /// The ratio estimates' parts of the direct light at the pixel's camera-ray hits, pooled
     /// over its samples (`direct::ShadowRatio`), scaled by the hits' opacity.
     pub pixel_shadow_ratio: direct::ShadowRatio,
+    /// The direct light at the sample's camera-ray hit that is exact at its point (punctual
+    /// lights each traced: `direct::DirectLight::exact`), scaled by the hit's opacity: the
+    /// pixel's noise leaves it out (`render::noise`).
+    pub sample_exact_direct: Vec3,
     /// The cache's irradiance at the pixel's centre on the surface its samples last looked up,
     /// for its other samples there (`pixel_irradiance`).
     pub pixel_irradiance: Option<PixelIrradiance>,
@@ -149,6 +153,7 @@ impl<'a> Work<'a> {
             sample: SampleContext::default(),
             data: SampleData::default(),
             pixel_shadow_ratio: direct::ShadowRatio::default(),
+            sample_exact_direct: Vec3::ZERO,
             pixel_irradiance: None,
         }
     }
@@ -581,6 +586,9 @@ impl<'a> Integrator<'a> {
             // pixel's pool (`render_pixel` adds the pooled estimate; `direct::ShadowRatio`).
             let pooled =
                 state.level == 0 && state.specular_depth == 0 && counts.sample.index < counts.sample.pixel_samples;
+            if pooled {
+                counts.sample_exact_direct += light.exact * surface.opacity;
+            }
             c.direct = match light.ratio {
                 Some(parts) if pooled => {
                     if parts.is_finite() {

@@ -203,7 +203,8 @@ pub struct RtFilter<'a> {
     pub normal: Option<&'a [f32]>,
     /// The colour is linear HDR (any non-negative value), not [0, 1].
     pub hdr: bool,
-    /// The auxiliary planes are noise-free (prefiltered, or exact).
+    /// The auxiliary planes are clean (prefiltered): the filter keeps what they show. Off, it
+    /// takes them as guides that may be noisy.
     pub clean_aux: bool,
     pub quality: Quality,
 }
