@@ -209,7 +209,7 @@ pub struct DenoisedFrame {
     /// Whether the filter's output was weighed against the raw layers by the pixels' noise
     /// (`blend_by_noise`; not with one sample a pixel).
     pub weighed_by_noise: bool,
-    /// "Intel Open Image Denoise 2.5.1".
+    /// "Intel Open Image Denoise 2.5.1", or that it was not started (no layer to filter).
     pub denoiser: String,
     /// The denoiser's own time: its device, the guides' prefiltering and every filter.
     pub seconds: f64,
@@ -436,9 +436,13 @@ pub fn denoise_frame(
 ) -> Result<DenoisedFrame, String> {
     let start = Instant::now();
     let (w, h) = (frame.width, frame.height);
-    let denoiser = Denoiser::new(quality, threads)?;
-    // A frame with data layers carries its pixels' noise; one sample a pixel measured none.
-    let weigh = samples_per_pixel >= 2 && frame.data().len() == (w * h) as usize;
+    // The device is started only for a layer that needs the filter: none may (a scene lit by
+    // punctual lights alone).
+    let mut device: Option<Denoiser> = None;
+    // A frame with data layers carries its pixels' noise and guides; one sample a pixel
+    // measured no noise.
+    let guided = frame.data().len() == (w * h) as usize;
+    let weigh = samples_per_pixel >= 2 && guided;
     let candidates = layers_to_denoise(written, per_pixel_indirect);
     let verdicts: Vec<Option<LeftRaw>> = if weigh {
         let noise = relative_noise(frame, &candidates);
@@ -447,8 +451,7 @@ pub fn denoise_frame(
     } else {
         vec![None; candidates.len()]
     };
-    let planes = guide_planes(frame);
-    let guides = planes.as_ref().map(|(albedo, normal)| Guides { albedo, normal });
+    // Guides, like the device, are made for the first layer filtered.
     let mut clean = None;
     let mut layers = Vec::new();
     let mut left_raw = Vec::new();
@@ -458,7 +461,13 @@ pub fn denoise_frame(
             left_raw.push((layer, why));
             continue;
         }
+        let denoiser = match &mut device {
+            Some(d) => d,
+            None => device.insert(Denoiser::new(quality, threads)?),
+        };
         if clean.is_none() {
+            let planes = guide_planes(frame);
+            let guides = planes.as_ref().map(|(albedo, normal)| Guides { albedo, normal });
             clean = guides.map(|g| denoiser.guides(g, w, h, prefilter)).transpose()?;
         }
         let mut plane = denoiser.denoise(frame.layer(layer), clean.as_ref(), w, h)?;
@@ -488,10 +497,13 @@ pub fn denoise_frame(
         layers,
         left_raw,
         composite,
-        guided: guides.is_some(),
-        prefiltered: guides.is_some() && prefilter,
+        guided,
+        prefiltered: guided && prefilter,
         weighed_by_noise: weigh,
-        denoiser: denoiser.describe(),
+        denoiser: device.as_ref().map_or_else(
+            || "Intel Open Image Denoise (not started: no layer to filter)".to_string(),
+            Denoiser::describe,
+        ),
         seconds: start.elapsed().as_secs_f64(),
     })
 }
@@ -824,6 +836,7 @@ mod tests {
         let written = [Layer::Direct, Layer::Specular];
         let denoised = denoise_frame(&frame, &written, false, 4, Quality::Fast, Some(2), false).unwrap();
         assert!(denoised.filtered().is_empty());
+        assert!(denoised.denoiser.contains("not started"), "{}", denoised.denoiser);
         assert_eq!(
             denoised.left_raw,
             [(Layer::Direct, LeftRaw::NoNoise), (Layer::Specular, LeftRaw::NoNoise)]
