@@ -437,32 +437,10 @@ fn punctual_light_traced_exactly_leaves_nothing_to_denoise() {
     let dir = tempfile::tempdir().unwrap();
     for area in [false, true] {
         let scene = shadowed_floor(dir.path(), area);
-        let image = dir.path().join(format!("area-{area}.exr"));
-        run_ok(&[
-            "render",
-            scene.to_str().unwrap(),
-            "-o",
-            image.to_str().unwrap(),
-            "-x",
-            "48",
-            "-y",
-            "48",
-            "-ab",
-            "0",
-            "--spp",
-            "4",
-            "--vp",
-            "0",
-            "5",
-            "4",
-            "--vd",
-            "0",
-            "-5",
-            "-4",
-            "--denoise",
-            "-q",
-            "--no-preview",
-        ]);
+        let view = ["--vp", "0", "5", "4", "--vd", "0", "-5", "-4"];
+        let mut args = vec!["-x", "48", "-y", "48", "-ab", "0", "--spp", "4", "--denoise"];
+        args.extend_from_slice(&view);
+        let image = render_file(dir.path(), &scene, &format!("area-{area}"), &args);
         let read = read_image(&image, &["icrender/denoise"]).unwrap();
         let said = read.attribute("icrender/denoise").unwrap().to_string();
         let (raw, denoised) = (rgb(&read, "direct"), rgb(&read, "direct.denoised"));
