@@ -346,7 +346,7 @@ pub const NEGLIGIBLE_NOISE_SHARE: f64 = 0.01;
 /// filter could not make visibly better for its 0.7 microseconds a pixel (OIDN 2.5.1, fast, 2
 /// cores). Measured on the peers bench's scenes (their fastest and slowest settings): the
 /// Cornell box's direct light 9.2e-3 and 1.4e-4, the conference room's 1.3e-2 at its slowest;
-/// Sibenik's specular layer (with `--lambertian`, what its few transparent surfaces pass)
+/// Sibenik's specular layer (with `--lambertian`, what its alpha-blended material passes)
 /// 6.3e-6 and 1.4e-6, where filtering it gave a composite no better (relMSE 1.458e-2 with it
 /// denoised, 1.455e-2 raw).
 pub const NEGLIGIBLE_RELATIVE_NOISE: f64 = 1e-5;
@@ -813,8 +813,8 @@ mod tests {
 
     #[test]
     fn relative_noise_is_the_mean_variance_over_the_squared_light() {
-        // The direct layer is the whole composite (the specular light a tenth of it on top):
-        // a variance of 0.03 times the clean light squared is 0.03 / 1.1^2 of the composite's.
+        // The composite is the direct light and a tenth of it as specular light: a variance of
+        // 0.03 times the direct light squared is 0.03 / 1.1^2 of the composite's light squared.
         let frame = frame_with_noise(&clean(), 0.03, 0.0);
         let noise = relative_noise(&frame, &[Layer::Direct]);
         assert!((noise[0] - 0.03 / 1.21).abs() < 1e-4, "{noise:?}");
