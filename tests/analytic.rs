@@ -2,6 +2,7 @@
 
 mod common;
 use common::*;
+use serde_json::json;
 
 /// A parallel view straight down (-y) from (x, y, 0), `size` wide and tall, the image's up
 /// along -z: each pixel centre's world position on a plane below is known exactly.
@@ -201,6 +202,75 @@ fn diffuse_plane_under_a_point_light_matches_the_analytic_radiance() {
         }
     }
     assert!(worst < 0.01, "largest relative error {worst}");
+}
+
+/// A Lambertian plane lit by a point light off to its side through `panes` vertical panes of
+/// alpha-blended glass of alpha 0.5 (out of view): each shadow ray passes every pane once, so the
+/// plane's radiance is the unshadowed one times 0.5 per pane. With an opaque pane behind them it
+/// is black. What `Tracer::transmittance` must give through partly transparent surfaces.
+#[test]
+fn a_point_lights_shadow_rays_through_glass_panes_keep_half_the_light_per_pane() {
+    let dir = tempfile::tempdir().unwrap();
+    let (rho, intensity, light_x, height) = (0.5f64, 40.0f64, 3.0f64, 1.0f64);
+    let n = 16u32;
+    for (panes, opaque) in [(0, false), (1, false), (2, false), (1, true)] {
+        let mut b = GltfBuilder::new();
+        let floor = b.material(lambertian("floor", [rho as f32; 3]));
+        b.quad(
+            facing(
+                [[-1.5, 0.0, -1.5], [1.5, 0.0, -1.5], [1.5, 0.0, 1.5], [-1.5, 0.0, 1.5]],
+                [0.0, 1.0, 0.0],
+            ),
+            Some(floor),
+        );
+        let glass = b.material(json!({
+            "name": "glass",
+            "alphaMode": "BLEND",
+            "pbrMetallicRoughness": {"baseColorFactor": [0.9, 0.9, 0.9, 0.5], "metallicFactor": 0.0},
+            "extensions": {"KHR_materials_specular": {"specularFactor": 0.0}}
+        }));
+        let wall = b.material(lambertian("wall", [0.5; 3]));
+        let pane = |b: &mut GltfBuilder, x: f32, material: usize| {
+            b.quad(
+                [[x, -0.5, -4.0], [x, -0.5, 4.0], [x, 3.0, 4.0], [x, 3.0, -4.0]],
+                Some(material),
+            );
+        };
+        for k in 0..panes {
+            pane(&mut b, 2.0 + 0.3 * k as f32, glass);
+        }
+        if opaque {
+            pane(&mut b, 2.7, wall);
+        }
+        b.point_light([light_x as f32, height as f32, 0.0], intensity as f32);
+        let scene = b.write(dir.path(), &format!("panes-{panes}-{opaque}"));
+        let out = dir.path().join(format!("panes-{panes}-{opaque}.exr"));
+        let mut args: Vec<String> = ["render", scene.to_str().unwrap(), "-o", out.to_str().unwrap(), "-q"]
+            .map(String::from)
+            .to_vec();
+        args.extend(["-x", "16", "-y", "16", "-ab", "0", "--no-preview"].map(String::from));
+        args.extend(view_down(0.0, 5.0, 2.0));
+        run_ok(&args.iter().map(String::as_str).collect::<Vec<_>>());
+        let [r, _, _] = rgb(&read_exr(&out), "");
+        let through = if opaque { 0.0 } else { 0.5f64.powi(panes) };
+        let mut worst = 0.0f64;
+        for j in 0..n {
+            for i in 0..n {
+                // View right is +X and up is -Z: pixel centre (i, j) lies at (sx, 0, -sy).
+                let sx = 2.0 * (i as f64 + 0.5) / n as f64 - 1.0;
+                let sy = 1.0 - 2.0 * (j as f64 + 0.5) / n as f64;
+                let (x, z) = (sx, -sy);
+                let d2 = (light_x - x).powi(2) + z * z + height * height;
+                let unshadowed = rho / std::f64::consts::PI * intensity * (height / d2.sqrt()) / d2;
+                let got = r[(j * n + i) as usize] as f64;
+                worst = worst.max((got - unshadowed * through).abs() / unshadowed);
+            }
+        }
+        assert!(
+            worst < 0.01,
+            "{panes} glass pane(s), opaque wall {opaque}: largest error {worst} of the unshadowed light"
+        );
+    }
 }
 
 /// A floor under a ceiling that three point lights of different strengths light, at -ab 1 by
