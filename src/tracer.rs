@@ -12,9 +12,33 @@ pub struct Tracer {
     embree: embree::Scene,
     /// Distance rays start off a surface, relative to the scene's size.
     scale_epsilon: f32,
-    transparency: bool,
+    shadows: Shadows,
     pub embree_version: String,
 }
+
+/// How a shadow ray is tested (`Tracer::transmittance`): a scene pays for see-through
+/// surfaces only where it has them.
+enum Shadows {
+    /// No material can be see-through: one occlusion query, which stops at the first blocker.
+    Opaque,
+    /// The ray walks its hits through the whole scene, closest first, reading each one's
+    /// opacity: where see-through surfaces are in shared (instanced) meshes, or Embree was
+    /// built without ray masks.
+    Walk,
+    /// One occlusion query that sees only the opaque meshes (`OPAQUE_MASK`), then, if nothing
+    /// blocked it, a walk through the see-through meshes alone, a scene of their own whose
+    /// geometry `k` is the scene's mesh `meshes[k]`. Most shadow rays of a scene with a few
+    /// see-through surfaces then stop at their first blocker and read no material, as in an
+    /// opaque scene.
+    Split {
+        see_through: embree::Scene,
+        meshes: Vec<u32>,
+    },
+}
+
+/// Embree masks of the meshes no material makes see-through, and of the others (`Shadows`).
+const OPAQUE_MASK: u32 = 1;
+const SEE_THROUGH_MASK: u32 = 2;
 
 /// A ray's closest hit, ready for shading.
 #[derive(Clone, Copy, Debug)]
@@ -48,15 +72,30 @@ impl Tracer {
     /// prototype instances in order).
     pub fn new(scene: &Scene) -> Result<Tracer, embree::EmbreeError> {
         let device = Arc::new(Device::new()?);
+        let shared = &scene.instancing;
+        let see_through = |material: u32| scene.materials[material as usize].may_be_transparent();
+        let shared_see_through = (shared.prototypes.iter()).any(|p| {
+            p.members
+                .iter()
+                .any(|&m| see_through(shared.meshes[m as usize].material))
+        });
+        let split = scene.needs().transparency
+            && !shared_see_through
+            && scene.meshes.iter().any(|m| see_through(m.material))
+            && device.supports_ray_masks();
         let meshes: Vec<TriangleMeshData<'_>> = scene
             .meshes
             .iter()
             .map(|m| TriangleMeshData {
                 positions: &m.positions,
                 indices: &m.indices,
+                mask: match (split, see_through(m.material)) {
+                    (false, _) => embree::ALL_MASKS,
+                    (true, false) => OPAQUE_MASK,
+                    (true, true) => SEE_THROUGH_MASK,
+                },
             })
             .collect();
-        let shared = &scene.instancing;
         let prototypes = (shared.prototypes.iter())
             .map(|proto| {
                 // The members' vertices in the prototype's space: Embree's copy, the only one
@@ -72,6 +111,7 @@ impl Tracer {
                     .map(|(&m, positions)| TriangleMeshData {
                         positions,
                         indices: &shared.meshes[m as usize].indices,
+                        mask: embree::ALL_MASKS,
                     })
                     .collect();
                 embree::Scene::build(&device, &members).map(Arc::new)
@@ -84,10 +124,29 @@ impl Tracer {
             })
             .collect();
         let embree_scene = embree::Scene::build_with_instances(&device, &meshes, &instances)?;
+        let shadows = if !scene.needs().transparency {
+            Shadows::Opaque
+        } else if split {
+            let chosen: Vec<u32> = (0..meshes.len() as u32)
+                .filter(|&i| meshes[i as usize].mask == SEE_THROUGH_MASK)
+                .collect();
+            let members: Vec<TriangleMeshData<'_>> = (chosen.iter())
+                .map(|&i| TriangleMeshData {
+                    mask: embree::ALL_MASKS,
+                    ..meshes[i as usize]
+                })
+                .collect();
+            Shadows::Split {
+                see_through: embree::Scene::build(&device, &members)?,
+                meshes: chosen,
+            }
+        } else {
+            Shadows::Walk
+        };
         Ok(Tracer {
             embree: embree_scene,
             scale_epsilon: 1e-5 * scene.size(),
-            transparency: scene.needs().transparency,
+            shadows,
             embree_version: device.version(),
         })
     }
@@ -125,6 +184,12 @@ impl Tracer {
         let hit = self
             .embree
             .intersect(org.to_array(), dir.to_array(), 0.0, tfar, coherence)?;
+        Some(self.surface_hit(scene, &hit, dir))
+    }
+
+    /// The surface point Embree's `hit` along `dir` found: position, normals, texture
+    /// coordinates, material and object.
+    fn surface_hit(&self, scene: &Scene, hit: &embree::RayHit, dir: Vec3) -> SurfaceHit {
         let (triangle, object) = match hit.instance {
             None => {
                 let mesh = &scene.meshes[hit.geom_id as usize];
@@ -175,7 +240,7 @@ impl Tracer {
             let ratio = (uv_area / across.length()).sqrt();
             if ratio.is_finite() { ratio } else { 0.0 }
         });
-        Some(SurfaceHit {
+        SurfaceHit {
             position,
             distance: hit.t,
             geometric_normal,
@@ -186,26 +251,54 @@ impl Tracer {
             material: triangle.material,
             object,
             prim_id: hit.prim_id,
-        })
+        }
     }
 
     /// Fraction of light that gets from `org` along unit `dir` over `distance` (1 unobstructed,
     /// 0 blocked). Only scenes with transparent materials pay for walking through hits.
     pub fn transmittance(&self, scene: &Scene, org: Vec3, dir: Vec3, distance: f32) -> f32 {
-        if !self.transparency {
-            return if self.embree.occluded(org.to_array(), dir.to_array(), 0.0, distance) {
-                0.0
-            } else {
-                1.0
-            };
+        match &self.shadows {
+            Shadows::Opaque => {
+                if self.embree.occluded(org.to_array(), dir.to_array(), 0.0, distance) {
+                    0.0
+                } else {
+                    1.0
+                }
+            }
+            Shadows::Walk => self.walk_through(scene, &self.embree, None, (org, dir, distance)),
+            Shadows::Split { see_through, meshes } => {
+                let (o, d) = (org.to_array(), dir.to_array());
+                if self.embree.occluded_masked(o, d, 0.0, distance, OPAQUE_MASK) {
+                    0.0
+                } else {
+                    self.walk_through(scene, see_through, Some(meshes), (org, dir, distance))
+                }
+            }
         }
+    }
+
+    /// The product of (1 - opacity) over the surfaces of `embree` the ray (origin, unit
+    /// direction, distance) passes, closest first, 0 once one blocks it. `meshes` names the
+    /// scene's mesh of each of `embree`'s geometries where they are not the scene's own ids.
+    fn walk_through(
+        &self,
+        scene: &Scene,
+        embree: &embree::Scene,
+        meshes: Option<&[u32]>,
+        (org, dir, distance): (Vec3, Vec3, f32),
+    ) -> f32 {
         let mut through = 1.0;
         let mut origin = org;
         let mut left = distance;
         for _ in 0..MAX_TRANSPARENT_PASSES {
-            let Some(hit) = self.intersect_within(scene, origin, dir, left, Coherence::Incoherent) else {
+            let found = embree.intersect(origin.to_array(), dir.to_array(), 0.0, left, Coherence::Incoherent);
+            let Some(mut found) = found else {
                 return through;
             };
+            if let Some(meshes) = meshes {
+                found.geom_id = meshes[found.geom_id as usize];
+            }
+            let hit = self.surface_hit(scene, &found, dir);
             let material = &scene.materials[hit.material as usize];
             let opacity = material.at(hit.uv, &scene.textures).opacity;
             through *= 1.0 - opacity;

@@ -207,13 +207,23 @@ fn diffuse_plane_under_a_point_light_matches_the_analytic_radiance() {
 /// A Lambertian plane lit by a point light off to its side through `panes` vertical panes of
 /// alpha-blended glass of alpha 0.5 (out of view): each shadow ray passes every pane once, so the
 /// plane's radiance is the unshadowed one times 0.5 per pane. With an opaque pane behind them it
-/// is black. What `Tracer::transmittance` must give through partly transparent surfaces.
+/// is black. What `Tracer::transmittance` must give through partly transparent surfaces, both
+/// where the panes are meshes of their own (an occlusion query for the opaque meshes, then a walk
+/// through the see-through ones) and where they are one mesh placed twice (shared, instanced:
+/// a walk through the whole scene).
 #[test]
 fn a_point_lights_shadow_rays_through_glass_panes_keep_half_the_light_per_pane() {
     let dir = tempfile::tempdir().unwrap();
     let (rho, intensity, light_x, height) = (0.5f64, 40.0f64, 3.0f64, 1.0f64);
     let n = 16u32;
-    for (panes, opaque) in [(0, false), (1, false), (2, false), (1, true)] {
+    for (panes, opaque, shared) in [
+        (0, false, false),
+        (1, false, false),
+        (2, false, false),
+        (2, false, true),
+        (1, true, false),
+        (2, true, true),
+    ] {
         let mut b = GltfBuilder::new();
         let floor = b.material(lambertian("floor", [rho as f32; 3]));
         b.quad(
@@ -236,15 +246,24 @@ fn a_point_lights_shadow_rays_through_glass_panes_keep_half_the_light_per_pane()
                 Some(material),
             );
         };
-        for k in 0..panes {
-            pane(&mut b, 2.0 + 0.3 * k as f32, glass);
+        if shared {
+            let corners = [[0.0, -0.5, -4.0], [0.0, -0.5, 4.0], [0.0, 3.0, 4.0], [0.0, 3.0, -4.0]];
+            let mesh = b.mesh(&corners, &[[0, 1, 2], [0, 2, 3]], Some(glass));
+            for k in 0..panes {
+                b.node(json!({"mesh": mesh, "translation": [2.0 + 0.3 * k as f32, 0.0, 0.0]}));
+            }
+        } else {
+            for k in 0..panes {
+                pane(&mut b, 2.0 + 0.3 * k as f32, glass);
+            }
         }
         if opaque {
             pane(&mut b, 2.7, wall);
         }
         b.point_light([light_x as f32, height as f32, 0.0], intensity as f32);
-        let scene = b.write(dir.path(), &format!("panes-{panes}-{opaque}"));
-        let out = dir.path().join(format!("panes-{panes}-{opaque}.exr"));
+        let name = format!("panes-{panes}-{opaque}-{shared}");
+        let scene = b.write(dir.path(), &name);
+        let out = dir.path().join(format!("{name}.exr"));
         let mut args: Vec<String> = ["render", scene.to_str().unwrap(), "-o", out.to_str().unwrap(), "-q"]
             .map(String::from)
             .to_vec();
@@ -268,7 +287,7 @@ fn a_point_lights_shadow_rays_through_glass_panes_keep_half_the_light_per_pane()
         }
         assert!(
             worst < 0.01,
-            "{panes} glass pane(s), opaque wall {opaque}: largest error {worst} of the unshadowed light"
+            "{panes} glass pane(s) (one shared mesh: {shared}), opaque wall {opaque}: largest error {worst} of the unshadowed light"
         );
     }
 }

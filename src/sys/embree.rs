@@ -79,6 +79,13 @@ impl Device {
         }
     }
 
+    /// Whether rays and geometries carry masks (`TriangleMeshData::mask`,
+    /// `Scene::occluded_masked`): an option of Embree's build, on in Debian's.
+    pub fn supports_ray_masks(&self) -> bool {
+        // SAFETY: querying a property of a live device.
+        unsafe { rtc::rtcGetDeviceProperty(self.raw, rtc::RTC_DEVICE_PROPERTY_RAY_MASK_SUPPORTED) != 0 }
+    }
+
     /// Version of the library actually loaded, e.g. "3.13.5".
     pub fn version(&self) -> String {
         // SAFETY: querying a property of a live device.
@@ -94,10 +101,12 @@ impl Drop for Device {
     }
 }
 
-/// A triangle mesh ready to hand to Embree: world-space vertices and indices.
+/// A triangle mesh ready to hand to Embree: world-space vertices and indices, and the mask a
+/// ray's must share a bit with for the ray to see it (`ALL_MASKS`: every ray).
 pub struct TriangleMeshData<'a> {
     pub positions: &'a [[f32; 3]],
     pub indices: &'a [[u32; 3]],
+    pub mask: u32,
 }
 
 /// An instance to place in a scene: a committed prototype scene and the affine transform from
@@ -142,6 +151,9 @@ pub enum Coherence {
     Coherent,
     Incoherent,
 }
+
+/// The mask of a geometry every ray sees, and of a ray that sees every geometry.
+pub const ALL_MASKS: u32 = u32::MAX;
 
 fn make_ray(org: [f32; 3], dir: [f32; 3], tnear: f32, tfar: f32) -> rtc::RTCRay {
     rtc::RTCRay {
@@ -227,6 +239,7 @@ impl Scene {
             }
             std::ptr::copy_nonoverlapping(mesh.positions.as_ptr(), vbuf, vcount);
             std::ptr::copy_nonoverlapping(mesh.indices.as_ptr(), ibuf, tcount);
+            rtc::rtcSetGeometryMask(geom, mesh.mask);
             rtc::rtcCommitGeometry(geom);
             let id = rtc::rtcAttachGeometry(self.raw, geom);
             rtc::rtcReleaseGeometry(geom);
@@ -314,7 +327,16 @@ impl Scene {
     /// True when anything blocks the ray within (tnear, tfar).
     #[inline]
     pub fn occluded(&self, org: [f32; 3], dir: [f32; 3], tnear: f32, tfar: f32) -> bool {
+        self.occluded_masked(org, dir, tnear, tfar, ALL_MASKS)
+    }
+
+    /// True when a geometry whose mask shares a bit with `mask` blocks the ray within (tnear,
+    /// tfar); the others are passed through. Needs `Device::supports_ray_masks` (without it
+    /// every geometry blocks).
+    #[inline]
+    pub fn occluded_masked(&self, org: [f32; 3], dir: [f32; 3], tnear: f32, tfar: f32, mask: u32) -> bool {
         let mut ray = make_ray(org, dir, tnear, tfar);
+        ray.mask = mask;
         self.raw_occluded(&mut ray);
         // Embree marks a blocked ray by setting tfar to -inf.
         ray.tfar < 0.0
@@ -402,6 +424,7 @@ mod tests {
             &[TriangleMeshData {
                 positions: &positions,
                 indices: &indices,
+                mask: ALL_MASKS,
             }],
         )
         .unwrap();
@@ -440,6 +463,7 @@ mod tests {
         let mesh = TriangleMeshData {
             positions: &positions,
             indices: &indices,
+            mask: ALL_MASKS,
         };
         let prototype = Arc::new(Scene::build(&device, &[mesh]).unwrap());
         // Instance 0 moved by +10 in x; instance 1 mirrored in x (x -> -x) and moved by -10.
@@ -449,6 +473,7 @@ mod tests {
         let flat = TriangleMeshData {
             positions: &flat_positions,
             indices: &indices,
+            mask: ALL_MASKS,
         };
         let scene = Scene::build_with_instances(
             &device,
@@ -484,5 +509,38 @@ mod tests {
         assert_eq!((c.instance, c.geom_id), (None, 0));
         assert!(scene.occluded([10.25, 0.5, 1.0], down, 0.0, 2.0));
         assert!(!scene.occluded([10.25, 0.5, 1.0], down, 0.0, 0.5));
+    }
+
+    #[test]
+    fn a_masked_occlusion_query_passes_the_geometries_outside_its_mask() {
+        let device = Arc::new(Device::new().unwrap());
+        if !device.supports_ray_masks() {
+            return;
+        }
+        let indices = [[0u32, 1, 2]];
+        let near = [[0.0, 0.0, 1.0], [1.0, 0.0, 1.0], [0.0, 1.0, 1.0]];
+        let far = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
+        let scene = Scene::build(
+            &device,
+            &[
+                TriangleMeshData {
+                    positions: &near,
+                    indices: &indices,
+                    mask: 2,
+                },
+                TriangleMeshData {
+                    positions: &far,
+                    indices: &indices,
+                    mask: 1,
+                },
+            ],
+        )
+        .unwrap();
+        let (from, down) = ([0.25, 0.25, 2.0], [0.0, 0.0, -1.0]);
+        // Only the near triangle (mask 2) lies within 1.5 of the origin.
+        assert!(scene.occluded(from, down, 0.0, 1.5));
+        assert!(scene.occluded_masked(from, down, 0.0, 1.5, 2));
+        assert!(!scene.occluded_masked(from, down, 0.0, 1.5, 1));
+        assert!(scene.occluded_masked(from, down, 0.0, 3.0, 1));
     }
 }
