@@ -15,6 +15,26 @@ fn view_down(x: f64, y: f64, size: f64) -> Vec<String> {
     .to_vec()
 }
 
+/// A Lambertian square floor of albedo `rho` and half-side `half` at y = 0, facing up.
+fn floor(b: &mut GltfBuilder, half: f32, rho: f64) {
+    let m = b.material(lambertian("floor", [rho as f32; 3]));
+    let corners = [
+        [-half, 0.0, -half],
+        [half, 0.0, -half],
+        [half, 0.0, half],
+        [-half, 0.0, half],
+    ];
+    b.quad(facing(corners, [0.0, 1.0, 0.0]), Some(m));
+}
+
+/// The point (x, z) of the floor that the centre of pixel (i, j) of an n x n image sees through
+/// `view_down(0, _, 2)`: view right is +X and up is -Z.
+fn floor_point(i: u32, j: u32, n: u32) -> (f64, f64) {
+    let sx = 2.0 * (i as f64 + 0.5) / n as f64 - 1.0;
+    let sy = 1.0 - 2.0 * (j as f64 + 0.5) / n as f64;
+    (sx, -sy)
+}
+
 /// A unit box whose walls all have albedo `rho` and emit radiance `e` from their inner side.
 fn emitting_furnace(dir: &std::path::Path, rho: f64, e: f64) -> std::path::PathBuf {
     let mut b = GltfBuilder::new();
@@ -151,14 +171,7 @@ fn diffuse_plane_under_a_point_light_matches_the_analytic_radiance() {
     let dir = tempfile::tempdir().unwrap();
     let (rho, intensity, height) = (0.5f64, 10.0f64, 1.0f64);
     let mut b = GltfBuilder::new();
-    let m = b.material(lambertian("plane", [rho as f32; 3]));
-    b.quad(
-        facing(
-            [[-2.0, 0.0, -2.0], [2.0, 0.0, -2.0], [2.0, 0.0, 2.0], [-2.0, 0.0, 2.0]],
-            [0.0, 1.0, 0.0],
-        ),
-        Some(m),
-    );
+    floor(&mut b, 2.0, rho);
     b.point_light([0.0, height as f32, 0.0], intensity as f32);
     let scene = b.write(dir.path(), "plane");
     let out = dir.path().join("plane.exr");
@@ -190,10 +203,7 @@ fn diffuse_plane_under_a_point_light_matches_the_analytic_radiance() {
     let mut worst = 0.0f64;
     for j in 0..n {
         for i in 0..n {
-            // View right is +X and up is -Z: pixel centre (i, j) lies at (sx, 0, -sy).
-            let sx = 2.0 * (i as f64 + 0.5) / n as f64 - 1.0;
-            let sy = 1.0 - 2.0 * (j as f64 + 0.5) / n as f64;
-            let (x, z) = (sx, -sy);
+            let (x, z) = floor_point(i, j, n);
             let d2 = x * x + z * z + height * height;
             let cos = height / d2.sqrt();
             let expected = rho / std::f64::consts::PI * intensity * cos / d2;
@@ -225,14 +235,7 @@ fn a_point_lights_shadow_rays_through_glass_panes_keep_half_the_light_per_pane()
         (2, true, true),
     ] {
         let mut b = GltfBuilder::new();
-        let floor = b.material(lambertian("floor", [rho as f32; 3]));
-        b.quad(
-            facing(
-                [[-1.5, 0.0, -1.5], [1.5, 0.0, -1.5], [1.5, 0.0, 1.5], [-1.5, 0.0, 1.5]],
-                [0.0, 1.0, 0.0],
-            ),
-            Some(floor),
-        );
+        floor(&mut b, 1.5, rho);
         let glass = b.material(json!({
             "name": "glass",
             "alphaMode": "BLEND",
@@ -275,10 +278,7 @@ fn a_point_lights_shadow_rays_through_glass_panes_keep_half_the_light_per_pane()
         let mut worst = 0.0f64;
         for j in 0..n {
             for i in 0..n {
-                // View right is +X and up is -Z: pixel centre (i, j) lies at (sx, 0, -sy).
-                let sx = 2.0 * (i as f64 + 0.5) / n as f64 - 1.0;
-                let sy = 1.0 - 2.0 * (j as f64 + 0.5) / n as f64;
-                let (x, z) = (sx, -sy);
+                let (x, z) = floor_point(i, j, n);
                 let d2 = (light_x - x).powi(2) + z * z + height * height;
                 let unshadowed = rho / std::f64::consts::PI * intensity * (height / d2.sqrt()) / d2;
                 let got = r[(j * n + i) as usize] as f64;
