@@ -402,19 +402,23 @@ impl Outputs {
             && !args.quiet
         {
             let what: Vec<&str> = d.filtered().iter().map(|l| l.name()).collect();
-            eprintln!(
-                "icrender: denoised {} (and their sum with the emission, layer `denoised`) in {:.3} s ({}, quality {}, {}){}",
-                if what.is_empty() {
-                    "no layer".to_string()
-                } else {
-                    what.join(", ")
-                },
-                d.seconds,
-                d.denoiser,
-                quality_name(args),
-                guides_text(d),
-                left_raw_text(d)
-            );
+            if what.is_empty() {
+                eprintln!(
+                    "icrender: --denoise ran no filter: no layer needed it{}; layer `denoised` holds the raw layers' sum ({:.3} s)",
+                    left_raw_text(d),
+                    d.seconds
+                );
+            } else {
+                eprintln!(
+                    "icrender: denoised {} (and their sum with the emission, layer `denoised`) in {:.3} s ({}, quality {}, {}){}",
+                    what.join(", "),
+                    d.seconds,
+                    d.denoiser,
+                    quality_name(args),
+                    guides_text(d),
+                    left_raw_text(d)
+                );
+            }
         }
         Ok(())
     }
@@ -520,34 +524,38 @@ fn left_raw_text(d: &denoise::DenoisedFrame) -> String {
         .collect()
 }
 
-/// The header's record of what was denoised, how, and the denoiser's time.
+/// The header's record of what was denoised, how, and the denoiser's time. Where no layer
+/// needed the filter, it says so and names no filter settings or guides: none were used.
 fn denoise_attributes(d: &denoise::DenoisedFrame, args: &RenderArgs) -> Vec<(String, String)> {
-    let raw: Vec<&str> = d.filtered().iter().map(|l| l.name()).collect();
+    let filtered: Vec<&str> = d.filtered().iter().map(|l| l.name()).collect();
+    const COMPOSITE: &str = "the composite R G B is raw, and `denoised` is the raw emission plus the \
+                             denoised layers and any raw one (not the composite denoised itself)";
+    let how = if filtered.is_empty() {
+        format!(
+            "{}; every noisy layer written as rendered into <layer>.denoised{}; {COMPOSITE}",
+            d.denoiser,
+            left_raw_text(d),
+        )
+    } else {
+        format!(
+            "{}, RT filter, quality {}, {}; layers {} each denoised into <layer>.denoised{} \
+             (emission is not noisy and not denoised; indirect only where each pixel samples it, \
+             -aa 0){}; {COMPOSITE}",
+            d.denoiser,
+            quality_name(args),
+            guides_text(d),
+            filtered.join(", "),
+            if d.weighed_by_noise {
+                ", weighed against the raw layer by the noise each pixel's samples measured"
+            } else {
+                " (one sample a pixel: no noise measured, the filter's output as it is)"
+            },
+            left_raw_text(d),
+        )
+    };
     vec![
         ("icrender/denoised".to_string(), d.names().join(" ")),
-        (
-            "icrender/denoise".to_string(),
-            format!(
-                "{}, RT filter, quality {}, {}; layers {} each denoised into <layer>.denoised{} \
-                 (emission is not noisy and not denoised; indirect only where each pixel samples it, \
-                 -aa 0){}; the composite R G B is raw, and `denoised` is the raw emission plus the \
-                 denoised layers and any raw one (not the composite denoised itself)",
-                d.denoiser,
-                quality_name(args),
-                guides_text(d),
-                if raw.is_empty() {
-                    "(none)".to_string()
-                } else {
-                    raw.join(", ")
-                },
-                if d.weighed_by_noise {
-                    ", weighed against the raw layer by the noise each pixel's samples measured"
-                } else {
-                    " (one sample a pixel: no noise measured, the filter's output as it is)"
-                },
-                left_raw_text(d),
-            ),
-        ),
+        ("icrender/denoise".to_string(), how),
         ("icrender/denoise_time_s".to_string(), format!("{:.3}", d.seconds)),
     ]
 }
