@@ -66,14 +66,20 @@ pub struct Guides<'a> {
     pub normal: &'a [Vec3],
 }
 
+/// Whether `frame` has its data layers (one `PixelData` a pixel): the guides and the pixels'
+/// measured noise.
+fn carries_data(frame: &FrameBuffer) -> bool {
+    frame.data().len() == frame.width as usize * frame.height as usize
+}
+
 /// The guides `frame` carries: the albedo and normal of its data layers (gathered from the
 /// beauty's own camera samples whatever `--aovs` writes), one value a pixel; None for a frame
 /// without them.
 pub fn guide_planes(frame: &FrameBuffer) -> Option<(Vec<Vec3>, Vec<Vec3>)> {
-    let data = frame.data();
-    if data.len() != frame.width as usize * frame.height as usize {
+    if !carries_data(frame) {
         return None;
     }
+    let data = frame.data();
     Some((
         data.iter().map(|d| d.albedo).collect(),
         data.iter().map(|d| d.normal).collect(),
@@ -441,7 +447,7 @@ pub fn denoise_frame(
     let mut device: Option<Denoiser> = None;
     // A frame with data layers carries its pixels' noise and guides; one sample a pixel
     // measured no noise.
-    let guided = frame.data().len() == (w * h) as usize;
+    let guided = carries_data(frame);
     let weigh = samples_per_pixel >= 2 && guided;
     let candidates = layers_to_denoise(written, per_pixel_indirect);
     let verdicts: Vec<Option<LeftRaw>> = if weigh {
