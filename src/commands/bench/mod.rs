@@ -173,9 +173,10 @@ fn rays(path: &Path, options: &RaysOptions<'_>) -> CommandResult {
         (o, Vec3::new(r * phi.cos(), r * phi.sin(), z))
     };
     // Shadow rays as the renderer casts them: from the surfaces the view sees to a point on an
-    // emitter the light tree picks for that surface, stopping short of the emitter. Made before
-    // the clock starts: picking through the light tree is not the ray's cost (x32's tree holds
-    // 32 times the single room's emitters).
+    // emitter the light tree picks for that surface, stopping short of the emitter (in a scene
+    // lit by punctual lights alone, to each light in turn). Made before the clock starts:
+    // picking through the light tree is not the ray's cost (x32's tree holds 32 times the
+    // single room's emitters).
     let shading_points: Vec<(Vec3, Vec3)> = (0..4096u64)
         .filter_map(|i| {
             let (o, d) = primary(i.wrapping_mul(2_654_435_761) % (width as u64 * height as u64));
@@ -188,6 +189,9 @@ fn rays(path: &Path, options: &RaysOptions<'_>) -> CommandResult {
         None => (0..(1u64 << 16))
             .filter_map(|i| {
                 let (p, n) = *shading_points.get((i % shading_points.len().max(1) as u64) as usize)?;
+                if scene.emitters.is_empty() {
+                    return punctual_shadow_ray(&scene, p, n, i);
+                }
                 let mut rng = Rng::new(i, 7);
                 let light = scene
                     .emitters
@@ -274,6 +278,25 @@ fn rays(path: &Path, options: &RaysOptions<'_>) -> CommandResult {
         }
     }
     Ok(())
+}
+
+/// A shadow ray from `p` (facing `n`) to punctual light number `i` (modulo their count), as
+/// the renderer casts one: to the light's position, or for a directional light across the
+/// scene. None where the light does not reach the point's front.
+fn punctual_shadow_ray(scene: &Scene, p: Vec3, n: Vec3, i: u64) -> Option<(Vec3, Vec3)> {
+    let lights = &scene.punctual_lights;
+    let light = lights.get((i % lights.len().max(1) as u64) as usize)?;
+    let sample = light.illuminate(p)?;
+    if sample.to_light.dot(n) <= 0.0 {
+        return None;
+    }
+    let across = (scene.bounds_max - scene.bounds_min).length() * 2.0;
+    let reach = if sample.distance.is_finite() {
+        sample.distance * 0.999
+    } else {
+        across
+    };
+    Some((p, sample.to_light * reach))
 }
 
 /// Shadow rays written by --save-shadow-rays.
