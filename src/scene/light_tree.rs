@@ -320,6 +320,7 @@ impl LightTree {
     /// picked it. None where nothing can light the receiver.
     pub fn pick(&self, at: Receiver, u: f64) -> Option<(usize, f64)> {
         self.pick_with(u, &mut |node| self.shares(node, at))
+            .map(|p| (p.emitter, p.probability))
     }
 
     /// A chooser for several picks at one receiver: the slots' shares of each wide node are
@@ -331,39 +332,48 @@ impl LightTree {
             at,
             memo: [MemoEntry::EMPTY; MEMO],
             next: 0,
+            last: None,
         }
     }
 
     /// The walk of `pick`, the shares of a wide node given by `shares`.
     #[inline(always)]
-    fn pick_with(&self, u: f64, shares: &mut impl FnMut(usize) -> Option<([f64; WIDTH], f64)>) -> Option<(usize, f64)> {
+    fn pick_with(&self, u: f64, shares: &mut impl FnMut(usize) -> Option<([f64; WIDTH], f64)>) -> Option<Pick> {
         if self.wide.is_empty() {
             return None;
         }
         let (mut node, mut u, mut probability) = (0usize, u, 1.0f64);
+        // Where the chosen slot's interval of the original u starts (its width is `probability`).
+        let mut start_of_u = 0.0f64;
         loop {
             let (weights, total) = shares(node)?;
             let wide = &self.wide[node];
             // The slot whose interval holds u (the last lit one should rounding leave u past
             // every interval's end).
             let target = u * total;
-            let mut start = 0.0f64;
+            let (mut start, mut end) = (0.0f64, 0.0f64);
             let mut chosen = 0;
             for (k, &w) in weights[..wide.count].iter().enumerate() {
                 if w > 0.0 {
                     chosen = k;
-                    if target < start + w {
+                    start = end;
+                    end += w;
+                    if target < end {
                         break;
                     }
-                    start += w;
                 }
             }
             let w = weights[chosen];
+            start_of_u += probability * (start / total);
             probability *= w / total;
             u = ((target - start) / w).clamp(0.0, 1.0 - f64::EPSILON);
             let slot = &wide.slots[chosen];
             if slot.leaf {
-                return (probability > 0.0).then_some((slot.target as usize, probability));
+                return (probability > 0.0).then_some(Pick {
+                    emitter: slot.target as usize,
+                    probability,
+                    start_of_u,
+                });
             }
             node = slot.target as usize;
         }
@@ -414,14 +424,36 @@ impl MemoEntry {
     };
 }
 
+/// A walk's result: the emitter, the probability of picking it, and where its interval of u
+/// starts (it ends `probability` further on).
+#[derive(Clone, Copy, Debug)]
+struct Pick {
+    emitter: usize,
+    probability: f64,
+    start_of_u: f64,
+}
+
+impl Pick {
+    /// Whether `u` lies inside the interval of u that leads to this pick (strictly, so that
+    /// the rounding of its ends never decides).
+    fn holds(&self, u: f64) -> bool {
+        self.start_of_u < u && u < self.start_of_u + self.probability
+    }
+}
+
 /// Picks at one receiver that share the weighing of the nodes they walk (`LightTree::chooser`);
-/// each pick is exactly `LightTree::pick`'s, with the same probability.
+/// each pick is `LightTree::pick`'s, with the same probability.
 pub struct Chooser<'a> {
     tree: &'a LightTree,
     at: Receiver,
     memo: [MemoEntry; MEMO],
     /// The entry the next new node replaces (round robin).
     next: usize,
+    /// The last walk's pick: a point's shadow rays take consecutive strata of u (`LightStrata`),
+    /// so most of them fall in one emitter's interval, and such a pick needs no walk. On the
+    /// conference room (48 emitters) at -ab 2, 16 rays a sample, the walks were 5.9 % of the
+    /// render.
+    last: Option<Pick>,
 }
 
 impl Chooser<'_> {
@@ -432,9 +464,12 @@ impl Chooser<'_> {
 
     /// `LightTree::pick` at the chooser's receiver.
     pub fn pick(&mut self, u: f64) -> Option<(usize, f64)> {
+        if let Some(last) = self.last.filter(|p| p.holds(u)) {
+            return Some((last.emitter, last.probability));
+        }
         let (tree, at) = (self.tree, self.at);
         let (memo, next) = (&mut self.memo, &mut self.next);
-        tree.pick_with(u, &mut |node| {
+        let pick = tree.pick_with(u, &mut |node| {
             if let Some(entry) = memo.iter().find(|e| e.node == node as u32) {
                 return entry.shares;
             }
@@ -445,7 +480,11 @@ impl Chooser<'_> {
             };
             *next = (*next + 1) % MEMO;
             shares
-        })
+        });
+        if pick.is_some() {
+            self.last = pick;
+        }
+        pick.map(|p| (p.emitter, p.probability))
     }
 }
 
@@ -522,6 +561,33 @@ mod tests {
                 let u = ((k * 7919) % 500) as f64 / 500.0 + 0.0007;
                 assert_eq!(chooser.pick(u), tree.pick(at, u), "u {u}");
             }
+        }
+    }
+
+    #[test]
+    fn a_chooser_reusing_its_last_pick_picks_as_the_tree_does() {
+        // u rising in small steps (a point's shadow rays take consecutive strata): runs of them
+        // fall in one emitter's interval and reuse the last walk. Every pick must still be the
+        // tree's, including where no emitter lights the point (the last 18 face down).
+        let items: Vec<Item> = (0..48)
+            .map(|i| Item {
+                front: if i < 30 { Vec3::Z } else { -Vec3::Z },
+                ..item(i as f32 * 0.3, 1.0 + (i % 5) as f64)
+            })
+            .collect();
+        let tree = LightTree::new(&items);
+        for at in [above(3.0, 1.0), above(11.0, 0.0), above(7.0, 0.3)] {
+            let mut chooser = tree.chooser(at);
+            let (mut reused, mut picks) = (0, 0);
+            for k in 0..4000 {
+                let u = (k as f64 + 0.37) / 4000.0;
+                let before = chooser.last.map(|p| p.holds(u));
+                let pick = chooser.pick(u);
+                assert_eq!(pick, tree.pick(at, u), "u {u}");
+                reused += (before == Some(true)) as u32;
+                picks += pick.is_some() as u32;
+            }
+            assert!(reused > picks / 2, "{reused} of {picks} picks reused the last walk");
         }
     }
 
