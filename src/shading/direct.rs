@@ -52,10 +52,25 @@ impl LightStrata {
         }
     }
 
+    /// The same strata with `offset` reduced below `total` (the same stratum for every ray),
+    /// so that `uniforms` need not divide for each ray.
+    fn reduced(self) -> LightStrata {
+        LightStrata {
+            offset: self.offset % self.total.max(1),
+            ..self
+        }
+    }
+
     /// The uniforms of ray k (of `count`): stratum of the emitter choice, point on the emitter.
     fn uniforms(&self, k: u32, rng: &mut Rng) -> (f32, f32, f32) {
-        let g = self.first + k;
-        let stratum = ((g as u64 + self.offset as u64) % self.total as u64) as u32;
+        let (g, total) = ((self.first + k) as u64, self.total as u64);
+        let shifted = g + self.offset as u64;
+        // (g + offset) mod total, without a division where the offset is reduced (`reduced`).
+        let stratum = if self.offset < self.total && g < total {
+            if shifted >= total { shifted - total } else { shifted }
+        } else {
+            shifted % total
+        } as u32;
         let (col, row, cols, rows) = emitter_cell(stratum, self.total, self.cell_offset);
         (
             (stratum as f32 + rng.next_f32()) / self.total as f32,
@@ -92,19 +107,18 @@ fn emitter_cell(stratum: u32, total: u32, shift: u32) -> (u32, u32, u32, u32) {
 /// Point `index` of the two-dimensional Sobol sequence, as 32-bit fractions: the first
 /// coordinate the base-2 radical inverse, the second by the Pascal matrix mod 2.
 fn sobol_2d(index: u32) -> (u32, u32) {
-    let (mut x, mut y) = (0u32, 0u32);
-    let (mut column_x, mut column_y) = (1u32 << 31, 1u32 << 31);
+    // The radical inverse is the index's bits reversed.
+    let mut y = 0u32;
+    let mut column_y = 1u32 << 31;
     let mut i = index;
     while i != 0 {
         if i & 1 != 0 {
-            x ^= column_x;
             y ^= column_y;
         }
         i >>= 1;
-        column_x >>= 1;
         column_y ^= column_y >> 1;
     }
-    (x, y)
+    (index.reverse_bits(), y)
 }
 
 /// The exact unshadowed irradiance replaces the sampled one while the emitters number at most
@@ -213,6 +227,7 @@ pub fn direct_light(
         // What the rays would bring if none were blocked, for the ratio estimator.
         let mut sum_unblocked = Vec3::ZERO;
         let mut sampler = scene.emitters.sampler(hit.position, hit.normal);
+        let strata = strata.reduced();
         for k in 0..emitter_samples {
             let (u1, u2, u3) = strata.uniforms(k, rng);
             let Some(light) = sampler.as_mut().and_then(|s| s.sample(u1, u2, u3)) else {
