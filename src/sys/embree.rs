@@ -469,11 +469,9 @@ mod tests {
             let offset = (target - inside) * 1.5;
             let (length, dir) = (offset.length(), offset.normalize());
             let (o, d) = (inside.to_array(), dir.to_array());
-            if !scene.occluded(o, d, 0.0, length) {
-                leaked += 1;
-            } else if scene.intersect(o, d, 0.0, length, Coherence::Incoherent).is_none() {
-                leaked += 1;
-            }
+            let stopped = scene.occluded(o, d, 0.0, length)
+                && scene.intersect(o, d, 0.0, length, Coherence::Incoherent).is_some();
+            leaked += u32::from(!stopped);
         }
         assert_eq!(leaked, 0, "{leaked} of {rays} rays passed through the walls");
     }
