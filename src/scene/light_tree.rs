@@ -451,8 +451,10 @@ pub struct Chooser<'a> {
     next: usize,
     /// The last walk's pick: a point's shadow rays take consecutive strata of u (`LightStrata`),
     /// so most of them fall in one emitter's interval, and such a pick needs no walk. On the
-    /// conference room (48 emitters) at -ab 2, 16 rays a sample, the walks were 5.9 % of the
-    /// render.
+    /// conference room (48 emitters) at -ab 2, 16 rays a sample (ray_rate's settings, one
+    /// thread), picking went from 5.9 % of the render to 3.9 %, the render to 0.982x the time.
+    /// (Laying out every emitter's probability once a point instead, for picks by binary
+    /// search, made it 1.03x.)
     last: Option<Pick>,
 }
 
