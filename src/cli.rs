@@ -505,8 +505,9 @@ pub enum BenchCommand {
         /// (default: the automatic view).
         #[command(flatten)]
         view: ViewArgs,
-        /// Write the shadow rays (origin and offset to the emitter point, 6 little-endian f32
-        /// each) to FILE, to trace the same rays in another scene with --shadow-rays.
+        /// Write the shadow rays (origin and offset to the emitter point, or to the punctual
+        /// light in a scene without emitters; 6 little-endian f32 each) to FILE, to trace the
+        /// same rays in another scene with --shadow-rays.
         #[arg(long = "save-shadow-rays", value_name = "FILE")]
         save_shadow_rays: Option<PathBuf>,
         /// Trace the shadow rays saved in FILE (by --save-shadow-rays) instead of making them.
