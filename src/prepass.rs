@@ -71,6 +71,9 @@ pub struct PrepassOutcome {
     /// The last bounce's grid (`--ic-deep grid`): cells with a mean, and samples taken.
     pub last_bounce_cells: u64,
     pub last_bounce_samples: u64,
+    /// The rays those samples traced (of every kind: their sites' camera rays, their paths'
+    /// segments and shadow rays), counted in `threads` too.
+    pub last_bounce_rays: RayCounts,
 }
 
 impl PrepassOutcome {
@@ -502,7 +505,12 @@ fn run_watched<E>(
         .last_bounce_level()
         .filter(|_| integrator.options.last_bounce_grid);
     if grid_level.is_some() && cache.last_bounce().is_none() {
-        let grid = last_bounce_grid(pass, &mut outcome.threads);
+        let mut sampling = vec![ThreadStats::default(); outcome.threads.len()];
+        let grid = last_bounce_grid(pass, &mut sampling);
+        for (thread, part) in outcome.threads.iter_mut().zip(&sampling) {
+            thread.absorb(part);
+            outcome.last_bounce_rays.add(&part.rays);
+        }
         outcome.last_bounce_cells = grid.cells() as u64;
         outcome.last_bounce_samples = grid.samples();
         cache.set_last_bounce(grid);

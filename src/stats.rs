@@ -169,6 +169,8 @@ pub struct RenderStats {
     /// The last bounce's grid (`--ic-deep grid`): cells with a mean, and the samples taken.
     pub last_bounce_cells: u64,
     pub last_bounce_samples: u64,
+    /// The rays the grid's samples traced (part of `rays`).
+    pub last_bounce_rays: RayStats,
     /// Records pixels had to make after the prepass, each for its own use (a gap it left).
     pub gap_records: u64,
     pub triangles: usize,
@@ -247,6 +249,7 @@ impl RenderStats {
         self.prepass_pixels_sampled = prepass.pixels_sampled;
         self.last_bounce_cells = prepass.last_bounce_cells;
         self.last_bounce_samples = prepass.last_bounce_samples;
+        self.last_bounce_rays = RayStats::from(&prepass.last_bounce_rays);
     }
 
     pub fn add_threads(&mut self, threads: &[ThreadStats]) {

@@ -5,6 +5,7 @@
 use crate::scene::Scene;
 use crate::scene::instancing::{self, HitTriangle};
 use crate::sys::embree::{self, Coherence, Device, InstanceData, TriangleMeshData};
+use crate::sys::prefetch::prefetch;
 use glam::{DVec3, Vec3};
 use std::sync::Arc;
 
@@ -169,6 +170,37 @@ impl Tracer {
         hit.position + hit.geometric_normal * (side * self.epsilon_at(hit.position))
     }
 
+    /// Embree's hit alone, before the surface point is made from it (`surface_hit`): a batch's
+    /// rays are all traced before any of their hits is read.
+    pub fn nearest_hit(&self, org: Vec3, dir: Vec3, coherence: Coherence) -> Option<embree::RayHit> {
+        self.embree
+            .intersect(org.to_array(), dir.to_array(), 0.0, f32::INFINITY, coherence)
+    }
+
+    /// Starts loading the corner indices of the triangle `hit` found (`surface_hit`'s first
+    /// read), for a batch whose hits are read a little later.
+    #[inline]
+    pub fn prefetch_triangle(&self, scene: &Scene, hit: &embree::RayHit) {
+        if hit.instance.is_none() {
+            prefetch(&scene.meshes[hit.geom_id as usize].indices[hit.prim_id as usize]);
+        }
+    }
+
+    /// Starts loading the corners' positions and normals of the triangle `hit` found (reads
+    /// its indices: best after `prefetch_triangle` had time to bring them).
+    #[inline]
+    pub fn prefetch_corners(&self, scene: &Scene, hit: &embree::RayHit) {
+        if hit.instance.is_none() {
+            let mesh = &scene.meshes[hit.geom_id as usize];
+            for i in mesh.indices[hit.prim_id as usize] {
+                prefetch(&mesh.positions[i as usize]);
+                if let Some(normals) = &mesh.normals {
+                    prefetch(&normals[i as usize]);
+                }
+            }
+        }
+    }
+
     pub fn intersect(&self, scene: &Scene, org: Vec3, dir: Vec3, coherence: Coherence) -> Option<SurfaceHit> {
         self.intersect_within(scene, org, dir, f32::INFINITY, coherence)
     }
@@ -189,7 +221,7 @@ impl Tracer {
 
     /// The surface point Embree's `hit` along `dir` found: position, normals, texture
     /// coordinates, material and object.
-    fn surface_hit(&self, scene: &Scene, hit: &embree::RayHit, dir: Vec3) -> SurfaceHit {
+    pub fn surface_hit(&self, scene: &Scene, hit: &embree::RayHit, dir: Vec3) -> SurfaceHit {
         let (triangle, object) = match hit.instance {
             None => {
                 let mesh = &scene.meshes[hit.geom_id as usize];

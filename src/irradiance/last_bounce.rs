@@ -59,7 +59,7 @@ pub struct CellKey(u64);
 #[derive(Clone, Debug, Default)]
 pub struct LastBounceGrid {
     cell: f32,
-    levels: Vec<HashMap<CellKey, Received, BuildHasherDefault<KeyHasher>>>,
+    levels: Vec<CellTable>,
     samples: u64,
 }
 
@@ -118,8 +118,9 @@ impl LastBounceGrid {
                         };
                         (key, received)
                     })
-                    .collect()
+                    .collect::<Vec<_>>()
             })
+            .map(|cells| CellTable::new(&cells))
             .collect();
         LastBounceGrid {
             cell,
@@ -140,13 +141,22 @@ impl LastBounceGrid {
         self.levels
             .iter()
             .enumerate()
-            .find_map(|(level, means)| means.get(&place.key(level)))
-            .copied()
+            .find_map(|(level, means)| means.get(place.key(level)))
+    }
+
+    /// Starts loading what `lookup(p, normal)` will read at the two finest levels (where most
+    /// lookups end), so a batch of hits can have the grid's cache misses under way together.
+    #[inline]
+    pub fn prefetch(&self, p: Vec3, normal: Vec3) {
+        let place = Place::of(self.cell, p, normal);
+        for (level, means) in self.levels.iter().enumerate().take(2) {
+            means.prefetch(place.key(level));
+        }
     }
 
     /// Cells with a mean, at every level.
     pub fn cells(&self) -> usize {
-        self.levels.iter().map(|l| l.len()).sum()
+        self.levels.iter().map(|l| l.len).sum()
     }
 
     /// Samples the grid was built from.
@@ -193,6 +203,80 @@ impl Place {
     fn key(&self, level: usize) -> CellKey {
         let [x, y, z] = self.cell.map(|c| ((c >> level) as u64) & 0xF_FFFF);
         CellKey(x | y << 20 | z << 40 | self.side << 60)
+    }
+}
+
+/// One level's cells and their means: an open-addressed table (linear probing, at most half
+/// full) of 32-byte slots, two to a cache line, whose slot for a key a caller can ask to be
+/// loaded ahead of the lookup (`prefetch`): a hash map's would be hidden behind its API, and
+/// a lookup's time is the one cache miss on its slot.
+#[derive(Clone, Debug, Default)]
+struct CellTable {
+    slots: Vec<Slot>,
+    /// Slots minus one (their count is a power of two).
+    mask: usize,
+    /// Cells held.
+    len: usize,
+}
+
+#[derive(Clone, Copy, Debug)]
+#[repr(C, align(32))]
+struct Slot {
+    key: u64,
+    received: Received,
+}
+
+/// No key is this: a key's side (bits 60 and up) is at most 5.
+const EMPTY: u64 = u64::MAX;
+
+impl CellTable {
+    fn new(cells: &[(CellKey, Received)]) -> CellTable {
+        let size = (2 * cells.len()).next_power_of_two().max(2);
+        let empty = Slot {
+            key: EMPTY,
+            received: Received::default(),
+        };
+        let mut table = CellTable {
+            slots: vec![empty; size],
+            mask: size - 1,
+            len: cells.len(),
+        };
+        for &(key, received) in cells {
+            let mut i = table.home(key);
+            while table.slots[i].key != EMPTY {
+                i = (i + 1) & table.mask;
+            }
+            table.slots[i] = Slot { key: key.0, received };
+        }
+        table
+    }
+
+    /// Where a key's probe starts: the top bits of its mixed value.
+    #[inline]
+    fn home(&self, key: CellKey) -> usize {
+        let mut hasher = KeyHasher::default();
+        hasher.write_u64(key.0);
+        (hasher.finish() >> 32) as usize & self.mask
+    }
+
+    #[inline]
+    fn get(&self, key: CellKey) -> Option<Received> {
+        let mut i = self.home(key);
+        loop {
+            let slot = &self.slots[i];
+            if slot.key == key.0 {
+                return Some(slot.received);
+            }
+            if slot.key == EMPTY {
+                return None;
+            }
+            i = (i + 1) & self.mask;
+        }
+    }
+
+    #[inline]
+    fn prefetch(&self, key: CellKey) {
+        crate::sys::prefetch::prefetch(&self.slots[self.home(key)]);
     }
 }
 

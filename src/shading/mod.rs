@@ -8,6 +8,7 @@
 
 pub mod direct;
 pub mod glossy;
+mod hemisphere_batch;
 pub mod last_bounce;
 pub mod pixel_irradiance;
 pub mod request;
@@ -16,6 +17,7 @@ use crate::image::components::Components;
 use crate::image::framebuffer::Layer;
 use crate::irradiance::IrradianceCache;
 use crate::irradiance::hemisphere::{CellSample, Frame, Hemisphere, cell_direction};
+use crate::irradiance::last_bounce::Received;
 use crate::irradiance::record::Record;
 use crate::sampling::{Rng, basis, cosine_hemisphere, grid_side};
 use crate::scene::Scene;
@@ -268,6 +270,14 @@ pub struct Integrator<'a> {
 /// Passes through fully transparent (alpha-masked) points before a ray gives up.
 const MAX_MASKED_PASSES: u32 = 64;
 
+/// Whether a hit's cell of the last bounce's grid was read before its shading (a batch reads
+/// its hits' cells together: `hemisphere_batch`), and what it held.
+#[derive(Clone, Copy)]
+enum GridRead {
+    Unread,
+    Read(Option<Received>),
+}
+
 impl<'a> Integrator<'a> {
     pub fn new(
         scene: &'a Scene,
@@ -424,15 +434,33 @@ impl<'a> Integrator<'a> {
         coherence: Coherence,
         spread: f32,
     ) -> Option<(SurfaceHit, crate::scene::material::SurfacePoint)> {
-        let mut origin = origin;
-        for _ in 0..MAX_MASKED_PASSES {
-            let hit = self.tracer.intersect(self.scene, origin, dir, coherence)?;
+        let found = self.tracer.nearest_hit(origin, dir, coherence)?;
+        let hit = self.tracer.surface_hit(self.scene, &found, dir);
+        self.first_surface_from(hit, dir, coherence, spread)
+    }
+
+    /// `first_surface` from the point Embree's first hit along `dir` made.
+    fn first_surface_from(
+        &self,
+        hit: SurfaceHit,
+        dir: Vec3,
+        coherence: Coherence,
+        spread: f32,
+    ) -> Option<(SurfaceHit, crate::scene::material::SurfacePoint)> {
+        let mut hit = hit;
+        for pass in 1..=MAX_MASKED_PASSES {
             let material = &self.scene.materials[hit.material as usize];
             let surface = material.over(hit.uv, texture_footprint(&hit, dir, spread), &self.scene.textures);
             if surface.opacity > 0.0 {
                 return Some((hit, surface));
             }
-            origin = self.tracer.spawn_point(&hit, dir);
+            if pass == MAX_MASKED_PASSES {
+                break;
+            }
+            let found = self
+                .tracer
+                .nearest_hit(self.tracer.spawn_point(&hit, dir), dir, coherence)?;
+            hit = self.tracer.surface_hit(self.scene, &found, dir);
         }
         None
     }
@@ -484,9 +512,25 @@ impl<'a> Integrator<'a> {
             // The camera ray's own first hit.
             counts.data.first = Some(hit);
         }
-        let mut c = self.shade(&hit, dir, &surface, state, rng, counts) * surface.opacity;
+        self.light_from(origin, dir, (&hit, &surface), state, GridRead::Unread, rng, counts)
+    }
+
+    /// The light that leaves the first surface `found` along -`dir` towards `origin`, and the
+    /// distance to it: `trace`'s work after the ray found its surface.
+    #[allow(clippy::too_many_arguments)]
+    fn light_from(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        (hit, surface): (&SurfaceHit, &SurfacePoint),
+        state: PathState,
+        grid: GridRead,
+        rng: &mut Rng,
+        counts: &mut Work<'_>,
+    ) -> (Components, f32) {
+        let mut c = self.shade(hit, dir, surface, state, grid, rng, counts) * surface.opacity;
         if surface.opacity < 1.0 {
-            c.specular += self.transmit(&hit, dir, 1.0 - surface.opacity, state, rng, counts);
+            c.specular += self.transmit(hit, dir, 1.0 - surface.opacity, state, rng, counts);
         }
         (c, (hit.position - origin).length())
     }
@@ -520,12 +564,14 @@ impl<'a> Integrator<'a> {
             * jt
     }
 
+    #[allow(clippy::too_many_arguments)]
     fn shade(
         &self,
         hit: &SurfaceHit,
         dir: Vec3,
         surface: &crate::scene::material::SurfacePoint,
         state: PathState,
+        grid: GridRead,
         rng: &mut Rng,
         counts: &mut Work<'_>,
     ) -> Components {
@@ -547,7 +593,10 @@ impl<'a> Integrator<'a> {
         // At the grid's level the diffuse part reads the light the surface receives, direct
         // and indirect, from the grid (`irradiance::last_bounce`): no light pick, no shadow
         // ray, no further path.
-        let grid = has_diffuse.then(|| self.last_bounce_received(hit, state)).flatten();
+        let grid = match grid {
+            GridRead::Read(received) => received,
+            GridRead::Unread => has_diffuse.then(|| self.last_bounce_received(hit, state)).flatten(),
+        };
         if let Some(grid) = grid {
             c.direct = surface.diffuse * grid.direct;
             if has_specular && !self.scene.punctual_lights.is_empty() {
@@ -933,12 +982,25 @@ impl<'a> Integrator<'a> {
                 direction: wi,
             }
         };
-        let mut cells = Vec::with_capacity(n * n);
-        for i in 0..n {
-            for j in 0..n {
-                cells.push(sample(i, j, rng, counts));
+        // Where the hits read the last bounce's grid, the rays go as one batch
+        // (`hemisphere_batch`); elsewhere (no grid: `--ic-deep paths`, or not the grid's
+        // level) each ray's path is followed as it is traced.
+        let has_grid = self.cache.and_then(|c| c.last_bounce()).is_some();
+        let batched = has_grid && Some(next.level) == self.last_bounce_level();
+        let frame = Frame {
+            normal,
+            tangent,
+            bitangent,
+        };
+        let sample_cells = |cells: &[(usize, usize)], rng: &mut Rng, counts: &mut Work<'_>| {
+            if batched {
+                self.grid_level_samples(hit, frame, n, cells, next, rng, counts)
+            } else {
+                cells.iter().map(|&(i, j)| sample(i, j, rng, counts)).collect()
             }
-        }
+        };
+        let every_cell: Vec<_> = (0..n).flat_map(|i| (0..n).map(move |j| (i, j))).collect();
+        let cells = sample_cells(&every_cell, rng, counts);
         let mut hemisphere = Hemisphere {
             n,
             normal,
@@ -947,8 +1009,9 @@ impl<'a> Integrator<'a> {
             cells,
         };
         let extra = cache.settings.extra_samples(state.level);
-        for cell in hemisphere.supersampled_cells(extra) {
-            let s = sample(cell / n, cell % n, rng, counts);
+        let supersampled = hemisphere.supersampled_cells(extra);
+        let again: Vec<_> = supersampled.iter().map(|&cell| (cell / n, cell % n)).collect();
+        for (cell, s) in supersampled.into_iter().zip(sample_cells(&again, rng, counts)) {
             let c = &mut hemisphere.cells[cell];
             c.radiance = (c.radiance + s.radiance) * 0.5;
             c.distance = c.distance.min(s.distance);

@@ -28,6 +28,7 @@ pub mod alloc;
 pub mod embree;
 pub mod image_io;
 pub mod oidn;
+pub mod prefetch;
 pub mod process;
 pub mod scene_io;
 pub mod signals;
