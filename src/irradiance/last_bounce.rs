@@ -317,6 +317,36 @@ mod tests {
     }
 
     #[test]
+    fn the_cell_table_finds_every_key_it_holds_and_no_other() {
+        // Keys as a grid makes them: neighbouring cells, every side, so many share a home.
+        let mut cells = Vec::new();
+        for x in 0..40u64 {
+            for y in 0..30u64 {
+                let key = CellKey(x | y << 20 | (x % 6) << 60);
+                let value = (x * 100 + y) as f32;
+                cells.push((
+                    key,
+                    Received {
+                        direct: Vec3::splat(value),
+                        indirect: Vec3::splat(-value),
+                    },
+                ));
+            }
+        }
+        let table = CellTable::new(&cells);
+        assert_eq!(table.len, cells.len());
+        assert!(table.slots.len() >= 2 * cells.len());
+        for (key, received) in &cells {
+            assert_eq!(table.get(*key), Some(*received));
+            table.prefetch(*key);
+        }
+        for x in 40..80u64 {
+            assert_eq!(table.get(CellKey(x | 5 << 20)), None);
+        }
+        assert_eq!(CellTable::new(&[]).get(CellKey(0)), None);
+    }
+
+    #[test]
     fn a_cell_reads_the_mean_of_its_samples_once_it_has_enough() {
         let p = Vec3::new(0.5, 0.5, 0.5);
         let few: Vec<_> = (0..MIN_SAMPLES - 1).map(|_| at(p, Vec3::Y, 1.0)).collect();

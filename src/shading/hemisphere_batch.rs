@@ -19,6 +19,8 @@
 //! numbers are drawn in another order (every direction's first, then what shading draws: a
 //! path where a grid cell was seldom sampled, glossy highlights, transparency), so images
 //! differ from the unbatched order's by that noise; they still depend on nothing but the seed.
+//! Without a grid (`--ic-deep paths`) nothing is batched: every hit traces a path, whose loads
+//! are not the ones that dominate.
 
 use super::{GridRead, Integrator, PathState, Work};
 use crate::irradiance::hemisphere::{CellSample, Frame, cell_direction};
