@@ -174,38 +174,17 @@ mod tests {
     use crate::irradiance::{CacheSettings, IrradianceCache};
     use crate::sampling::basis;
     use crate::scene::light::EmitterSet;
-    use crate::scene::material::{DEFAULT_SPECULAR_THRESHOLD, Material};
+    use crate::scene::material::Material;
     use crate::scene::{Scene, WorldMesh};
     use crate::shading::{RayCounts, ShadingOptions};
-    use crate::sys::scene_io::{AlphaMode, GltfMaterial};
     use crate::tracer::Tracer;
     use glam::DVec3;
 
-    /// A Lambertian of albedo `base`: its hits draw no random numbers where the grid answers.
-    fn lambertian(base: f32) -> Material {
-        let mut m = Material::from_gltf(
-            &GltfMaterial {
-                name: "wall".into(),
-                base_color: [base, base, base, 1.0],
-                base_color_texture: None,
-                metallic: 0.0,
-                roughness: 1.0,
-                emissive: [0.0; 3],
-                emissive_strength: 1.0,
-                specular_factor: 1.0,
-                specular_color: [1.0; 3],
-                alpha_mode: AlphaMode::Opaque,
-                alpha_cutoff: 0.5,
-                double_sided: true,
-            },
-            DEFAULT_SPECULAR_THRESHOLD,
-        );
-        m.make_lambertian();
-        m
-    }
-
-    /// The closed box [0, 1]^3, one mesh of two triangles per wall, the walls' albedos apart.
+    /// The closed box [0, 1]^3, one mesh of two triangles per wall, white Lambertian walls
+    /// (their hits draw no random numbers where the grid answers).
     fn closed_box() -> Scene {
+        let mut white = Material::gltf_default();
+        white.make_lambertian();
         let corner = |i: u32| [(i & 1) as f32, (i >> 1 & 1) as f32, (i >> 2 & 1) as f32];
         let walls: [[u32; 4]; 6] = [
             [0, 1, 3, 2],
@@ -217,13 +196,12 @@ mod tests {
         ];
         let meshes = walls
             .iter()
-            .enumerate()
-            .map(|(k, w)| WorldMesh {
+            .map(|w| WorldMesh {
                 positions: w.iter().map(|&i| corner(i)).collect(),
                 normals: None,
                 texcoords: None,
                 indices: vec![[0, 1, 2], [0, 2, 3]],
-                material: k as u32,
+                material: 0,
                 object: 0,
             })
             .collect();
@@ -231,7 +209,7 @@ mod tests {
             path: "box.gltf".into(),
             meshes,
             instancing: Default::default(),
-            materials: (0..6).map(|k| lambertian(0.3 + 0.1 * k as f32)).collect(),
+            materials: vec![white],
             textures: Vec::new(),
             punctual_lights: Vec::new(),
             emitters: EmitterSet::default(),
