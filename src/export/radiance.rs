@@ -445,7 +445,6 @@ pub fn export(scene: &Scene, path: &Path) -> Result<ExportSummary, String> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::scene::light::EmitterSet;
     use crate::scene::material::DEFAULT_SPECULAR_THRESHOLD;
     use crate::sys::scene_io::{AlphaMode, GltfMaterial};
 
@@ -479,30 +478,6 @@ mod tests {
             indices: vec![[0, 1, 2], [0, 2, 3]],
             material,
             object: 0,
-        }
-    }
-
-    fn scene(materials: Vec<Material>, meshes: Vec<WorldMesh>, lights: Vec<PunctualLight>) -> Scene {
-        let points = meshes.iter().flat_map(|m| m.positions.iter().map(|&p| Vec3::from(p)));
-        let (lo, hi) = points.fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), p| {
-            (lo.min(p), hi.max(p))
-        });
-        Scene {
-            path: "test.gltf".into(),
-            meshes,
-            instancing: Default::default(),
-            materials,
-            textures: Vec::new(),
-            punctual_lights: lights,
-            emitters: EmitterSet::default(),
-            cameras: Vec::new(),
-            rig: Default::default(),
-            origin: DVec3::ZERO,
-            bounds_min: lo,
-            bounds_max: hi,
-            dropped_triangles: 0,
-            warnings: Vec::new(),
-            names: Default::default(),
         }
     }
 
@@ -616,7 +591,7 @@ mod tests {
     #[test]
     fn lambertian_quad_is_a_plastic_of_its_colour_with_the_same_winding() {
         let m = material(&gltf_material("white wall", [0.5, 0.25, 0.125], 0.0, 0.9, 0.0));
-        let (text, summary) = text(&scene(vec![m], vec![quad(0)], vec![]));
+        let (text, summary) = text(&Scene::of_parts(vec![m], vec![quad(0)], vec![]));
         let prims = parse(&text);
         assert_eq!(summary.materials, 1);
         assert_eq!(summary.polygons, 2);
@@ -688,7 +663,7 @@ mod tests {
         let mut g = gltf_material("lamp", [0.8, 0.8, 0.8], 0.0, 1.0, 1.0);
         g.emissive = [1.0, 0.5, 0.25];
         g.emissive_strength = 17.0;
-        let (text, _) = text(&scene(vec![material(&g)], vec![quad(0)], vec![]));
+        let (text, _) = text(&Scene::of_parts(vec![material(&g)], vec![quad(0)], vec![]));
         let prims = parse(&text);
         assert_eq!(prims[0].kind, "light");
         assert_eq!(prims[0].reals, vec![17.0, 8.5, 4.25]);
@@ -717,7 +692,7 @@ mod tests {
             light(LightType::Spot, "spot"),
             light(LightType::Directional, "sun"),
         ];
-        let s = scene(vec![material(&glass)], vec![quad(0)], lights);
+        let s = Scene::of_parts(vec![material(&glass)], vec![quad(0)], lights);
         let (text, summary) = text(&s);
         assert_eq!(summary.light_sources, 3);
         let prims = parse(&text);
@@ -755,7 +730,7 @@ mod tests {
     fn export_writes_atomically_and_names_failures() {
         let dir = tempfile::tempdir().unwrap();
         let m = material(&gltf_material("wall", [0.5, 0.5, 0.5], 0.0, 1.0, 0.0));
-        let s = scene(vec![m], vec![quad(0)], vec![]);
+        let s = Scene::of_parts(vec![m], vec![quad(0)], vec![]);
         let path = dir.path().join("scene.rad");
         let summary = export(&s, &path).unwrap();
         assert_eq!(summary.polygons, 2);

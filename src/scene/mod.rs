@@ -387,6 +387,35 @@ fn collect_emitters(mesh: &WorldMesh, radiance: Vec3, out: &mut Vec<EmitterTrian
 }
 
 #[cfg(test)]
+impl Scene {
+    /// A scene of world-space meshes, materials and punctual lights made in a test, its bounds
+    /// those of the meshes; no emitters are sampled and no camera is set.
+    pub fn of_parts(materials: Vec<Material>, meshes: Vec<WorldMesh>, lights: Vec<PunctualLight>) -> Scene {
+        let points = meshes.iter().flat_map(|m| m.positions.iter().map(|&p| Vec3::from(p)));
+        let (lo, hi) = points.fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), p| {
+            (lo.min(p), hi.max(p))
+        });
+        Scene {
+            path: "test.gltf".into(),
+            meshes,
+            instancing: Default::default(),
+            materials,
+            textures: Vec::new(),
+            punctual_lights: lights,
+            emitters: EmitterSet::default(),
+            cameras: Vec::new(),
+            rig: Default::default(),
+            origin: DVec3::ZERO,
+            bounds_min: lo,
+            bounds_max: hi,
+            dropped_triangles: 0,
+            warnings: Vec::new(),
+            names: Default::default(),
+        }
+    }
+}
+
+#[cfg(test)]
 mod tests {
     use super::*;
     use crate::sys::scene_io::GltfMesh;

@@ -24,6 +24,7 @@
 
 use super::{GridRead, Integrator, PathState, Work};
 use crate::irradiance::hemisphere::{CellSample, Frame, cell_direction};
+use crate::irradiance::last_bounce::Received;
 use crate::sampling::Rng;
 use crate::scene::material::SurfacePoint;
 use crate::sys::embree::{self, Coherence};
@@ -154,13 +155,12 @@ impl Integrator<'_> {
         &self,
         surfaces: &[Option<(SurfaceHit, SurfacePoint)>],
         next: PathState,
-    ) -> Vec<Option<crate::irradiance::last_bounce::Received>> {
+    ) -> Vec<Option<Received>> {
         surfaces
             .iter()
             .map(|found| {
                 let (hit, surface) = found.as_ref()?;
-                let diffuse = surface.diffuse.max_element() > 0.0;
-                diffuse.then(|| self.last_bounce_received(hit, next)).flatten()
+                self.last_bounce_received(hit, surface, next)
             })
             .collect()
     }
@@ -169,16 +169,14 @@ impl Integrator<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::irradiance::last_bounce::{GridSample, LastBounceGrid, Received};
+    use crate::irradiance::last_bounce::{GridSample, LastBounceGrid};
     use crate::irradiance::record::Metric;
     use crate::irradiance::{CacheSettings, IrradianceCache};
     use crate::sampling::basis;
-    use crate::scene::light::EmitterSet;
     use crate::scene::material::Material;
     use crate::scene::{Scene, WorldMesh};
     use crate::shading::{RayCounts, ShadingOptions};
     use crate::tracer::Tracer;
-    use glam::DVec3;
 
     /// The closed box [0, 1]^3, one mesh of two triangles per wall, white Lambertian walls
     /// (their hits draw no random numbers where the grid answers).
@@ -205,23 +203,7 @@ mod tests {
                 object: 0,
             })
             .collect();
-        Scene {
-            path: "box.gltf".into(),
-            meshes,
-            instancing: Default::default(),
-            materials: vec![white],
-            textures: Vec::new(),
-            punctual_lights: Vec::new(),
-            emitters: EmitterSet::default(),
-            cameras: Vec::new(),
-            rig: Default::default(),
-            origin: DVec3::ZERO,
-            bounds_min: Vec3::ZERO,
-            bounds_max: Vec3::ONE,
-            dropped_triangles: 0,
-            warnings: Vec::new(),
-            names: Default::default(),
-        }
+        Scene::of_parts(vec![white], meshes, Vec::new())
     }
 
     /// A grid over every wall of the box, each cell sampled enough, its light varying with

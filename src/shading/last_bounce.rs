@@ -40,11 +40,12 @@ impl Integrator<'_> {
         (self.options.ambient_bounces >= 2).then(|| self.options.ambient_bounces - 1)
     }
 
-    /// What the grid holds for a diffuse point at `hit` on a path at `state`: the light it
-    /// receives (irradiance over pi), direct and indirect, where the point is at the grid's
-    /// level and its cell was sampled enough. None elsewhere: the point is shaded as a path.
-    pub fn last_bounce_received(&self, hit: &SurfaceHit, state: PathState) -> Option<Received> {
-        if Some(state.level) != self.last_bounce_level() {
+    /// What the grid holds for the point at `hit` (of `surface`) on a path at `state`: the
+    /// light it receives (irradiance over pi), direct and indirect, where the surface is diffuse,
+    /// the point at the grid's level and its cell sampled enough. None elsewhere: the point is
+    /// shaded as a path.
+    pub fn last_bounce_received(&self, hit: &SurfaceHit, surface: &SurfacePoint, state: PathState) -> Option<Received> {
+        if surface.diffuse.max_element() <= 0.0 || Some(state.level) != self.last_bounce_level() {
             return None;
         }
         let grid = self.cache?.last_bounce()?;

@@ -595,7 +595,7 @@ impl<'a> Integrator<'a> {
         // ray, no further path.
         let grid = match grid {
             GridRead::Read(received) => received,
-            GridRead::Unread => has_diffuse.then(|| self.last_bounce_received(hit, state)).flatten(),
+            GridRead::Unread => self.last_bounce_received(hit, surface, state),
         };
         if let Some(grid) = grid {
             c.direct = surface.diffuse * grid.direct;
