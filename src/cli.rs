@@ -233,6 +233,12 @@ pub struct RenderArgs {
     /// edges over the pixel's area at the cost of one ray each, without shading.
     #[arg(long = "emission-samples", default_value_t = 16, allow_negative_numbers = true)]
     pub emission_samples: u32,
+    /// Samples per pixel in the pixels an edge crosses (their four corners do not all see one
+    /// surface: a silhouette, a crease, where objects or materials meet), used when above
+    /// --spp. One ray per pixel corner finds them; a box filter's error is largest there.
+    /// 0: every pixel takes --spp.
+    #[arg(long = "edge-samples", default_value_t = 0, allow_negative_numbers = true)]
+    pub edge_samples: u32,
     /// Before a tile's pixels, make the cache records that the first surfaces on a grid of
     /// this spacing (pixels) need; the pixels then interpolate between records on all their
     /// sides instead of extrapolating from the records earlier pixels made. 0: none. In

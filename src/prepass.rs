@@ -26,10 +26,12 @@ use crate::irradiance::IrradianceCache;
 use crate::irradiance::index::FrozenIndex;
 use crate::irradiance::last_bounce::{self, LastBounceGrid};
 use crate::irradiance::record::{Record, RecordIdentity};
+use crate::render::edges;
 use crate::render::pixel::{RenderSettings, ThreadClock, ThreadStats, pixel_offset};
 use crate::sampling::Rng;
 use crate::scene::view::Camera;
 use crate::shading::{Integrator, RayCounts, Work};
+use crate::tiles::Tile;
 use crate::tracer::SurfaceHit;
 use std::convert::Infallible;
 use std::sync::Mutex;
@@ -50,7 +52,14 @@ const SAMPLE_STREAM: u64 = u32::MAX as u64 + 3;
 pub struct Site {
     pub x: u32,
     pub y: u32,
-    pub sample: Option<u32>,
+    pub sample: Option<PixelSample>,
+}
+
+/// Sample `index` of a pixel's `count` (`render::pixel_offset` places it).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PixelSample {
+    pub index: u32,
+    pub count: u32,
 }
 
 /// What the prepass did.
@@ -185,24 +194,26 @@ fn last_records(snapshot: &FrozenIndex, count: usize) -> std::collections::HashS
         .collect()
 }
 
-/// Rounds of the sample positions of the pixels `needs` marks (the pixels of `window`,
-/// row-major), after the centres: one round per sample number and pixel parity (the parity of
-/// the full image's coordinates). Neighbouring samples (of one pixel, or of adjacent pixels
-/// along an edge) would otherwise all lack a record at once and each make one (conference room
-/// 320x240 at 16 samples: 16,780 duplicates of 20,450 records in one round; records made as
-/// pixels render: 4,800).
-pub fn sample_rounds(window: PixelWindow, samples: u32, needs: &[bool]) -> Vec<Vec<Site>> {
+/// Rounds of the sample positions of the pixels of `window` (`needs`: how many samples each
+/// pixel takes whose positions need sites, row-major; 0: none), after the centres: one round
+/// per sample number and pixel parity (the parity of the full image's coordinates).
+/// Neighbouring samples (of one pixel, or of adjacent pixels along an edge) would otherwise all
+/// lack a record at once and each make one (conference room 320x240 at 16 samples: 16,780
+/// duplicates of 20,450 records in one round; records made as pixels render: 4,800).
+pub fn sample_rounds(window: PixelWindow, needs: &[u32]) -> Vec<Vec<Site>> {
     let a = window.area;
     // The first coordinate at or after `from` whose parity is `parity`.
     let first = |from: u32, parity: u32| from + (from % 2 != parity) as u32;
     let mut out = Vec::new();
-    for s in 0..samples {
+    for s in 0..needs.iter().copied().max().unwrap_or(0) {
         for (px, py) in [(0, 0), (1, 1), (1, 0), (0, 1)] {
             let mut sites = Vec::new();
             for y in (first(a.y0, py)..a.y1).step_by(2) {
                 for x in (first(a.x0, px)..a.x1).step_by(2) {
-                    if window.index(x, y).and_then(|i| needs.get(i)).copied().unwrap_or(false) {
-                        sites.push(Site { x, y, sample: Some(s) });
+                    let count = window.index(x, y).and_then(|i| needs.get(i)).copied().unwrap_or(0);
+                    if s < count {
+                        let sample = Some(PixelSample { index: s, count });
+                        sites.push(Site { x, y, sample });
                     }
                 }
             }
@@ -260,13 +271,6 @@ fn last_bounce_grid(pass: Pass<'_, '_>, stats: &mut [ThreadStats]) -> LastBounce
     LastBounceGrid::from_samples(cell, rows.into_iter().flat_map(|(_, row)| row))
 }
 
-/// Whether two hits lie on one plane (as far as a record is concerned): normals within about
-/// 8 degrees, and each within 2 % of their distance from the other's tangent plane.
-fn same_plane(a: &SurfaceHit, b: &SurfaceHit) -> bool {
-    let offset = b.position - a.position;
-    a.normal.dot(b.normal) > 0.99 && offset.dot(a.normal).abs() <= 0.02 * offset.length()
-}
-
 /// The pixels whose samples may need records the centres' did not make, once every centre
 /// has its records: those with a corner whose eye path reaches a diffuse surface no record
 /// covers yet (between centres, or seen in a mirror from farther apart), or reaches other
@@ -322,7 +326,7 @@ fn pixels_needing_samples(pass: Pass<'_, '_>, snapshot: &FrozenIndex, stats: &mu
                     let (x, i) = ((x - area.x0) as usize, (x - area.x0) as usize + 1);
                     [&top[x], &top[i], &bottom[x], &bottom[i]].iter().any(|(corner, ok)| {
                         !ok || corner.len() != centre.len()
-                            || corner.iter().zip(&centre).any(|(a, b)| !same_plane(b, a))
+                            || corner.iter().zip(&centre).any(|(a, b)| !b.on_plane_of(a))
                     })
                 })
                 .collect();
@@ -333,15 +337,47 @@ fn pixels_needing_samples(pass: Pass<'_, '_>, snapshot: &FrozenIndex, stats: &mu
     needs.into_inner().unwrap_or_else(|e| e.into_inner())
 }
 
+/// Rows of pixels an edge map's strip holds (a strip's pixels share their corner rays).
+const EDGE_STRIP: u32 = 8;
+
+/// The pixels of the area rendered an edge crosses (`render::edges::edge_pixels`), row-major
+/// as `RenderSettings::window`'s: the same corner rays as the final pass's tiles, so the same
+/// answer for every pixel. Strips of rows on every thread.
+fn edge_map(pass: Pass<'_, '_>, stats: &mut [ThreadStats]) -> Vec<bool> {
+    let Pass { integrator, camera, .. } = pass;
+    let window = pass.settings.window(camera);
+    let area = window.area;
+    let next = AtomicUsize::new(0);
+    let edges = Mutex::new(vec![false; window.pixels()]);
+    on_threads(stats, |counts| {
+        loop {
+            let y0 = area.y0 + next.fetch_add(1, Ordering::Relaxed) as u32 * EDGE_STRIP;
+            if y0 >= area.y1 {
+                break;
+            }
+            let strip = Tile {
+                x0: area.x0,
+                y0,
+                x1: area.x1,
+                y1: (y0 + EDGE_STRIP).min(area.y1),
+            };
+            let found = edges::edge_pixels(integrator, camera, &strip, &mut Work::new(counts));
+            let start = window.index(area.x0, y0).expect("a row of the area");
+            edges.lock().unwrap_or_else(|e| e.into_inner())[start..start + found.len()].copy_from_slice(&found);
+        }
+    });
+    edges.into_inner().unwrap_or_else(|e| e.into_inner())
+}
+
 /// The primary ray through a site: the pixel's centre, or exactly the ray its sample takes
 /// in `render::render_pixel` (same stream, same jitter).
 fn site_ray(camera: &Camera, settings: &RenderSettings, site: Site) -> (glam::Vec3, glam::Vec3) {
     match site.sample {
         None => camera.ray(site.x as f32 + 0.5, site.y as f32 + 0.5),
-        Some(s) => {
+        Some(PixelSample { index, count }) => {
             let pixel = site.y as u64 * camera.width as u64 + site.x as u64;
-            let mut rng = Rng::for_sample(settings.seed, pixel, s as u64);
-            let (jx, jy) = pixel_offset(s, settings.spp.max(1), settings.jitter, &mut rng);
+            let mut rng = Rng::for_sample(settings.seed, pixel, index as u64);
+            let (jx, jy) = pixel_offset(index, count, settings.jitter, &mut rng);
             camera.ray(site.x as f32 + jx, site.y as f32 + jy)
         }
     }
@@ -431,7 +467,7 @@ fn site_records(
     let pixel = site.y as u64 * camera.width as u64 + site.x as u64;
     let stream = match site.sample {
         None => LATTICE_STREAM,
-        Some(s) => SAMPLE_STREAM + s as u64,
+        Some(s) => SAMPLE_STREAM + s.index as u64,
     };
     let mut rng = Rng::for_sample(settings.seed, pixel, stream);
     let (origin, dir) = site_ray(camera, settings, site);
@@ -567,10 +603,22 @@ fn run_watched<E>(
             break;
         }
     }
-    if go_on && (settings.spp > 1 || settings.jitter) {
-        let needs = pixels_needing_samples(pass, &snapshot, &mut outcome.threads);
-        outcome.pixels_sampled = needs.iter().filter(|&&n| n).count() as u64;
-        let more = sample_rounds(settings.window(camera), settings.spp, &needs);
+    // The pixels an edge crosses take more samples (`render::edges`), each a site: the final
+    // pass finds the same pixels from the same rays.
+    let spp = settings.spp.max(1);
+    let edges = (go_on && settings.edge_samples > spp).then(|| edge_map(pass, &mut outcome.threads));
+    if go_on && (spp > 1 || settings.jitter || edges.is_some()) {
+        let needs = if spp > 1 || settings.jitter {
+            pixels_needing_samples(pass, &snapshot, &mut outcome.threads)
+        } else {
+            vec![false; settings.window(camera).pixels()]
+        };
+        let edge = |i: usize| edges.as_ref().is_some_and(|e| e[i]);
+        let needs: Vec<u32> = (needs.iter().enumerate())
+            .map(|(i, &n)| if edge(i) { settings.edge_samples } else { spp * n as u32 })
+            .collect();
+        outcome.pixels_sampled = needs.iter().filter(|&&n| n > 0).count() as u64;
+        let more = sample_rounds(settings.window(camera), &needs);
         total += more.len();
         for sites in more {
             run(sites, &mut snapshot, &mut outcome)?;
@@ -679,9 +727,10 @@ mod tests {
                     marked(x, y)
                 })
                 .collect();
+            let counts = |marks: Vec<bool>| marks.iter().map(|&m| samples * m as u32).collect::<Vec<_>>();
             assert_eq!(
-                sample_rounds(window, samples, &own),
-                sample_rounds(PixelWindow::whole(w, h), samples, &whole),
+                sample_rounds(window, &counts(own)),
+                sample_rounds(PixelWindow::whole(w, h), &counts(whole)),
                 "{area:?}"
             );
         }
@@ -698,24 +747,29 @@ mod tests {
 
     #[test]
     fn the_samples_of_marked_pixels_get_rounds_of_their_own() {
-        let (w, h, samples) = (5u32, 4u32, 4u32);
-        let needs: Vec<bool> = (0..w * h).map(|i| i % 3 != 0).collect();
-        let rounds = sample_rounds(PixelWindow::whole(w, h), samples, &needs);
-        // Every sample of every marked pixel once, and nothing else.
-        let marked = needs.iter().filter(|&&n| n).count() as u32;
+        let (w, h) = (5u32, 4u32);
+        // Most marked pixels take 4 samples, some (as edge pixels do) 9, the rest none.
+        let needs: Vec<u32> = (0..w * h)
+            .map(|i| match (i % 3, i % 5) {
+                (0, _) => 0,
+                (_, 0) => 9,
+                _ => 4,
+            })
+            .collect();
+        let rounds = sample_rounds(PixelWindow::whole(w, h), &needs);
+        // Every sample of every marked pixel once, placed among its own count, and nothing else.
         assert_eq!(
             rounds.iter().map(|r| r.len()).sum::<usize>(),
-            (marked * samples) as usize
+            needs.iter().sum::<u32>() as usize
         );
-        assert!(
-            rounds
-                .iter()
-                .flatten()
-                .all(|s| needs[(s.y * w + s.x) as usize] && s.sample.is_some())
-        );
+        assert!(rounds.iter().flatten().all(|s| {
+            let count = needs[(s.y * w + s.x) as usize];
+            s.sample.is_some_and(|p| p.count == count && p.index < count)
+        }));
+        let index = |s: &Site| s.sample.map(|p| p.index);
         // Within a round, one sample number and no two neighbouring pixels.
         for round in &rounds {
-            assert!(round.iter().all(|s| s.sample == round[0].sample));
+            assert!(round.iter().all(|s| index(s) == index(&round[0])));
             for (i, a) in round.iter().enumerate() {
                 for b in &round[i + 1..] {
                     assert!(a.x.abs_diff(b.x).max(a.y.abs_diff(b.y)) >= 2, "{a:?} {b:?}");

@@ -51,6 +51,7 @@ pub struct ThreadReport {
     pub hits: u64,
     pub duplicates: u64,
     pub gap_records: u64,
+    pub edge_pixels: u64,
     /// Time computing indirect diffuse light (the paper's T_amb) and the rest (T_notamb).
     pub t_amb_s: f64,
     pub t_notamb_s: f64,
@@ -76,6 +77,7 @@ impl ThreadReport {
             hits: c.hits,
             duplicates: c.duplicates,
             gap_records: c.gap_records,
+            edge_pixels: c.edge_pixels,
             t_amb_s,
             t_notamb_s: (t.cpu_s - t_amb_s).max(0.0),
             rays: RayStats::from(c),
@@ -101,6 +103,9 @@ pub struct RankReport {
     /// Records made after a prepass for one pixel's own use (see `RenderStats::gap_records`).
     #[serde(default)]
     pub gap_records: u64,
+    /// Pixels that took `--edge-samples` (see `RenderStats::edge_pixels`).
+    #[serde(default)]
+    pub edge_pixels: u64,
     pub lookups: u64,
     pub hits: u64,
     pub t_amb_s: f64,
@@ -173,6 +178,8 @@ pub struct RenderStats {
     pub last_bounce_rays: RayStats,
     /// Records pixels had to make after the prepass, each for its own use (a gap it left).
     pub gap_records: u64,
+    /// Pixels an edge crosses, which took `--edge-samples` samples instead of `--spp`.
+    pub edge_pixels: u64,
     pub triangles: usize,
     pub dropped_triangles: usize,
     pub load_s: f64,
@@ -263,6 +270,7 @@ impl RenderStats {
         self.hits = total.hits;
         self.duplicates = total.duplicates;
         self.gap_records = total.gap_records;
+        self.edge_pixels = total.edge_pixels;
         self.t_amb_s = self.per_thread.iter().map(|t| t.t_amb_s).sum();
         self.t_notamb_s = self.per_thread.iter().map(|t| t.t_notamb_s).sum();
         self.rays = RayStats::from(&total);
@@ -279,6 +287,7 @@ impl RenderStats {
             tiles: self.per_thread.iter().map(|t| t.tiles).sum(),
             records_computed: self.records_computed,
             gap_records: self.gap_records,
+            edge_pixels: self.edge_pixels,
             lookups: self.lookups,
             hits: self.hits,
             t_amb_s: self.t_amb_s,
@@ -293,6 +302,7 @@ impl RenderStats {
     pub fn add_ranks(&mut self, ranks: Vec<RankReport>) {
         self.records_computed = ranks.iter().map(|r| r.records_computed).sum();
         self.gap_records = ranks.iter().map(|r| r.gap_records).sum();
+        self.edge_pixels = ranks.iter().map(|r| r.edge_pixels).sum();
         self.lookups = ranks.iter().map(|r| r.lookups).sum();
         self.hits = ranks.iter().map(|r| r.hits).sum();
         self.t_amb_s = ranks.iter().map(|r| r.t_amb_s).sum();

@@ -63,6 +63,16 @@ pub struct SurfaceHit {
     pub prim_id: u32,
 }
 
+impl SurfaceHit {
+    /// Whether two hits lie on one plane (as far as a record or a pixel's corners are
+    /// concerned): normals within about 8 degrees, and each within 2 % of their distance from
+    /// the other's tangent plane.
+    pub fn on_plane_of(&self, other: &SurfaceHit) -> bool {
+        let offset = other.position - self.position;
+        self.normal.dot(other.normal) > 0.99 && offset.dot(self.normal).abs() <= 0.02 * offset.length()
+    }
+}
+
 /// Passes through transparent surfaces a single ray may make before we call it blocked;
 /// bounds the loop on pathological stacks of coplanar cut-outs.
 const MAX_TRANSPARENT_PASSES: u32 = 64;

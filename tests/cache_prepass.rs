@@ -76,11 +76,25 @@ fn the_image_is_the_same_whatever_the_threads_and_tiles() {
         "2",
         "--ic-records",
     ];
+    // And with more samples in the pixels an edge crosses, found from corner rays that tiles
+    // share within themselves only.
+    let edges = [&common[..], &["--edge-samples", "6"]].concat();
+    for (common, label) in [(&common[..], "plain"), (&edges[..], "edges")] {
+        images_alike_whatever_the_threads_and_tiles(dir.path(), &scene, common, label);
+    }
+}
+
+fn images_alike_whatever_the_threads_and_tiles(
+    dir: &std::path::Path,
+    scene: &std::path::Path,
+    common: &[&str],
+    label: &str,
+) {
     let runs = [("1", "32x32"), ("2", "8x8"), ("2", "13x7")];
     let mut images = Vec::new();
     for (threads, tile) in runs {
-        let args = [&common[..], &["--threads", threads, "--tile", tile]].concat();
-        let (image, stats) = render_to(dir.path(), &scene, &format!("t{threads}_{tile}"), &args);
+        let args = [common, &["--threads", threads, "--tile", tile]].concat();
+        let (image, stats) = render_to(dir, scene, &format!("{label}_t{threads}_{tile}"), &args);
         assert_eq!(stats["cache_build"], "prepass");
         assert!(stats["prepass_records"].as_u64().unwrap() > 10, "{stats}");
         assert_eq!(
@@ -90,11 +104,18 @@ fn the_image_is_the_same_whatever_the_threads_and_tiles() {
         images.push((threads, tile, image, stats));
     }
     let (_, _, first, first_stats) = &images[0];
+    let edge_pixels = first_stats["edge_pixels"].as_u64().unwrap();
+    assert_eq!(
+        edge_pixels > 0,
+        common.contains(&"--edge-samples"),
+        "{label}: {edge_pixels} edge pixels"
+    );
     for (threads, tile, image, stats) in &images[1..] {
         assert!(
             same_pixels(first, image),
-            "{threads} threads, tiles {tile}: the image differs from 1 thread's with 32x32 tiles"
+            "{label}: {threads} threads, tiles {tile}: the image differs from 1 thread's with 32x32 tiles"
         );
+        assert_eq!(stats["edge_pixels"], first_stats["edge_pixels"]);
         assert_eq!(stats["records_computed"], first_stats["records_computed"]);
     }
 }

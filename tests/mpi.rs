@@ -203,8 +203,10 @@ fn the_prepass_gives_every_mode_the_serial_image() {
     let _one_job = one_job_at_a_time();
     let dir = tempfile::tempdir().unwrap();
     // The Cornell box with its mirror: the prepass follows the mirror to the walls it shows.
+    // More samples where an edge crosses a pixel: every rank finds the same pixels, and the
+    // prepass places the records their samples need.
     let scene = project_dir().join("scenes/cornell.gltf");
-    let prepass = ["--ic-build", "prepass", "-ab", "2", "--spp", "2"];
+    let prepass = ["--ic-build", "prepass", "-ab", "2", "--spp", "2", "--edge-samples", "5"];
     let serial = render(
         dir.path(),
         &scene,
@@ -215,7 +217,9 @@ fn the_prepass_gives_every_mode_the_serial_image() {
     assert_eq!(serial.stats["cache_build"], "prepass");
     let records = u(&serial.stats, "prepass_records");
     let gaps = u(&serial.stats, "gap_records");
+    let edge_pixels = u(&serial.stats, "edge_pixels");
     assert!(records > 20);
+    assert!(edge_pixels > 0);
     // A few samples reach a surface the prepass did not cover (measured: 4 here).
     assert!(gaps * 20 < records, "{gaps} gaps for {records} records");
     for (mode, np) in [
@@ -242,6 +246,7 @@ fn the_prepass_gives_every_mode_the_serial_image() {
         );
         // Every record is made once, by one worker; afterwards only the same gaps' records.
         assert_eq!(u(s, "gap_records"), gaps, "{name}");
+        assert_eq!(u(s, "edge_pixels"), edge_pixels, "{name}");
         assert_eq!(u(s, "records_computed"), records + gaps, "{name}");
         // The prepass's messages are in the ranks' books, and the books balance.
         let ranks = s["per_rank"].as_array().unwrap();

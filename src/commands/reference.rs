@@ -72,6 +72,9 @@ pub fn run(args: &ReferenceArgs) -> CommandResult {
     // Every pass places its samples anew over each pixel: the reference integrates the pixel's
     // area, as a box-filtered render converges to.
     job.settings.jitter = true;
+    // Every pixel alike: the passes' mean is the box filter's integral with no pixel weighed
+    // by more samples than its neighbours.
+    job.settings.edge_samples = 0;
     let base_seed = job.settings.seed;
     let (w, h) = (render_args.width, render_args.height);
     let mut halves = [FrameBuffer::new(w, h), FrameBuffer::new(w, h)];

@@ -188,6 +188,7 @@ pub fn part_settings(args: &RenderArgs) -> String {
     let aovs: Vec<&str> = args.aovs().iter().map(|a| a.name()).collect();
     items.extend([
         format!("--emission-samples {}", args.emission_samples),
+        format!("--edge-samples {}", args.edge_samples),
         format!("--tile {}", args.tile),
         format!("view {:?}", args.view),
         format!(

@@ -229,6 +229,7 @@ impl Setup<'_> {
             tiles: reports.iter().map(|t| t.tiles).sum(),
             records_computed: reports.iter().map(|t| t.records_computed).sum(),
             gap_records: reports.iter().map(|t| t.gap_records).sum(),
+            edge_pixels: reports.iter().map(|t| t.edge_pixels).sum(),
             lookups: reports.iter().map(|t| t.lookups).sum(),
             hits: reports.iter().map(|t| t.hits).sum(),
             t_amb_s: reports.iter().map(|t| t.t_amb_s).sum(),

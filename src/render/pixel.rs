@@ -5,6 +5,7 @@
 use crate::image::components::Components;
 use crate::image::data::{PixelData, PixelDataSum, SampleHit};
 use crate::image::framebuffer::PixelValue;
+use crate::render::edges;
 use crate::render::noise::PixelNoise;
 use crate::sampling::Rng;
 use crate::scene::footprint::EmitterFootprint;
@@ -29,6 +30,8 @@ pub struct RenderSettings {
     /// filter's error is largest, and these rays cost no shading. Used when it exceeds `spp`.
     pub emission_samples: u32,
     pub emission_footprint: Option<Arc<EmitterFootprint>>,
+    /// Samples in the pixels an edge crosses (`edges`), used when it exceeds `spp`.
+    pub edge_samples: u32,
     /// Spacing in pixels of the overture's grid (see `Integrator::prepare_records`); 0: none.
     pub overture: u32,
     /// Place every cache record before shading (`prepass`); the pixels then only read the
@@ -134,18 +137,18 @@ fn sample_hit(integrator: &Integrator<'_>, camera: &Camera, data: &SampleData) -
     })
 }
 
-/// The components of one pixel: the mean of its samples, each with its own primary ray, direct
+/// The components of one pixel: the mean of its `samples`, each with its own primary ray, direct
 /// light and cache lookup (a box filter over the pixel's area); and its data layers, from the
 /// same samples' camera rays.
 pub fn render_pixel(
     integrator: &Integrator<'_>,
     camera: &Camera,
     settings: &RenderSettings,
-    x: u32,
-    y: u32,
+    (x, y): (u32, u32),
+    samples: u32,
     counts: &mut RayCounts,
 ) -> (Components, PixelData) {
-    let samples = settings.spp.max(1);
+    let samples = samples.max(1);
     let pixel_index = y as u64 * camera.width as u64 + x as u64;
     // Only worth it when the extra rays outnumber the pixel samples, which see emission anyway.
     let split_emission = settings.emission_samples > samples
@@ -264,10 +267,21 @@ pub fn render_tile(
             }
         }
     }
+    let spp = settings.spp.max(1);
+    let edges =
+        (settings.edge_samples > spp).then(|| edges::edge_pixels(integrator, camera, tile, &mut Work::new(counts)));
     for (x, y) in pixel_order(tile, if grid_first { stride } else { 0 }) {
         let before = counts.records_level0;
-        let (components, data) = render_pixel(integrator, camera, settings, x, y, counts);
-        let value = &mut values[(y - tile.y0) as usize * width + (x - tile.x0) as usize];
+        let index = (y - tile.y0) as usize * width + (x - tile.x0) as usize;
+        let samples = match &edges {
+            Some(edges) if edges[index] => {
+                counts.edge_pixels += 1;
+                settings.edge_samples
+            }
+            _ => spp,
+        };
+        let (components, data) = render_pixel(integrator, camera, settings, (x, y), samples, counts);
+        let value = &mut values[index];
         value.components = components;
         value.data = data;
         value.records += (counts.records_level0 - before) as f32;

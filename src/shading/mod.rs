@@ -95,6 +95,8 @@ pub struct RayCounts {
     /// Level-0 records a pixel had to make after the prepass (a gap it left: surfaces seen
     /// only through mirrors or glass), used for that pixel alone.
     pub gap_records: u64,
+    /// Pixels an edge crosses that took `--edge-samples` (`render::edges`).
+    pub edge_pixels: u64,
     /// Seconds spent computing L_a (lookups and new records), the paper's T_amb.
     pub t_amb: f64,
     /// Indirect diffuse values left to a PA as requests (component mode's PRs).
@@ -187,6 +189,7 @@ impl RayCounts {
         self.duplicates += o.duplicates;
         self.records_level0 += o.records_level0;
         self.gap_records += o.gap_records;
+        self.edge_pixels += o.edge_pixels;
         self.t_amb += o.t_amb;
         self.deferred += o.deferred;
     }
@@ -463,6 +466,15 @@ impl<'a> Integrator<'a> {
             hit = self.tracer.surface_hit(self.scene, &found, dir);
         }
         None
+    }
+
+    /// The first surface a camera ray stops at (alpha-masked points passed through): one ray,
+    /// no shading, counted as a primary ray. What tells the pixels an edge crosses
+    /// (`render::edges`).
+    pub fn eye_surface(&self, origin: Vec3, dir: Vec3, counts: &mut Work<'_>) -> Option<SurfaceHit> {
+        counts.primary += 1;
+        self.first_surface(origin, dir, Coherence::Coherent, 0.0)
+            .map(|(hit, _)| hit)
     }
 
     /// The emission of the first surface a primary ray stops at (times its opacity, as
