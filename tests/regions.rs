@@ -73,10 +73,13 @@ fn regions_with_the_prepass_cache_merge_into_the_full_render_without_seams() {
     let d = dir.path();
     let cache = d.join("cache.icc");
     let cache_stats = d.join("cache.json");
-    // The prepass task.
+    // The prepass task, with more samples where edges cross pixels: its records serve them too,
+    // and every region finds the same edge pixels from the same corner rays.
     let scene = cornell();
+    let edges = ["--edge-samples", "4"];
     let mut args = vec!["cache", s(&scene), "-af", s(&cache), "--stats", s(&cache_stats)];
     args.extend(SIZE);
+    args.extend(edges);
     let out = run_ok(&args);
     assert!(stderr(&out).contains("records made"), "{}", stderr(&out));
     let made: Value = serde_json::from_str(&std::fs::read_to_string(&cache_stats).unwrap()).unwrap();
@@ -85,9 +88,12 @@ fn regions_with_the_prepass_cache_merge_into_the_full_render_without_seams() {
     let bytes_before = std::fs::read(&cache).unwrap();
     let mtime_before = std::fs::metadata(&cache).unwrap().modified().unwrap();
 
-    let shared = [&SIZE[..], &["-af", s(&cache), "--af-read-only"]].concat();
+    let shared = [&SIZE[..], &edges, &["-af", s(&cache), "--af-read-only"]].concat();
     let (_, full_stats) = render_to(d, &cornell(), "full", &shared);
     assert_eq!(records_in(&full_stats), (0, 0, 0), "the full render made records");
+    let edge_pixels = full_stats["edge_pixels"].as_u64().unwrap();
+    assert!(edge_pixels > 0, "{full_stats}");
+    let mut parts_edge_pixels = 0;
     let mut names = Vec::new();
     for (k, region) in SPLIT.iter().enumerate() {
         let name = format!("shared{k}");
@@ -95,6 +101,7 @@ fn regions_with_the_prepass_cache_merge_into_the_full_render_without_seams() {
         // The region tasks only read the prepass's records: none made in their prepass or final pass.
         assert_eq!(records_in(&stats), (0, 0, 0), "{name} made records");
         assert_eq!(stats["records_loaded"].as_u64(), Some(records), "{name}");
+        parts_edge_pixels += stats["edge_pixels"].as_u64().unwrap();
         // The part's data window is its region inside the whole display window.
         let part = read_image_with_header(&d.join(format!("{name}.exr"))).unwrap();
         assert_eq!(
@@ -114,6 +121,7 @@ fn regions_with_the_prepass_cache_merge_into_the_full_render_without_seams() {
         assert_eq!(part.attribute("icrender/region"), Some(named.join(" ").as_str()));
         names.push(name);
     }
+    assert_eq!(parts_edge_pixels, edge_pixels);
     // Read-only: the file is exactly as the prepass left it.
     assert_eq!(std::fs::read(&cache).unwrap(), bytes_before);
     assert_eq!(std::fs::metadata(&cache).unwrap().modified().unwrap(), mtime_before);
