@@ -228,8 +228,9 @@ pub fn pixel_order(tile: &Tile, grid_stride: u32) -> Vec<(u32, u32)> {
     first
 }
 
-/// Renders a tile's pixels in scanline order. `after_pixel` runs after each pixel (the MPI
-/// modes share cache records there).
+/// Renders a tile's pixels in scanline order, each with `--spp` samples, or `--edge-samples`
+/// where an edge crosses it (`edges`, found from the tile's own corner rays first).
+/// `after_pixel` runs after each pixel (the MPI modes share cache records there).
 ///
 /// With the overture on, a rank with a cache of its own first makes the records at the tile's
 /// grid pixels (`Integrator::prepare_records`). A rank that defers its misses (a component-mode
