@@ -268,6 +268,7 @@ impl Job {
             jitter: false,
             emission_samples: args.emission_samples,
             edge_samples: args.edge_samples,
+            edge_map: None,
             // In every mode; in component mode the grid orders each PA's queue instead
             // (parallel::component::order). The prepass places every record before the
             // pixels, which leaves an overture nothing to do.

@@ -83,6 +83,10 @@ pub struct PrepassOutcome {
     /// The rays those samples traced (of every kind: their sites' camera rays, their paths'
     /// segments and shadow rays), counted in `threads` too.
     pub last_bounce_rays: RayCounts,
+    /// The pixels an edge crosses (`edge_map`), when `--edge-samples` asked for them: the final
+    /// pass takes them from here (`RenderSettings::edge_map`) instead of tracing the corners
+    /// again.
+    pub edges: Option<std::sync::Arc<Vec<bool>>>,
 }
 
 impl PrepassOutcome {
@@ -633,6 +637,7 @@ fn run_watched<E>(
     }
     // The cache is complete: from now on lookups read its lock-free copy.
     cache.freeze();
+    outcome.edges = edges.map(std::sync::Arc::new);
     outcome.seconds = start.elapsed().as_secs_f64();
     Ok(outcome)
 }

@@ -358,6 +358,8 @@ pub fn run(job_in: &ParallelJob<'_>) -> CommandResult {
             .unwrap_or_else(|e| end_job(&comm, job.cache.as_ref(), &e))
     });
     job.prepass_threads = prepass.as_ref().map(|p| p.threads.clone()).unwrap_or_default();
+    // The tiles take the prepass's edge pixels instead of tracing their corners again.
+    job.settings.edge_map = prepass.as_ref().and_then(|p| p.edges.clone());
     // Component mode's PAs and PRs: every rank chooses alike from the same scene and options.
     let roles = (job_in.mode == Mode::Component).then(|| {
         let needed = job.cache.is_some() || (job.shading.ambient_bounces > 0 && job.scene.needs().diffuse);

@@ -50,6 +50,18 @@ pub fn render_resumable(
     let watch = watch_prepass(progress);
     let prepass =
         (settings.prepass && integrator.cache.is_some()).then(|| prepass::run(integrator, camera, settings, &watch));
+    // The pixels an edge crosses, as the prepass found them.
+    let with_edges;
+    let settings = match prepass.as_ref().and_then(|p| p.edges.clone()) {
+        Some(map) => {
+            with_edges = RenderSettings {
+                edge_map: Some(map),
+                ..settings.clone()
+            };
+            &with_edges
+        }
+        None => settings,
+    };
     // After the prepass the pixels only read the cache (see `Integrator::frozen`).
     let reading = Integrator {
         frozen: prepass.is_some(),

@@ -32,6 +32,9 @@ pub struct RenderSettings {
     pub emission_footprint: Option<Arc<EmitterFootprint>>,
     /// Samples in the pixels an edge crosses (`edges`), used when it exceeds `spp`.
     pub edge_samples: u32,
+    /// Those pixels of `window`, row-major, as the prepass found them (`PrepassOutcome::edges`);
+    /// None: each tile finds its own from the same corner rays.
+    pub edge_map: Option<Arc<Vec<bool>>>,
     /// Spacing in pixels of the overture's grid (see `Integrator::prepare_records`); 0: none.
     pub overture: u32,
     /// Place every cache record before shading (`prepass`); the pixels then only read the
@@ -229,7 +232,7 @@ pub fn pixel_order(tile: &Tile, grid_stride: u32) -> Vec<(u32, u32)> {
 }
 
 /// Renders a tile's pixels in scanline order, each with `--spp` samples, or `--edge-samples`
-/// where an edge crosses it (`edges`, found from the tile's own corner rays first).
+/// where an edge crosses it (`edges`: the prepass's map, else the tile's own corner rays first).
 /// `after_pixel` runs after each pixel (the MPI modes share cache records there).
 ///
 /// With the overture on, a rank with a cache of its own first makes the records at the tile's
@@ -269,8 +272,16 @@ pub fn render_tile(
         }
     }
     let spp = settings.spp.max(1);
-    let edges =
-        (settings.edge_samples > spp).then(|| edges::edge_pixels(integrator, camera, tile, &mut Work::new(counts)));
+    let edges = (settings.edge_samples > spp).then(|| match &settings.edge_map {
+        Some(map) => {
+            let window = settings.window(camera);
+            let pixels = (tile.y0..tile.y1).flat_map(|y| (tile.x0..tile.x1).map(move |x| (x, y)));
+            pixels
+                .map(|(x, y)| window.index(x, y).is_some_and(|i| map[i]))
+                .collect()
+        }
+        None => edges::edge_pixels(integrator, camera, tile, &mut Work::new(counts)),
+    });
     for (x, y) in pixel_order(tile, if grid_first { stride } else { 0 }) {
         let before = counts.records_level0;
         let index = (y - tile.y0) as usize * width + (x - tile.x0) as usize;
