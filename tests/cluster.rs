@@ -426,18 +426,22 @@ fn every_mode_across_hosts_matches_serial_and_its_bytes_match_the_kernel_counts(
 /// shows the render is under way (the master appends what the workers sync).
 fn long_render<'a>(mode: &'a str, cache: &'a str, timeout: &'a str) -> Vec<&'a str> {
     // Records made as tiles render: the faults land in the modes' own sharing and gathering
-    // (a fault during the prepass has a test of its own).
+    // (a fault during the prepass has a test of its own). Long enough that a cut made once the
+    // file holds its first records always lands mid-render: about 5 s of work for 4 ranks on 2
+    // cores, the first records in the file after about 1 s. (At 192x192 and -ad 512 the whole
+    // render took 0.45 s, and a CI run once cut the PA's link only after every request had been
+    // computed, when nothing but its statistics was missing.)
     vec![
         "--ic-build",
         "progressive",
         "-x",
-        "192",
+        "320",
         "-y",
-        "192",
+        "320",
         "-ab",
         "2",
         "-ad",
-        "512",
+        "4096",
         "-aa",
         "0.1",
         "--tile",
