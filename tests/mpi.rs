@@ -543,8 +543,11 @@ fn load_balancing_resolves_a_forced_imbalance() {
 }
 
 /// A PA that runs dry once every tile is out gets a share of another PA's queue, as an idle PR
-/// does. Three tiles for two PAs (tile i goes to PA i mod 2): the first PA gets twice the
-/// second's work, so the second runs dry while the first still has a long queue.
+/// does. Three rows of tiles for two PAs (bands of rows: the first two to the first PA): the
+/// first PA gets twice the second's work, so one of them runs dry while the other still has a
+/// long queue (the PR's help may drain the first sooner). A PA that reported its empty queue
+/// before the last tile went out is dry too: 1 run in 5 it never got a share before the master
+/// marked such PAs when the PRs go idle.
 #[test]
 fn a_pa_that_runs_dry_takes_a_share_of_another_pas_queue() {
     let _one_job = one_job_at_a_time();

@@ -58,6 +58,14 @@ impl Sharing for ComponentSharing {
                 if let Some(share) = self.balancer.pr_idle(source) {
                     self.order(core, share);
                 }
+                // A PR idles once no tile is left: the PAs that reported an empty queue before
+                // are dry now.
+                if core.queue.all_out() {
+                    self.balancer.all_tiles_out();
+                    for share in self.balancer.rebalance() {
+                        self.order(core, share);
+                    }
+                }
             }
             Message::RecordsUp { thread, records } => core.sync(source, thread, records),
             Message::PaStatus { queue, done, records } => {
