@@ -306,7 +306,12 @@ fn cornell() -> PathBuf {
 
 #[test]
 fn a_killed_render_resumes_without_redoing_tiles() {
-    let extra = ["-x", "160", "-y", "160", "-ab", "2", "-ad", "256", "--tile", "16x16"];
+    // 32 samples a pixel make the tiles long enough to be killed among (about 0.9 s for the
+    // 100 tiles after the prepass): at 1 they took 0.04 s, the kills often came only after the
+    // last, and once just 2 of 5 landed between the first finished tile and the last.
+    let extra = [
+        "-x", "160", "-y", "160", "-ab", "2", "-ad", "256", "--tile", "16x16", "--spp", "32",
+    ];
     let victims = [("process", None); KILLS];
     kill_and_resume(Launch::Single, &cornell(), &extra, &victims, 160, 16);
 }
