@@ -331,6 +331,10 @@ fn a_killed_component_render_resumes_whoever_died() {
         "16x16",
         "--mode",
         "component",
+        // Tiles long enough to be killed among, as in the single-process test (at 1 sample a
+        // pixel the 64 tiles took 0.04 s, and only 3 of 5 kills landed among them).
+        "--spp",
+        "32",
     ];
     // 4 ranks: the master (0), one PA (1), two PRs (2, 3); and mpirun itself.
     let victims = [
