@@ -46,7 +46,10 @@ fn render(dir: &Path, scene: &Path, name: &str, np: Option<usize>, extra: &[&str
         "--timeout",
         "60",
     ];
-    args.extend_from_slice(&["--stats", stats.to_str().unwrap(), "-x", "48", "-y", "48"]);
+    args.extend_from_slice(&["--stats", stats.to_str().unwrap(), "-x", "48"]);
+    if !extra.contains(&"-y") {
+        args.extend_from_slice(&["-y", "48"]);
+    }
     if !extra.contains(&"-ad") {
         args.extend_from_slice(&["-ad", "64"]);
     }
@@ -547,11 +550,14 @@ fn load_balancing_resolves_a_forced_imbalance() {
 }
 
 /// A PA that runs dry once every tile is out gets a share of another PA's queue, as an idle PR
-/// does. Three rows of tiles for two PAs (bands of rows: the first two to the first PA): the
-/// first PA gets twice the second's work, so one of them runs dry while the other still has a
-/// long queue (the PR's help may drain the first sooner). A PA that reported its empty queue
-/// before the last tile went out is dry too: 1 run in 5 it never got a share before the master
-/// marked such PAs when the PRs go idle.
+/// does. Three rows of tiles for two PAs (bands of rows: the first two to the first PA), the
+/// last two pixels tall: the second PA gets a few requests, runs dry while the first still has
+/// a long queue, even with the PR helping the first. (With three equal rows, twice the work,
+/// the PR's help drained both PAs at about the same moment: no share was left for a dry PA in
+/// 1 run of 4 with other work on the machine; with a last row of 8 pixels, in 2 of 10, its
+/// requests slower than the first PA's; with 2 pixels, 0 of 8.) A PA that reported its empty
+/// queue before the last tile went out is dry too: 1 run in 5 it never got a share before the
+/// master marked such PAs when the PRs go idle.
 #[test]
 fn a_pa_that_runs_dry_takes_a_share_of_another_pas_queue() {
     let _one_job = one_job_at_a_time();
@@ -563,7 +569,18 @@ fn a_pa_that_runs_dry_takes_a_share_of_another_pas_queue() {
         &scene,
         "dry",
         Some(4),
-        &["--mode", "component", "--pa", "2", "--tile", "48x16", "-ad", "4096"],
+        &[
+            "--mode",
+            "component",
+            "--pa",
+            "2",
+            "--tile",
+            "48x16",
+            "-y",
+            "34",
+            "-ad",
+            "4096",
+        ],
     );
     let s = &run.stats;
     // Whatever the PAs forwarded and the PR did not compute went to the other PA.
