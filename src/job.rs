@@ -266,6 +266,7 @@ impl Job {
             tile_height,
             threads,
             jitter: false,
+            texture_footprint: true,
             emission_samples: args.emission_samples,
             edge_samples: args.edge_samples,
             edge_map: None,

@@ -27,7 +27,7 @@ use crate::irradiance::index::FrozenIndex;
 use crate::irradiance::last_bounce::{self, LastBounceGrid};
 use crate::irradiance::record::{Record, RecordIdentity};
 use crate::render::edges;
-use crate::render::pixel::{RenderSettings, ThreadClock, ThreadStats, pixel_offset};
+use crate::render::pixel::{RenderSettings, ThreadClock, ThreadStats, eye_spread, pixel_offset};
 use crate::sampling::Rng;
 use crate::scene::view::Camera;
 use crate::shading::{Integrator, RayCounts, Work};
@@ -296,7 +296,8 @@ fn pixels_needing_samples(pass: Pass<'_, '_>, snapshot: &FrozenIndex, stats: &mu
         let (origin, dir) = camera.ray(x, y);
         // Glossy directions from a fixed stream: the same rays on every process.
         let mut rng = Rng::new(0, ((y as u64) << 32) | x.to_bits() as u64);
-        integrator.record_sites(origin, dir, &mut rng, &mut Work::new(counts))
+        let spread = eye_spread(camera, pass.settings, dir, 1);
+        integrator.record_sites(origin, dir, spread, &mut rng, &mut Work::new(counts))
     };
     let covered = |hits: &[SurfaceHit], counts: &mut RayCounts| {
         hits.iter().all(|h| {
@@ -475,9 +476,12 @@ fn site_records(
     };
     let mut rng = Rng::for_sample(settings.seed, pixel, stream);
     let (origin, dir) = site_ray(camera, settings, site);
+    // The footprint the pixel's sample reads textures over (a lattice site: the centre's ray
+    // of a pixel's one sample).
+    let spread = eye_spread(camera, settings, dir, site.sample.map_or(1, |s| s.count));
     let mut work = Work::new(counts);
     work.sample.pixel = pixel as u32;
-    for hit in integrator.record_sites(origin, dir, &mut rng, &mut work) {
+    for hit in integrator.record_sites(origin, dir, spread, &mut rng, &mut work) {
         work.lookups += 1;
         let headroom = integrator.headroom(cache, &hit, &mut work);
         if cache.covered_in(snapshot, hit.position, hit.normal, headroom, 0) {

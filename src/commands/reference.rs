@@ -72,6 +72,8 @@ pub fn run(args: &ReferenceArgs) -> CommandResult {
     // Every pass places its samples anew over each pixel: the reference integrates the pixel's
     // area, as a box-filtered render converges to.
     job.settings.jitter = true;
+    // Points: a footprint would blur what the passes' mean integrates exactly.
+    job.settings.texture_footprint = false;
     // Every pixel alike: the passes' mean is the box filter's integral with no pixel weighed
     // by more samples than its neighbours.
     job.settings.edge_samples = 0;

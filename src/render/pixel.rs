@@ -25,6 +25,11 @@ pub struct RenderSettings {
     /// Jitter even a single sample over the pixel (a reference's passes then integrate the
     /// pixel's area); otherwise one sample is the pixel's centre, as rpict -pj 0 takes it.
     pub jitter: bool,
+    /// Camera rays read textures averaged over their share of the pixel (`Camera::sample_spread`),
+    /// as mip-mapping does: at a few samples a pixel a textured surface is then the pixel's
+    /// average of its texture, not one texel of it. Off for a reference, whose passes
+    /// integrate the pixel's area by points.
+    pub texture_footprint: bool,
     /// Extra primary rays per pixel that gather only the emission seen first, in the pixels
     /// where an emitter can be seen (`emission_footprint`): a light's edges are where a box
     /// filter's error is largest, and these rays cost no shading. Used when it exceeds `spp`.
@@ -126,6 +131,16 @@ pub fn pixel_offset(s: u32, samples: u32, jitter: bool, rng: &mut Rng) -> (f32, 
     )
 }
 
+/// The footprint a camera ray of one of `samples` samples in its pixel reads textures over
+/// (`RenderSettings::texture_footprint`; the prepass's sites take the same).
+pub fn eye_spread(camera: &Camera, settings: &RenderSettings, dir: glam::Vec3, samples: u32) -> f32 {
+    if settings.texture_footprint {
+        camera.sample_spread(dir, samples)
+    } else {
+        0.0
+    }
+}
+
 /// What a sample's camera ray hit, as the data layers take it (world-space point, view-axis
 /// depth, Cryptomatte IDs).
 fn sample_hit(integrator: &Integrator<'_>, camera: &Camera, data: &SampleData) -> Option<SampleHit> {
@@ -171,6 +186,7 @@ pub fn render_pixel(
         light_offset: pixel_rng.next_u32(),
         light_cell_offset: pixel_rng.next_u32(),
         centre_ray: (samples > 1).then(|| camera.ray(x as f32 + 0.5, y as f32 + 0.5)),
+        eye_spread: 0.0,
     };
     let mut data = PixelDataSum::new(samples);
     let mut noise = PixelNoise::default();
@@ -179,6 +195,7 @@ pub fn render_pixel(
         let (jx, jy) = pixel_offset(s, samples, settings.jitter, &mut rng);
         let (origin, dir) = camera.ray(x as f32 + jx, y as f32 + jy);
         work.sample.index = s;
+        work.sample.eye_spread = eye_spread(camera, settings, dir, samples);
         work.data = SampleData::default();
         work.sample_exact_direct = glam::Vec3::ZERO;
         // The sample's own share of the pixel's shadow-ray pool, for its noise.

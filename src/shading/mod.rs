@@ -120,6 +120,9 @@ pub struct SampleContext {
     /// The camera ray through the pixel's centre (origin, direction), where the pixel's
     /// samples share the cache's irradiance (`PixelIrradiance`); None: each looks up its own.
     pub centre_ray: Option<(Vec3, Vec3)>,
+    /// How wide the camera ray's footprint grows per unit of distance (`PathState::spread`):
+    /// its share of the pixel (`Camera::sample_spread`); 0: textures read at the point.
+    pub eye_spread: f32,
 }
 
 /// What a camera sample's own rays found for the data layers (`image::data`), noted as the
@@ -336,15 +339,11 @@ impl<'a> Integrator<'a> {
         counts: &mut Work<'_>,
     ) -> Components {
         counts.primary += 1;
-        self.trace(
-            origin,
-            dir,
-            PathState::eye(first_emission_elsewhere),
-            Coherence::Coherent,
-            rng,
-            counts,
-        )
-        .0
+        let state = PathState {
+            spread: counts.sample.eye_spread,
+            ..PathState::eye(first_emission_elsewhere)
+        };
+        self.trace(origin, dir, state, Coherence::Coherent, rng, counts).0
     }
 
     /// The overture of a tile: makes the records the first diffuse surface along a primary
@@ -367,8 +366,16 @@ impl<'a> Integrator<'a> {
     /// Where the eye path of a primary ray would look up level-0 records: every diffuse
     /// surface it reaches straight or along specular reflections and transmissions (one ray
     /// each, glossy directions drawn from `rng`, within -lr and -lw as `trace` keeps them).
-    /// Empty without a cache to fill.
-    pub fn record_sites(&self, origin: Vec3, dir: Vec3, rng: &mut Rng, counts: &mut Work<'_>) -> Vec<SurfaceHit> {
+    /// Empty without a cache to fill. `spread`: the camera ray's footprint (`SampleContext::eye_spread`), so that the sites are
+    /// the surfaces the pixel's sample stops at, textures read as it reads them.
+    pub fn record_sites(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        spread: f32,
+        rng: &mut Rng,
+        counts: &mut Work<'_>,
+    ) -> Vec<SurfaceHit> {
         let mut sites = Vec::new();
         if self.cache.is_none() || self.options.ambient_bounces == 0 {
             return sites;
@@ -382,7 +389,7 @@ impl<'a> Integrator<'a> {
             } else {
                 Coherence::Incoherent
             };
-            let Some((hit, surface)) = self.first_surface(origin, dir, coherence, 0.0) else {
+            let Some((hit, surface)) = self.first_surface(origin, dir, coherence, spread) else {
                 continue;
             };
             if surface.diffuse.max_element() > 0.0 {
