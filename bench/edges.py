@@ -4,7 +4,11 @@ box at the peers bench's cheapest settings and two at one sample a pixel, raw an
 against a converged brute-force reference. Both of the peers bench's views, each setting with --edge-samples 0 (every pixel
 --spp), 8 and 16, each render --repeats times (its fastest time kept; the image is the same).
 
-    python3 bench/edges.py          # 25 minutes on 2 cores the first time (references), then 5; writes docs/EDGES.md
+    python3 bench/edges.py          # 45 minutes on 2 cores the first time (references), then 10; writes docs/EDGES.md
+
+Second part: the renderer's defaults on the Cornell box, the conference room and Sibenik, with
+--edge-samples 0, 4 and 8 and with more samples in every pixel instead (how `--edge-samples`'
+default was chosen).
 
 At a few samples a pixel the error left after the denoiser is mostly the edges' (a box filter
 with one or two samples puts a pixel on one side of an edge whatever share the other side
@@ -45,17 +49,29 @@ VIEWS = {
 }
 
 
+# At the renderer's defaults (`--spp 1 --light-samples 16`, the default -aa/-ad), each scene's
+# default view with --lambertian: what edge samples cost and buy there, against more samples in
+# every pixel (the choice of `--edge-samples`' default).
+DEFAULT_SCENES = {
+    "cornell": (SCENE, (256, 256), 1),
+    "conference": (os.path.join(common.SHARED_SCENES, "conference_room", "conference.gltf"), (320, 240), 2),
+    "sibenik": (os.path.join(common.SHARED_SCENES, "sibenik_cathedral", "sibenik.gltf"), (320, 240), 2),
+}
+DEFAULT_RUNS = [("--spp 1", 0), ("--spp 1", 4), ("--spp 1", 8), ("--spp 2", 0), ("--spp 2", 8), ("--spp 4", 0)]
+
+
 def base(view):
     return ["-x", str(SIZE[0]), "-y", str(SIZE[1]), "-ab", "1", "--lambertian"] + VIEWS[view]
 
 
-def run(out, view, setting, edges, repeats):
-    """Fastest render and denoiser times over `repeats`, the statistics and the errors."""
+def run(out, view, setting, edges, repeats, scene=SCENE, options=None, denoise=True):
+    """Fastest render (and denoiser) times over `repeats`: the statistics of the fastest."""
     best = None
     for _ in range(repeats):
         stats_path = out + ".json"
-        cmd = [common.BINARY, "render", SCENE, "-o", out, "-q", "--no-preview", "--overwrite", "--stats",
-               stats_path, "--denoise", "--edge-samples", str(edges)] + base(view) + setting.split()
+        cmd = [common.BINARY, "render", scene, "-o", out, "-q", "--no-preview", "--overwrite", "--stats",
+               stats_path, "--edge-samples", str(edges)] + (["--denoise"] if denoise else []) \
+            + (base(view) if options is None else options) + setting.split()
         subprocess.run(cmd, check=True, capture_output=True)
         with open(stats_path) as f:
             stats = json.load(f)
@@ -141,10 +157,55 @@ def main():
             lines.append(f"| `{setting}` | {edges} | {pixels} | {raw_s:.3f} | {raw_e:.3e} | {against_plain} | "
                          f"{den_s:.3f} | {den_e:.3e} | {ratio(raw, den_s, den_e)} |")
         lines.append("")
+    lines += defaults_section(args)
     with open(args.docs, "w") as f:
         f.write("\n".join(lines) + "\n")
     print(f"edges: wrote {args.docs}")
     return 0
+
+
+def scene_reference(name, scene, options, args):
+    """The peers bench's icrender reference of the scene's default view when it exists (the same
+    image: size, -ab, --lambertian, the automatic view), else one made the same way: brute
+    force at -ad 16 and 4 samples a pixel with 4 shadow rays a pass (at the default -ad one
+    pass took over a minute and 300 s left 6-12 % noise)."""
+    peers = os.path.join(common.ROOT, "bench", "out", "peers", name, "reference-icrender.exr")
+    if os.path.exists(peers):
+        return peers
+    return common.reference(scene, os.path.join(args.out, f"reference-{name}.exr"),
+                            ["-ad", "16", "--spp", "4", "--light-samples", "4"] + options,
+                            noise=0.004, max_seconds=300)
+
+
+def defaults_section(args):
+    """The renderer's defaults on the three scenes, with and without edge samples."""
+    lines = ["## At the defaults, on three scenes", "",
+             "Each scene's default view with `--lambertian` and otherwise the renderer's defaults "
+             "(`--spp 1 --light-samples 16`, the default `-aa`/`-ad`), with `--edge-samples` 0, 4 and 8 "
+             "and, for comparison, more samples in every pixel. References: `icrender reference` "
+             "(the Cornell box's above; elsewhere the peers bench's, or made as it makes them: noise 0.004 "
+             "or 300 s). Equal time: the "
+             "curve of the runs without edge samples at a run's time over the run's error (above 1: "
+             "the run is ahead; `-` outside their times).", "",
+             "| scene | settings | edge samples | edge pixels | s | relMSE | at equal time, against no edge samples |",
+             "|---|---|---|---|---|---|---|"]
+    for name, (scene, (width, height), ab) in DEFAULT_SCENES.items():
+        options = ["-x", str(width), "-y", str(height), "-ab", str(ab), "--lambertian"]
+        reference = os.path.join(args.out, "reference-default.exr") if name == "cornell" else scene_reference(
+            name, scene, options, args)
+        rows = []
+        for setting, edges in DEFAULT_RUNS:
+            out = os.path.join(args.out, f"defaults-{name}-{setting.split()[-1]}-{edges}.exr")
+            stats = run(out, "default", setting, edges, args.repeats, scene=scene, options=options, denoise=False)
+            error = common.compare(out, reference)["composite"][1]
+            rows.append((setting, edges, stats["edge_pixels"], stats["render_s"], error))
+            print(f"edges: defaults, {name}, {setting} --edge-samples {edges}: edge pixels {stats['edge_pixels']}, "
+                  f"{stats['render_s']:.3f} s, relMSE {error:.3e}", flush=True)
+        plain = envelope([(r[3], r[4]) for r in rows if r[1] == 0])
+        for setting, edges, pixels, seconds, error in rows:
+            against = ratio(plain, seconds, error) if edges else ""
+            lines.append(f"| {name} | `{setting}` | {edges} | {pixels} | {seconds:.3f} | {error:.3e} | {against} |")
+    return lines + [""]
 
 
 if __name__ == "__main__":
