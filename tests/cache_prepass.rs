@@ -430,31 +430,13 @@ fn ceiling_room_with_a_floor(dir: &Path, name: &str, material: impl FnOnce(&mut 
 #[test]
 fn records_read_a_texture_averaged_over_their_cells_footprints() {
     let dir = tempfile::tempdir().unwrap();
-    let encode = |linear: f32| (255.0 * linear.powf(1.0 / 2.2)).round() as u8;
-    let decode = |byte: u8| {
-        let c = byte as f32 / 255.0;
-        if c <= 0.04045 {
-            c / 12.92
-        } else {
-            ((c + 0.055) / 1.055).powf(2.4)
-        }
-    };
-    let (dark, bright) = (encode(0.05), encode(0.9));
-    let mut texels = Vec::new();
-    for y in 0..64 {
-        for x in 0..64 {
-            let v = if (x + y) % 2 == 0 { dark } else { bright };
-            texels.extend_from_slice(&[v, v, v]);
-        }
-    }
-    icrender::sys::image_io::write_png(&dir.path().join("checker.png"), 64, 64, &texels).unwrap();
+    let albedo = single_texel_checker(dir.path());
     let checker = ceiling_room_with_a_floor(dir.path(), "checker_floor", |b| {
         let texture = b.texture("checker.png");
         let mut painted = lambertian("checker", [1.0; 3]);
         painted["pbrMetallicRoughness"]["baseColorTexture"] = serde_json::json!({"index": texture});
         b.material(painted)
     });
-    let albedo = 0.5 * (decode(dark) + decode(bright));
     let uniform = ceiling_room_with_a_floor(dir.path(), "uniform_floor", |b| {
         b.material(lambertian("uniform", [albedo; 3]))
     });

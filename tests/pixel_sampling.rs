@@ -239,24 +239,7 @@ fn edge_samples_take_most_of_the_error_of_one_sample_a_pixel_away() {
 /// from 2 units above through a 60-degree perspective view at 64 x 64: each pixel covers some
 /// 4.6 texels across. Lit by -av alone, so the albedo layer and the light are the texture.
 fn checker_floor(dir: &Path) -> (PathBuf, f64) {
-    let encode = |linear: f32| (255.0 * linear.powf(1.0 / 2.2)).round() as u8;
-    let decode = |byte: u8| {
-        let c = byte as f64 / 255.0;
-        if c <= 0.04045 {
-            c / 12.92
-        } else {
-            ((c + 0.055) / 1.055).powf(2.4)
-        }
-    };
-    let (dark, bright) = (encode(0.05), encode(0.9));
-    let mut texels = Vec::new();
-    for y in 0..64 {
-        for x in 0..64 {
-            let v = if (x + y) % 2 == 0 { dark } else { bright };
-            texels.extend_from_slice(&[v, v, v]);
-        }
-    }
-    icrender::sys::image_io::write_png(&dir.join("checker.png"), 64, 64, &texels).unwrap();
+    let mean_albedo = single_texel_checker(dir) as f64;
     let mut b = GltfBuilder::new();
     let texture = b.texture("checker.png");
     let mut painted = lambertian("checker", [1.0; 3]);
@@ -266,7 +249,7 @@ fn checker_floor(dir: &Path) -> (PathBuf, f64) {
     let uv = [[0.0, 0.0], [0.0, 8.0], [8.0, 8.0], [8.0, 0.0]];
     let mesh = b.mesh_with(&floor, None, Some(&uv), &[[0, 1, 2], [0, 2, 3]], Some(material));
     b.node(serde_json::json!({"mesh": mesh}));
-    (b.write(dir, "checker_floor"), 0.5 * (decode(dark) + decode(bright)))
+    (b.write(dir, "checker_floor"), mean_albedo)
 }
 
 /// A camera ray reads textures averaged over its share of the pixel (the texture's mip

@@ -417,6 +417,30 @@ pub fn inward_box(b: &mut GltfBuilder, lo: [f32; 3], hi: [f32; 3], material: usi
 
 /// Relative mean squared error of the composite of `a` against `b` (eps 0.01, as icrender's
 /// own metric), over every channel of every pixel.
+/// A 64 x 64 checker of single texels, 0.05 and 0.9 in linear light (stored as sRGB bytes), as
+/// `dir/checker.png`; and the checker's mean in linear light, as the stored bytes decode.
+pub fn single_texel_checker(dir: &Path) -> f32 {
+    let encode = |linear: f32| (255.0 * linear.powf(1.0 / 2.2)).round() as u8;
+    let decode = |byte: u8| {
+        let c = byte as f32 / 255.0;
+        if c <= 0.04045 {
+            c / 12.92
+        } else {
+            ((c + 0.055) / 1.055).powf(2.4)
+        }
+    };
+    let (dark, bright) = (encode(0.05), encode(0.9));
+    let mut texels = Vec::new();
+    for y in 0..64 {
+        for x in 0..64 {
+            let v = if (x + y) % 2 == 0 { dark } else { bright };
+            texels.extend_from_slice(&[v, v, v]);
+        }
+    }
+    icrender::sys::image_io::write_png(&dir.join("checker.png"), 64, 64, &texels).unwrap();
+    0.5 * (decode(dark) + decode(bright))
+}
+
 pub fn relmse(a: &ImageData, b: &ImageData) -> f64 {
     let (x, y) = (rgb(a, ""), rgb(b, ""));
     let mut sum = 0.0;
