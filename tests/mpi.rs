@@ -516,11 +516,11 @@ fn load_balancing_resolves_a_forced_imbalance() {
     let scene = project_dir().join("scenes/cornell.gltf");
     // One PA for three PRs that send their misses in batches of 16, with records 64 times
     // dearer than elsewhere in these tests (-ad 4096): the PA's queue grows, and idle PRs must
-    // take shares of it for the run to end. (At -ad 256, and at -ad 1024 on a machine busy with other work, one
-    // PA kept up with three PRs and nothing needed forwarding: the test proved nothing.) And at
-    // -aa 0.02, so that most requests need records of their own: at the default -aa the first
-    // records answered most later requests, and with another job busy on the machine one PA kept
-    // up in four runs of five. Batches, not one request a message (--send 1): with both cores
+    // take shares of it for the run to end. (At -ad 256, and at -ad 1024 on a machine busy
+    // with other work, one PA kept up with three PRs and nothing needed forwarding: the test
+    // proved nothing.) And at -aa 0.02, so that most requests need records of their own: at
+    // the default -aa the first records answered most later requests, and with another job
+    // busy on the machine one PA kept up in four runs of five. Batches, not one request a message (--send 1): with both cores
     // busy with other work, each synchronous send waited for the PA's receiving thread to be
     // scheduled, the requests trickled in, the PA's queue never grew past 24-570, and in two
     // runs of three nothing was forwarded; in batches of 16 its queue reached 1148-1505 and

@@ -287,8 +287,7 @@ fn one_sample_a_pixel_reads_a_fine_texture_averaged_over_the_pixel() {
     ];
     args.extend_from_slice(&["--no-preview", "--noise", "0.01", "--max-seconds", "60"]);
     args.extend_from_slice(&view);
-    let out = run(&args);
-    assert!(out.status.success(), "{}", stderr(&out));
+    run_ok(&args);
     let error = relmse(&image, &read_exr(&reference));
     assert!(error < 2e-3, "relMSE {error:.2e} against the reference");
 }

@@ -22,7 +22,6 @@ pub struct View {
     pub vertical: f32,
 }
 
-/// A view fully resolved for an image size: an orthonormal frame and half-extents.
 /// The share of a sample's part of the pixel that its camera ray reads textures over: the
 /// whole part blurs a little (the samples' mean is then the texture filtered twice, by the
 /// part's box and by the pixel's), none leaves one texel a sample. Measured on Sibenik (320x240,
@@ -32,6 +31,7 @@ pub struct View {
 /// / 1.28e-3, 0.5 9.2e-3 / 1.19e-3, 0.7 8.7e-3 / 1.17e-3, 1.0 8.6e-3 / 1.15e-3.
 pub const EYE_FOOTPRINT: f32 = 0.7;
 
+/// A view fully resolved for an image size: an orthonormal frame and half-extents.
 #[derive(Clone, Debug)]
 pub struct Camera {
     view: View,
@@ -144,11 +144,16 @@ impl Camera {
     /// The width of one pixel at `point`'s depth in the view (the whole image's pixels, in
     /// world units): what the image can tell apart there.
     pub fn pixel_width_at(&self, point: Vec3) -> f32 {
-        let plane = 2.0 * self.half_width / self.width.max(1) as f32;
+        let plane = self.pixel_side();
         match self.view.projection {
             Projection::Perspective => self.view_depth(point) * plane,
             Projection::Parallel => plane,
         }
+    }
+
+    /// A pixel's width on the image plane at unit depth (a parallel view: in world units).
+    fn pixel_side(&self) -> f32 {
+        2.0 * self.half_width / self.width.max(1) as f32
     }
 
     /// Distance of `point` from the camera along the view axis (its forward direction; for a
@@ -182,9 +187,6 @@ impl Camera {
         (x.is_finite() && y.is_finite()).then_some((x, y))
     }
 
-    /// Primary ray through image position (x, y) in pixels, with (0, 0) at the top-left corner
-    /// of the image: origin and unit direction.
-    #[inline]
     /// How wide the footprint of a camera ray along `dir` (unit) grows per unit of distance
     /// when it stands for one of `samples` equal shares of its pixel: the pixel's side on the
     /// image plane at unit depth, shrunk as the ray leaves the axis (the plane lies farther and
@@ -194,14 +196,16 @@ impl Camera {
     pub fn sample_spread(&self, dir: Vec3, samples: u32) -> f32 {
         match self.view.projection {
             Projection::Perspective => {
-                let side = 2.0 * self.half_width / self.width.max(1) as f32;
                 let cos = dir.dot(self.forward).max(0.0);
-                EYE_FOOTPRINT * side * cos * cos.sqrt() / (samples.max(1) as f32).sqrt()
+                EYE_FOOTPRINT * self.pixel_side() * cos * cos.sqrt() / (samples.max(1) as f32).sqrt()
             }
             Projection::Parallel => 0.0,
         }
     }
 
+    /// Primary ray through image position (x, y) in pixels, with (0, 0) at the top-left corner
+    /// of the image: origin and unit direction.
+    #[inline]
     pub fn ray(&self, x: f32, y: f32) -> (Vec3, Vec3) {
         let sx = 2.0 * x / self.width as f32 - 1.0;
         let sy = 1.0 - 2.0 * y / self.height as f32;

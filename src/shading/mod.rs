@@ -366,8 +366,9 @@ impl<'a> Integrator<'a> {
     /// Where the eye path of a primary ray would look up level-0 records: every diffuse
     /// surface it reaches straight or along specular reflections and transmissions (one ray
     /// each, glossy directions drawn from `rng`, within -lr and -lw as `trace` keeps them).
-    /// Empty without a cache to fill. `spread`: the camera ray's footprint (`SampleContext::eye_spread`), so that the sites are
-    /// the surfaces the pixel's sample stops at, textures read as it reads them.
+    /// Empty without a cache to fill. `spread`: the camera ray's footprint
+    /// (`SampleContext::eye_spread`), so that the sites are the surfaces the pixel's sample
+    /// stops at, textures read as it reads them.
     pub fn record_sites(
         &self,
         origin: Vec3,
