@@ -315,7 +315,11 @@ impl Outputs {
                     frame,
                     &layers,
                     !crate::job::uses_cache(args, &job.scene),
-                    args.spp,
+                    denoise::PixelSampling {
+                        samples: args.spp,
+                        shadow_rays: args.light_samples,
+                        edge_samples: args.edge_samples,
+                    },
                     quality,
                     args.threads,
                     args.denoise_prefilter,
@@ -546,11 +550,7 @@ fn denoise_attributes(d: &denoise::DenoisedFrame, args: &RenderArgs) -> Vec<(Str
             quality_name(args),
             guides_text(d),
             filtered.join(", "),
-            if d.weighed_by_noise {
-                ", weighed against the raw layer by the noise each pixel's samples measured"
-            } else {
-                " (one sample a pixel: no noise measured, the filter's output as it is)"
-            },
+            weighing_text(d, args.spp),
             left_raw_text(d),
         )
     };
@@ -559,6 +559,28 @@ fn denoise_attributes(d: &denoise::DenoisedFrame, args: &RenderArgs) -> Vec<(Str
         ("icrender/denoise".to_string(), how),
         ("icrender/denoise_time_s".to_string(), format!("{:.3}", d.seconds)),
     ]
+}
+
+/// How the filtered layers were weighed against the raw ones (`denoise::PixelSampling`).
+fn weighing_text(d: &denoise::DenoisedFrame, spp: u32) -> String {
+    let unweighed: Vec<String> = d
+        .filtered()
+        .into_iter()
+        .filter(|l| !d.weighed.contains(l))
+        .map(|l| l.name().to_string())
+        .collect();
+    match (d.weighed.is_empty(), unweighed.is_empty()) {
+        (_, true) if spp >= 2 => {
+            ", weighed against the raw layer by the noise each pixel's samples measured".to_string()
+        }
+        (_, true) => ", weighed against the raw layer by the noise each pixel's shadow rays measured".to_string(),
+        (true, false) => " (one sample a pixel: no noise measured, the filter's output as it is)".to_string(),
+        (false, false) => format!(
+            ", direct weighed against the raw layer by the noise each pixel's shadow rays measured \
+             ({} with one sample a pixel: no noise measured, the filter's output as it is)",
+            unweighed.join(", ")
+        ),
+    }
 }
 
 /// With --checkpoint, the cache goes to the checkpoint directory (which `open_checkpoint` has

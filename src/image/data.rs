@@ -39,7 +39,8 @@ pub struct PixelData {
 }
 
 /// The variance of each noisy layer's pixel value (its luminance), from the pixel's samples:
-/// direct, specular, indirect. Zero where the samples tell nothing (a single sample).
+/// direct, specular, indirect. With a single sample only the direct light's, from its shadow
+/// rays (`render::noise`); zero where nothing measured it.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct LayerNoise {
     pub direct: f32,

@@ -27,6 +27,12 @@
 //! only, 16 samples a pixel) the denoised direct layer's relMSE was 4.3e-4 with it, 3.05e-4
 //! without (raw 2.8e-4, the filter alone 4.65e-4); at the peers bench's slowest setting of its
 //! inside view 4.05e-5 with it, 3.38e-5 without (raw 3.98e-5).
+//!
+//! A pixel of one sample has no spread of samples, but its direct light is still a mean over
+//! its shadow rays: their spread ray by ray (`shading::direct::RaySpread`) gives the ratio
+//! estimate's variance and the plainly sampled part's (`single_sample_direct`). The rays are
+//! stratified over the light, so it is an upper bound; the specular and indirect layers stay
+//! unmeasured (zero) at one sample.
 
 use crate::image::components::Components;
 use crate::image::data::LayerNoise;
@@ -86,6 +92,10 @@ impl<const K: usize> Moments<K> {
 pub struct PixelNoise {
     samples: u32,
     direct: Moments<DIRECT_TERMS>,
+    /// The samples' shadow-ray pools and the variances their plainly sampled rays measured,
+    /// summed: a single sample's direct noise (`single_sample_direct`).
+    pooled: ShadowRatio,
+    sampled_noise: f64,
     specular: Moments<1>,
     indirect: Moments<1>,
 }
@@ -94,8 +104,10 @@ impl PixelNoise {
     /// One sample: its components (the direct light without its pooled shadow-ray share), the
     /// ratio estimate's parts it added to the pixel's pool, and the part of its direct light
     /// that is exact at its point (`exact`: punctual lights each traced), left out.
-    pub fn add(&mut self, sample: &Components, pooled: ShadowRatio, exact: Vec3) {
+    pub fn add(&mut self, sample: &Components, pooled: ShadowRatio, exact: Vec3, sampled_noise: f32) {
         self.samples += 1;
+        self.pooled += pooled;
+        self.sampled_noise += sampled_noise as f64;
         let l = |v| luminance(v) as f64;
         self.direct.add([
             l(sample.direct - exact),
@@ -109,6 +121,12 @@ impl PixelNoise {
 
     pub fn finish(&self) -> LayerNoise {
         let n = self.samples as f64;
+        if self.samples == 1 {
+            return LayerNoise {
+                direct: self.single_sample_direct() as f32,
+                ..LayerNoise::default()
+            };
+        }
         let [_, exact, passed, unblocked] = self.direct.sum;
         let (mean_exact, mean_unblocked) = (exact / n.max(1.0), unblocked / n.max(1.0));
         let (share, slope) = if unblocked > 0.0 {
@@ -124,12 +142,25 @@ impl PixelNoise {
             indirect: single(&self.indirect),
         }
     }
+
+    /// One sample tells nothing of its noise by itself, but its shadow rays do: the ratio
+    /// estimate's share `R` spreads over them (`RaySpread::share_variance`), its light is
+    /// `exact * R`; the plainly sampled part's rays measured their own (`sampled_noise`).
+    /// Punctual lights, traced exactly, add none. The specular and indirect layers have no
+    /// such measure and stay at zero (`image::denoise` weighs only the direct layer then).
+    fn single_sample_direct(&self) -> f64 {
+        let l = |v| luminance(v);
+        let pool = &self.pooled;
+        let share = pool.rays.share_variance(l(pool.passed), l(pool.unblocked));
+        (l(pool.exact) as f64).powi(2) * share + self.sampled_noise
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::sampling::Rng;
+    use crate::shading::direct::RaySpread;
 
     fn sample(direct: f32) -> Components {
         Components {
@@ -143,6 +174,7 @@ mod tests {
             exact: Vec3::splat(exact),
             passed: Vec3::splat(passed),
             unblocked: Vec3::splat(unblocked),
+            ..Default::default()
         }
     }
 
@@ -150,12 +182,12 @@ mod tests {
     fn a_plain_mean_has_the_sample_variance_over_its_count() {
         let mut noise = PixelNoise::default();
         for v in [1.0, 2.0, 3.0, 6.0] {
-            noise.add(&sample(v), ShadowRatio::default(), Vec3::ZERO);
+            noise.add(&sample(v), ShadowRatio::default(), Vec3::ZERO, 0.0);
         }
         // Sample variance 14 / 3, over 4 samples.
         assert!((noise.finish().direct - 14.0 / 12.0).abs() < 1e-6);
         let mut one = PixelNoise::default();
-        one.add(&sample(5.0), ShadowRatio::default(), Vec3::ZERO);
+        one.add(&sample(5.0), ShadowRatio::default(), Vec3::ZERO, 0.0);
         assert_eq!(one.finish().direct, 0.0, "one sample tells nothing");
     }
 
@@ -166,7 +198,7 @@ mod tests {
         for through in [1.0, 0.0] {
             let mut noise = PixelNoise::default();
             for u in [0.2, 1.7, 0.9, 3.1] {
-                noise.add(&sample(0.0), parts(2.0, u * through, u), Vec3::ZERO);
+                noise.add(&sample(0.0), parts(2.0, u * through, u), Vec3::ZERO, 0.0);
             }
             assert!(noise.finish().direct.abs() < 1e-9, "share {through}");
         }
@@ -187,7 +219,7 @@ mod tests {
                 let u = 0.5 + rng.next_f32();
                 let p = if rng.next_f32() < 0.5 { u } else { 0.0 };
                 let part = parts(1.0, p, u);
-                noise.add(&sample(0.0), part, Vec3::ZERO);
+                noise.add(&sample(0.0), part, Vec3::ZERO, 0.0);
                 pool += part;
             }
             estimates.push(luminance(pool.estimate()) as f64 / samples as f64);
@@ -202,6 +234,76 @@ mod tests {
         );
     }
 
+    /// One sample's ratio estimate over `rays` shadow rays in a penumbra: each ray sees a
+    /// light of random strength, hidden at random with probability `hidden`.
+    fn one_sample_in_a_penumbra(rng: &mut Rng, rays: u32, hidden: f32) -> ShadowRatio {
+        let mut part = parts(1.5, 0.0, 0.0);
+        part.rays.rays = rays as f32;
+        for _ in 0..rays {
+            let u = (0.5 + rng.next_f32()) / rays as f32;
+            let p = if rng.next_f32() < hidden { 0.0 } else { u };
+            part.passed += Vec3::splat(p);
+            part.unblocked += Vec3::splat(u);
+            part.rays.add(p, u);
+        }
+        part
+    }
+
+    #[test]
+    fn one_samples_shadow_rays_measure_its_noise() {
+        // The estimated variance of single-sample pixels, on average, against the spread of
+        // their estimates themselves, at several shares of the light hidden.
+        for hidden in [0.2, 0.5, 0.8] {
+            let (pixels, rays) = (20_000, 16);
+            let mut rng = Rng::new(5, 0);
+            let (mut estimates, mut variances) = (Vec::new(), Vec::new());
+            for _ in 0..pixels {
+                let part = one_sample_in_a_penumbra(&mut rng, rays, hidden);
+                let mut noise = PixelNoise::default();
+                noise.add(&sample(0.0), part, Vec3::ZERO, 0.0);
+                estimates.push(luminance(part.estimate()) as f64);
+                variances.push(noise.finish().direct as f64);
+            }
+            let mean = estimates.iter().sum::<f64>() / pixels as f64;
+            let spread = estimates.iter().map(|e| (e - mean).powi(2)).sum::<f64>() / (pixels - 1) as f64;
+            let estimated = variances.iter().sum::<f64>() / pixels as f64;
+            assert!(
+                (estimated / spread - 1.0).abs() < 0.15,
+                "hidden {hidden}: estimated {estimated:.3e} against the estimates' spread {spread:.3e}"
+            );
+        }
+    }
+
+    #[test]
+    fn one_sample_wholly_lit_has_no_noise_and_its_plain_rays_add_theirs() {
+        let mut rng = Rng::new(6, 0);
+        let mut noise = PixelNoise::default();
+        noise.add(
+            &sample(0.0),
+            one_sample_in_a_penumbra(&mut rng, 8, 0.0),
+            Vec3::ZERO,
+            0.0,
+        );
+        assert!(noise.finish().direct.abs() < 1e-9, "every ray got through");
+        let mut plain = PixelNoise::default();
+        plain.add(&sample(0.3), ShadowRatio::default(), Vec3::ZERO, 0.25);
+        assert_eq!(plain.finish().direct, 0.25, "the plain rays' own variance");
+    }
+
+    #[test]
+    fn plain_rays_measure_the_variance_of_their_mean() {
+        // Rays of light 1, 2, 3, 6 (each over the count of 4): the mean 3 has the sample
+        // variance 14 / 3 over 4.
+        let mut spread = RaySpread {
+            rays: 4.0,
+            ..Default::default()
+        };
+        for v in [1.0f32, 2.0, 3.0, 6.0] {
+            spread.add(v / 4.0, v / 4.0);
+        }
+        assert!((spread.mean_variance(3.0) - 14.0 / 12.0).abs() < 1e-6);
+    }
+
     #[test]
     fn punctual_lights_traced_exactly_add_no_noise() {
         // Half the samples fall in a point light's hard shadow: the spread is the pixel's
@@ -209,11 +311,11 @@ mod tests {
         let mut noise = PixelNoise::default();
         for (k, lit) in [2.0, 0.0, 2.0, 0.0].into_iter().enumerate() {
             let sampled = if k < 2 { 0.5 } else { 0.7 };
-            noise.add(&sample(lit + sampled), ShadowRatio::default(), Vec3::splat(lit));
+            noise.add(&sample(lit + sampled), ShadowRatio::default(), Vec3::splat(lit), 0.0);
         }
         let mut sampled_only = PixelNoise::default();
         for sampled in [0.5, 0.5, 0.7, 0.7] {
-            sampled_only.add(&sample(sampled), ShadowRatio::default(), Vec3::ZERO);
+            sampled_only.add(&sample(sampled), ShadowRatio::default(), Vec3::ZERO, 0.0);
         }
         let (with, without) = (noise.finish().direct, sampled_only.finish().direct);
         assert!(

@@ -198,6 +198,7 @@ pub fn render_pixel(
         work.sample.eye_spread = eye_spread(camera, settings, dir, samples);
         work.data = SampleData::default();
         work.sample_exact_direct = glam::Vec3::ZERO;
+        work.sample_sampled_noise = 0.0;
         // The sample's own share of the pixel's shadow-ray pool, for its noise.
         let pool = std::mem::take(&mut work.pixel_shadow_ratio);
         let components = if split_emission {
@@ -207,7 +208,7 @@ pub fn render_pixel(
         };
         let pooled = std::mem::replace(&mut work.pixel_shadow_ratio, pool);
         work.pixel_shadow_ratio += pooled;
-        noise.add(&components, pooled, work.sample_exact_direct);
+        noise.add(&components, pooled, work.sample_exact_direct, work.sample_sampled_noise);
         sum += components;
         data.add(work.data.albedo, sample_hit(integrator, camera, &work.data));
     }

@@ -11,7 +11,7 @@
 
 use super::{Integrator, RayCounts, glossy};
 use crate::sampling::Rng;
-use crate::scene::light::{LightSample, PunctualLight};
+use crate::scene::light::{LightSample, PunctualLight, luminance};
 use crate::scene::material::SurfacePoint;
 use crate::tracer::SurfaceHit;
 use glam::Vec3;
@@ -150,6 +150,58 @@ pub struct ShadowRatio {
     pub exact: Vec3,
     pub passed: Vec3,
     pub unblocked: Vec3,
+    /// How the rays behind `passed` and `unblocked` spread, ray by ray: what a pixel of one
+    /// sample knows of its estimate's noise (`render::noise`).
+    pub rays: RaySpread,
+}
+
+/// The second moments of the shadow rays of a ratio estimate, in luminance: each ray's share
+/// of `passed` (x, its light if it got through, over the point's ray count) and of `unblocked`
+/// (y). With `P` and `U` their sums and `R = P / U`, the estimate's share has the variance
+/// `m / (m - 1) * sum (x - R y)^2 / U^2` over `m` rays (the delta method; `sum (x - R y)` is
+/// zero). The rays are stratified over the light, so this is an upper bound of their noise.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct RaySpread {
+    pub rays: f32,
+    pub passed_squared: f32,
+    pub unblocked_squared: f32,
+    pub product: f32,
+}
+
+impl RaySpread {
+    /// A ray's parts (a ray that brought nothing adds nothing; `rays` counts them all).
+    pub fn add(&mut self, passed: f32, unblocked: f32) {
+        self.passed_squared += passed * passed;
+        self.unblocked_squared += unblocked * unblocked;
+        self.product += passed * unblocked;
+    }
+
+    /// The variance of the share `passed / unblocked` (luminances, the rays' sums), zero
+    /// with fewer than two rays or no light.
+    pub fn share_variance(&self, passed: f32, unblocked: f32) -> f64 {
+        let (m, p, u) = (self.rays as f64, passed as f64, unblocked as f64);
+        if m < 2.0 || u <= 0.0 {
+            return 0.0;
+        }
+        let r = p / u;
+        let squares =
+            self.passed_squared as f64 - 2.0 * r * self.product as f64 + r * r * self.unblocked_squared as f64;
+        m / (m - 1.0) * squares.max(0.0) / (u * u)
+    }
+
+    /// The variance of the plain estimate `passed` (the rays' sum, each ray over their
+    /// count), zero with fewer than two rays.
+    pub fn mean_variance(&self, passed: f32) -> f64 {
+        let (m, p) = (self.rays as f64, passed as f64);
+        if m < 2.0 {
+            return 0.0;
+        }
+        ((m * self.passed_squared as f64 - p * p) / (m - 1.0)).max(0.0)
+    }
+
+    fn is_finite(&self) -> bool {
+        self.passed_squared.is_finite() && self.unblocked_squared.is_finite() && self.product.is_finite()
+    }
 }
 
 impl ShadowRatio {
@@ -158,15 +210,22 @@ impl ShadowRatio {
     }
 
     pub fn scaled(self, k: f32) -> ShadowRatio {
+        let k2 = k * k;
         ShadowRatio {
             exact: self.exact * k,
             passed: self.passed * k,
             unblocked: self.unblocked * k,
+            rays: RaySpread {
+                rays: self.rays.rays,
+                passed_squared: self.rays.passed_squared * k2,
+                unblocked_squared: self.rays.unblocked_squared * k2,
+                product: self.rays.product * k2,
+            },
         }
     }
 
     pub fn is_finite(&self) -> bool {
-        self.exact.is_finite() && self.passed.is_finite() && self.unblocked.is_finite()
+        self.exact.is_finite() && self.passed.is_finite() && self.unblocked.is_finite() && self.rays.is_finite()
     }
 }
 
@@ -175,6 +234,10 @@ impl std::ops::AddAssign for ShadowRatio {
         self.exact += other.exact;
         self.passed += other.passed;
         self.unblocked += other.unblocked;
+        self.rays.rays += other.rays.rays;
+        self.rays.passed_squared += other.rays.passed_squared;
+        self.rays.unblocked_squared += other.rays.unblocked_squared;
+        self.rays.product += other.rays.product;
     }
 }
 
@@ -189,6 +252,9 @@ pub struct DirectLight {
     /// pixel's samples only as the pixel's content does (a hard shadow's edge, a texture), and
     /// the pixel's noise leaves it out (`render::noise`).
     pub exact: Vec3,
+    /// The variance (luminance) of the emitters' plainly sampled light in `sampled`, as its
+    /// rays spread: what a pixel of one sample knows of that part's noise.
+    pub sampled_noise: f32,
 }
 
 impl DirectLight {
@@ -211,6 +277,7 @@ pub fn direct_light(
     let diffuse_brdf = surface.diffuse / PI;
     let mut total = Vec3::ZERO;
     let mut shadow_ratio = None;
+    let mut sampled_noise = 0.0;
 
     if surface.diffuse.max_element() > 0.0 && !scene.emitters.is_empty() {
         let emitter_samples = strata.count.max(1);
@@ -226,6 +293,12 @@ pub fn direct_light(
         let mut sum = Vec3::ZERO;
         // What the rays would bring if none were blocked, for the ratio estimator.
         let mut sum_unblocked = Vec3::ZERO;
+        // Ray by ray, for a single sample's noise (each ray's light over the ray count).
+        let mut spread = RaySpread {
+            rays: emitter_samples as f32,
+            ..RaySpread::default()
+        };
+        let per_ray = diffuse_brdf / emitter_samples as f32;
         let mut sampler = scene.emitters.sampler(hit.position, hit.normal);
         let strata = strata.reduced();
         for k in 0..emitter_samples {
@@ -270,6 +343,8 @@ pub fn direct_light(
             if visible > 0.0 {
                 sum += contribution * visible;
             }
+            let unblocked = luminance(per_ray * contribution);
+            spread.add(unblocked * visible, unblocked);
         }
         match unshadowed {
             // Ratio estimator: the exact unblocked irradiance times the share of the rays'
@@ -282,9 +357,14 @@ pub fn direct_light(
                     exact: diffuse_brdf * exact,
                     passed: diffuse_brdf * sum / n,
                     unblocked: diffuse_brdf * sum_unblocked / n,
+                    rays: spread,
                 })
             }
-            None => total += diffuse_brdf * sum / emitter_samples as f32,
+            None => {
+                let estimate = diffuse_brdf * sum / emitter_samples as f32;
+                sampled_noise = spread.mean_variance(luminance(estimate)) as f32;
+                total += estimate;
+            }
         }
     }
 
@@ -312,6 +392,7 @@ pub fn direct_light(
         sampled: total,
         ratio: shadow_ratio,
         exact,
+        sampled_noise,
     }
 }
 

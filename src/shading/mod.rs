@@ -148,6 +148,10 @@ pub struct Work<'a> {
     /// lights each traced: `direct::DirectLight::exact`), scaled by the hit's opacity: the
     /// pixel's noise leaves it out (`render::noise`).
     pub sample_exact_direct: Vec3,
+    /// The variance its rays measured of the plainly sampled emitters' light at the sample's
+    /// camera-ray hit (`direct::DirectLight::sampled_noise`), scaled by the hit's opacity
+    /// squared: with one sample a pixel, what its noise is known by (`render::noise`).
+    pub sample_sampled_noise: f32,
     /// The cache's irradiance at the pixel's centre on the surface its samples last looked up,
     /// for its other samples there (`pixel_irradiance`).
     pub pixel_irradiance: Option<PixelIrradiance>,
@@ -161,6 +165,7 @@ impl<'a> Work<'a> {
             data: SampleData::default(),
             pixel_shadow_ratio: direct::ShadowRatio::default(),
             sample_exact_direct: Vec3::ZERO,
+            sample_sampled_noise: 0.0,
             pixel_irradiance: None,
         }
     }
@@ -657,6 +662,7 @@ impl<'a> Integrator<'a> {
                 state.level == 0 && state.specular_depth == 0 && counts.sample.index < counts.sample.pixel_samples;
             if pooled {
                 counts.sample_exact_direct += light.exact * surface.opacity;
+                counts.sample_sampled_noise += light.sampled_noise * surface.opacity * surface.opacity;
             }
             c.direct = match light.ratio {
                 Some(parts) if pooled => {
