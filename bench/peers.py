@@ -71,7 +71,8 @@ SCENES = {
             # samples; the slower settings spend on the records' rays (-ad) instead, whose
             # noise is what is left of the 4x4 error (more records at lower -aa or higher -ar
             # did not lower it: measured on the inside view, two seeds each).
-            "-aa 0.3 -ad 64 -as 16 --spp 2 --light-samples 2 --emission-samples 32",
+            # (At two samples a pixel more at the edges did not pay: bench/edges.py, 0.74-0.90x.)
+            "-aa 0.3 -ad 64 -as 16 --spp 2 --light-samples 2 --emission-samples 32 --edge-samples 0",
             "-aa 0.3 -ad 64 -as 16 --spp 4 --light-samples 2 --emission-samples 32",
             "-aa 0.2 -ad 128 -as 32 --spp 4 --light-samples 4 --emission-samples 64",
             # One sample a pixel with many shadow rays, and more samples where an edge crosses a

@@ -25,9 +25,18 @@ fn edge_scene(dir: &Path) -> std::path::PathBuf {
     b.write(dir, "edge")
 }
 
-/// Column means of the composite's red channel of an 8 x 256 render of the edge scene.
+/// Column means of the composite's red channel of an 8 x 256 render of the edge scene, every pixel
+/// at `spp` samples (no more at the edge: `--edge-samples 0`).
 fn edge_columns(dir: &Path, name: &str, spp: &str, emission_samples: &str) -> Vec<f64> {
-    edge_columns_with(dir, name, &["--spp", spp, "--emission-samples", emission_samples]).0
+    let sampling = [
+        "--spp",
+        spp,
+        "--emission-samples",
+        emission_samples,
+        "--edge-samples",
+        "0",
+    ];
+    edge_columns_with(dir, name, &sampling).0
 }
 
 /// `edge_columns` with the sampling options given, and the render's statistics.
@@ -188,6 +197,8 @@ fn error_against_the_reference_falls_as_samples_grow() {
             out.to_str().unwrap(),
             "--spp",
             spp,
+            "--edge-samples",
+            "0",
             "--seed",
             "7",
         ];
@@ -222,7 +233,7 @@ fn edge_samples_take_most_of_the_error_of_one_sample_a_pixel_away() {
         let stats: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&stats).unwrap()).unwrap();
         (composite_rel_mse(&out, &reference), stats)
     };
-    let (one, _) = render("one", &["--spp", "1"]);
+    let (one, _) = render("one", &["--spp", "1", "--edge-samples", "0"]);
     let (edges, stats) = render("edges", &["--spp", "1", "--edge-samples", "16"]);
     let (sixteen, all) = render("sixteen", &["--spp", "16"]);
     eprintln!("relMSE 1 spp {one:.3e}, 1 spp + 16 at edges {edges:.3e}, 16 spp {sixteen:.3e}; {stats}");

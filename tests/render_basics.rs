@@ -236,6 +236,8 @@ fn edge_pixels(dir: &std::path::Path, spp: &str) -> Vec<Vec<f64>> {
             "32",
             "-ab",
             "0",
+            "--edge-samples",
+            "0",
             "-vtl",
             "-vp",
             "0",
@@ -359,9 +361,11 @@ fn info_and_compare_commands() {
     assert_eq!(json["cameras"], 1);
 
     let dir = tempfile::tempdir().unwrap();
-    // No emission rays of their own (they are jittered): the pixel centre alone sees emitters.
-    let a = render_default(dir.path(), "a", &["--emission-samples", "0"]);
-    let b = render_default(dir.path(), "b", &["--seed", "9", "-aa", "0", "--emission-samples", "0"]);
+    // No emission rays of their own and no more samples at edges (both jittered): the pixel
+    // centre alone sees emitters.
+    let centred = ["--emission-samples", "0", "--edge-samples", "0"];
+    let a = render_default(dir.path(), "a", &centred);
+    let b = render_default(dir.path(), "b", &[&centred[..], &["--seed", "9", "-aa", "0"]].concat());
     let same = stdout(&run_ok(&[
         "compare",
         a.to_str().unwrap(),

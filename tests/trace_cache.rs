@@ -1,5 +1,7 @@
 //! The hidden `--trace-cache FILE` option: one line per cache lookup and one per record made (or
-//! that a miss would make), matching the statistics, in serial mode only; the image is the same.
+//! that a miss would make), matching the statistics, in serial mode only; at one sample a pixel
+//! the image is the same (the trace looks every sample up on its own, where a pixel's several
+//! samples share one lookup otherwise: `--edge-samples 0` here).
 
 mod common;
 use common::*;
@@ -37,6 +39,8 @@ fn trace_cache_lists_every_lookup_and_record() {
         trace.to_str().unwrap(),
         "--ic-build",
         "progressive",
+        "--edge-samples",
+        "0",
     ]);
     let s: Value = serde_json::from_str(&std::fs::read_to_string(&stats).unwrap()).unwrap();
     let text = std::fs::read_to_string(&trace).unwrap();
@@ -81,6 +85,8 @@ fn trace_cache_lists_every_lookup_and_record() {
         "--no-preview",
         "--ic-build",
         "progressive",
+        "--edge-samples",
+        "0",
     ]);
     assert_eq!(rgb(&read_exr(&out), ""), rgb(&read_exr(&plain), ""));
 }
