@@ -5,17 +5,18 @@
 //! the next tile's request, and what it computes for PAs as results.
 
 use super::{Roles, compute_request, send_results};
-use crate::parallel::comm::{Comm, Counters, Marker, kind};
+use crate::parallel::comm::{Comm, Counters, Envelope, Marker, kind};
 use crate::parallel::protocol::{FinishedTile, Kind, Message, Records, Requests};
 use crate::parallel::{Intake, Setup, send_report};
 use crate::render::{ThreadClock, ThreadStats, render_tile};
 use crate::shading::Integrator;
 use crate::shading::request::RequestBuffer;
+use std::cell::RefCell;
 use std::collections::HashMap;
 use std::sync::atomic::AtomicU64;
 use std::sync::atomic::Ordering::Relaxed;
 use std::sync::mpsc::{Receiver, SyncSender, TrySendError, sync_channel};
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 /// Request batches waiting for the courier thread; at this many the renderer waits too.
 const BATCHES_IN_FLIGHT: usize = 16;
@@ -26,6 +27,9 @@ const BATCHES_IN_FLIGHT: usize = 16;
 /// 934-968 records against 765-772, fewer than centralised or broadcast sharing).
 struct Sender<'c> {
     outbox: Option<SyncSender<(i32, Message)>>,
+    /// The renderer's own link, for taking the master's answer in while it waits.
+    comm: Comm<'c>,
+    early: &'c EarlyAnswer,
     /// Where the renderer's waits for a full outbox are counted (its idle time).
     idle_ns: &'c AtomicU64,
     /// Each tile's PA (none without PAs).
@@ -48,13 +52,36 @@ impl Sender<'_> {
         self.sent += batch.len() as u64;
         let queued = outbox.try_send((pa, Message::Requests(Requests::from(batch))));
         self.handling_ns += handling.elapsed().as_nanos() as u64;
-        if let Err(TrySendError::Full(message)) = queued {
-            let waited = Instant::now();
-            let _ = outbox.send(message);
-            self.idle_ns.fetch_add(waited.elapsed().as_nanos() as u64, Relaxed);
+        if let Err(TrySendError::Full(mut message)) = queued {
+            let (waited, counted) = (Instant::now(), self.idle_ns.load(Relaxed));
+            // Waiting for room, the renderer still takes the master's answer in (`EarlyAnswer`).
+            while let Err(TrySendError::Full(back)) = outbox.try_send(message) {
+                message = back;
+                if self.early.borrow().is_some() {
+                    std::thread::sleep(OUTBOX_PAUSE);
+                } else if let Some(answer) = self.comm.receive(&[kind(Some(0), Kind::Work)], Some(OUTBOX_PAUSE)) {
+                    *self.early.borrow_mut() = Some(answer);
+                }
+            }
+            // All of it idle, less what the receives above have counted already.
+            let counted = self.idle_ns.load(Relaxed) - counted;
+            let idle = (waited.elapsed().as_nanos() as u64).saturating_sub(counted);
+            self.idle_ns.fetch_add(idle, Relaxed);
         }
     }
 }
+
+/// How long a renderer waiting for room in its outbox waits between looks.
+const OUTBOX_PAUSE: Duration = Duration::from_millis(1);
+
+/// The master's answer to a PR's `ask` (its next tile and records), taken in while the renderer
+/// waits for room in a full outbox. The master waits for its answer to leave (a standard MPI send
+/// of a large message waits for its receiver), and while it waits it takes in no PA's status; a
+/// PA whose status is not taken in computes nothing, so its queue stays full, the PR's courier
+/// waits for it, and the outbox stays full: a cycle that held until the master's --timeout
+/// (conference room, 320x240, -ab 2, 4 ranks, --tile 32x32, 4 samples where edges cross pixels,
+/// PA queues at --pa-queue's 65536). Taking the answer in breaks it; `Pr::answer` reads it.
+type EarlyAnswer = RefCell<Option<Envelope>>;
 
 /// Batches sent to one PA between two markers (see `deliver`).
 const WINDOW: usize = 16;
@@ -89,6 +116,7 @@ fn deliver(counters: &Counters, inbox: Receiver<(i32, Message)>) {
 struct Pr<'a, 'c> {
     setup: &'a Setup<'a>,
     comm: Comm<'c>,
+    early: &'c EarlyAnswer,
     integrator: Integrator<'a>,
     stats: ThreadStats,
     intake: Intake,
@@ -98,6 +126,7 @@ pub fn run(setup: &Setup<'_>, roles: &Roles) {
     let counters = Counters::default();
     let courier_counters = Counters::default();
     let sink = RequestBuffer::default();
+    let early = EarlyAnswer::default();
     let mut integrator = setup.integrator();
     if !roles.pas.is_empty() {
         integrator = integrator.deferring(&sink);
@@ -105,6 +134,7 @@ pub fn run(setup: &Setup<'_>, roles: &Roles) {
     let mut pr = Pr {
         setup,
         comm: Comm::new(&counters),
+        early: &early,
         integrator,
         stats: ThreadStats::default(),
         intake: Intake::default(),
@@ -113,6 +143,8 @@ pub fn run(setup: &Setup<'_>, roles: &Roles) {
     let (outbox, inbox) = sync_channel(BATCHES_IN_FLIGHT);
     let mut sender = Sender {
         outbox: Some(outbox),
+        comm: Comm::new(&counters),
+        early: &early,
         idle_ns: &counters.idle_ns,
         pa_of_tile: pa_of_tiles(&setup.tiles, roles.pas.len())
             .into_iter()
@@ -153,7 +185,11 @@ impl Pr<'_, '_> {
 
     /// The master's answer to `ask`: a tile or none, and the records this PR lacks.
     fn answer(&self) -> Option<u32> {
-        let reply = self.comm.receive(&[kind(Some(0), Kind::Work)], None)?;
+        let taken_early = self.early.borrow_mut().take();
+        let reply = match taken_early {
+            Some(reply) => reply,
+            None => self.comm.receive(&[kind(Some(0), Kind::Work)], None)?,
+        };
         let Ok(Message::Work { tile, records, .. }) = reply.message else {
             return None;
         };
