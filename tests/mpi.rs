@@ -46,7 +46,10 @@ fn render(dir: &Path, scene: &Path, name: &str, np: Option<usize>, extra: &[&str
         "--timeout",
         "60",
     ];
-    args.extend_from_slice(&["--stats", stats.to_str().unwrap(), "-x", "48"]);
+    args.extend_from_slice(&["--stats", stats.to_str().unwrap()]);
+    if !extra.contains(&"-x") {
+        args.extend_from_slice(&["-x", "48"]);
+    }
     if !extra.contains(&"-y") {
         args.extend_from_slice(&["-y", "48"]);
     }
@@ -593,41 +596,30 @@ fn a_pa_that_runs_dry_takes_a_share_of_another_pas_queue() {
 /// A PR held back by a full PA queue still takes the master's answer (its next tile and the
 /// records it lacks) in: the master waits for a large answer to leave, and a master that waits
 /// takes in no PA's status, so the PA computes nothing and its queue stays full. Before the PR
-/// took the answer in while waiting, this job ended at the master's --timeout in 3 runs of 3
-/// ("rank 3 took no message from the master for 10 s").
+/// took the answer in while waiting, this job (with --timeout 10) ended at the master's timeout
+/// in 3 runs of 3 ("rank 3 took no message from the master for 10 s").
 #[test]
 fn a_pr_held_back_by_a_full_pa_queue_still_takes_the_masters_answer() {
     let _one_job = one_job_at_a_time();
     let dir = tempfile::tempdir().unwrap();
     let scene = project_dir().join("scenes/cornell.gltf");
-    let out = dir.path().join("held.exr");
-    let stats = dir.path().join("held.json");
-    let args = [
-        "render",
-        scene.to_str().unwrap(),
-        "-o",
-        out.to_str().unwrap(),
-        "-q",
-        "--no-preview",
-        "--stats",
-        stats.to_str().unwrap(),
+    let extra = [
         "-x",
         "128",
         "-y",
         "128",
-        "--ic-build",
-        "progressive",
+        "-ad",
+        "512",
+        "--tile",
+        "32x32",
         "--mode",
         "component",
         "--pa-queue",
         "256",
-        "--timeout",
-        "10",
     ];
-    let output = mpirun(4, &args);
-    assert!(output.status.success(), "{}", stderr(&output));
-    let s: Value = serde_json::from_str(&std::fs::read_to_string(&stats).unwrap()).unwrap();
-    assert_eq!(u(&s, "requests_sent"), u(&s, "requests_computed"));
+    let held = render(dir.path(), &scene, "held", Some(4), &extra);
+    let s = &held.stats;
+    assert_eq!(u(s, "requests_sent"), u(s, "requests_computed"));
     let longest = s["per_rank"]
         .as_array()
         .unwrap()
@@ -640,7 +632,7 @@ fn a_pr_held_back_by_a_full_pa_queue_still_takes_the_masters_answer() {
         longest >= 256,
         "the PA's queue never filled ({longest}): nothing was held back"
     );
-    assert!(rgb(&read_exr(&out), "").iter().flatten().all(|v| v.is_finite()));
+    assert!(rgb(&held.image, "").iter().flatten().all(|v| v.is_finite()));
 }
 
 /// A PA whose queue is full takes no more requests in; the PRs wait (their synchronous sends do

@@ -169,6 +169,14 @@ mod tests {
         }
     }
 
+    /// The mean of the pixels' estimated variances, and the variance of their estimates.
+    fn estimated_and_spread(variances: &[f64], estimates: &[f64]) -> (f64, f64) {
+        let n = estimates.len() as f64;
+        let mean = estimates.iter().sum::<f64>() / n;
+        let spread = estimates.iter().map(|e| (e - mean).powi(2)).sum::<f64>() / (n - 1.0);
+        (variances.iter().sum::<f64>() / n, spread)
+    }
+
     fn parts(exact: f32, passed: f32, unblocked: f32) -> ShadowRatio {
         ShadowRatio {
             exact: Vec3::splat(exact),
@@ -225,9 +233,7 @@ mod tests {
             estimates.push(luminance(pool.estimate()) as f64 / samples as f64);
             variances.push(noise.finish().direct as f64);
         }
-        let mean = estimates.iter().sum::<f64>() / pixels as f64;
-        let spread = estimates.iter().map(|e| (e - mean).powi(2)).sum::<f64>() / (pixels - 1) as f64;
-        let estimated = variances.iter().sum::<f64>() / pixels as f64;
+        let (estimated, spread) = estimated_and_spread(&variances, &estimates);
         assert!(
             (estimated / spread - 1.0).abs() < 0.15,
             "estimated {estimated:.3e} against the estimates' spread {spread:.3e}"
@@ -264,9 +270,7 @@ mod tests {
                 estimates.push(luminance(part.estimate()) as f64);
                 variances.push(noise.finish().direct as f64);
             }
-            let mean = estimates.iter().sum::<f64>() / pixels as f64;
-            let spread = estimates.iter().map(|e| (e - mean).powi(2)).sum::<f64>() / (pixels - 1) as f64;
-            let estimated = variances.iter().sum::<f64>() / pixels as f64;
+            let (estimated, spread) = estimated_and_spread(&variances, &estimates);
             assert!(
                 (estimated / spread - 1.0).abs() < 0.15,
                 "hidden {hidden}: estimated {estimated:.3e} against the estimates' spread {spread:.3e}"
