@@ -593,6 +593,18 @@ fn a_pa_that_runs_dry_takes_a_share_of_another_pas_queue() {
     assert!(rgb(&run.image, "").iter().flatten().all(|v| v.is_finite()));
 }
 
+/// The longest any PA's queue grew in a run (its statistics).
+fn longest_pa_queue(stats: &Value) -> u64 {
+    stats["per_rank"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|r| r["role"] == "pa")
+        .map(|r| u(r, "queue_max"))
+        .max()
+        .unwrap()
+}
+
 /// A PR held back by a full PA queue still takes the master's answer (its next tile and the
 /// records it lacks) in: the master waits for a large answer to leave, and a master that waits
 /// takes in no PA's status, so the PA computes nothing and its queue stays full. Before the PR
@@ -620,14 +632,7 @@ fn a_pr_held_back_by_a_full_pa_queue_still_takes_the_masters_answer() {
     let held = render(dir.path(), &scene, "held", Some(4), &extra);
     let s = &held.stats;
     assert_eq!(u(s, "requests_sent"), u(s, "requests_computed"));
-    let longest = s["per_rank"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .filter(|r| r["role"] == "pa")
-        .map(|r| u(r, "queue_max"))
-        .max()
-        .unwrap();
+    let longest = longest_pa_queue(s);
     assert!(
         longest >= 256,
         "the PA's queue never filled ({longest}): nothing was held back"
@@ -661,16 +666,7 @@ fn a_full_pa_queue_holds_the_prs_back() {
     let mut args = common.to_vec();
     args.extend(["--pa-queue", "16"]);
     let held = render(dir.path(), &scene, "bounded", Some(4), &args);
-    let longest = |run: &Run| -> u64 {
-        run.stats["per_rank"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .filter(|r| r["role"] == "pa")
-            .map(|r| u(r, "queue_max"))
-            .max()
-            .unwrap()
-    };
+    let longest = |run: &Run| longest_pa_queue(&run.stats);
     // Without the bound the queue grows far past it (else this test would prove nothing).
     assert!(
         longest(&free) > 4 * bound,
