@@ -378,19 +378,36 @@ def error_at(rows, t, metric, clock):
     return pts[0][1] if len(pts) == 1 and pts[0][0] == t else None
 
 
+def frontier(rows, metric, clock):
+    """The runs no other run beats: none as fast or faster has a lower error. A renderer with
+    several knobs (icrender's settings) has runs in time order whose errors go up and down;
+    its frontier is what a user who picks the best setting for a time budget gets."""
+    best, kept = float("inf"), []
+    for r in sorted(rows, key=lambda r: (r[clock], r[metric])):
+        if r[metric] < best:
+            kept.append(r)
+            best = r[metric]
+    return kept
+
+
 def targets(name, rows, metric, clock, peer_names=("mitsuba", "cycles", "cycles+oidn"), horizon=30.0,
-            ours_name="icrender"):
+            ours_name="icrender", on_frontiers=False):
     """Prints the target for one scene, error measure and clock against the best of
     `peer_names`: icrender's curve below the best peer's at every time from icrender's fastest
     run to `horizon` seconds (aim: 2x below). At each time where icrender's curve and some
     peer's were both measured, the best peer's error over icrender's (log-log interpolated);
-    a time before a peer's fastest run leaves that peer out."""
+    a time before a peer's fastest run leaves that peer out. `on_frontiers`: every curve
+    through its `frontier` only (the tag says so)."""
     ours = [r for r in rows if r["renderer"] == ours_name]
     peers = {p: [r for r in rows if r["renderer"] == p] for p in peer_names}
     peers = {p: rs for p, rs in peers.items() if rs}
     if not ours or not peers:
         return
-    tag = f"{name} [{ours_name}, {metric}, {clock}, vs {'/'.join(peers)}]"
+    if on_frontiers:
+        ours = frontier(ours, metric, clock)
+        peers = {p: frontier(rs, metric, clock) for p, rs in peers.items()}
+        rows = ours + [r for rs in peers.values() for r in rs]
+    tag = f"{name} [{ours_name}, {metric}, {clock}, vs {'/'.join(peers)}{', frontiers' if on_frontiers else ''}]"
     first = min(r[clock] for r in ours)
     compared = []
     for t in sorted({r[clock] for r in rows if first <= r[clock] <= horizon}):
@@ -423,6 +440,12 @@ def report_targets(name, rows):
         for clock in CLOCKS:
             for metric in ("relmse", "relmse_4x4", "rmse"):
                 targets(name, rows, metric, clock, peer_names, ours_name="icrender+oidn")
+    # The denoised curve against the raw one again, each through its frontier only: icrender's
+    # settings in time order are not a curve of one knob, and between two runs of one kind the
+    # other curve may pass through a run of another (a 4-sample setting between one-sample ones).
+    for clock in CLOCKS:
+        for metric in ("relmse", "relmse_4x4"):
+            targets(name, rows, metric, clock, ("icrender",), ours_name="icrender+oidn", on_frontiers=True)
 
 
 def plot(name, cfg, rows, path):
