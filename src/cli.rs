@@ -188,7 +188,8 @@ pub struct RenderArgs {
     #[arg(long = "send", default_value_t = 32, allow_negative_numbers = true)]
     pub send: u32,
     /// Most requests a PA keeps queued (component mode); while its queue is this long it takes
-    /// no more in, and PRs wait before sending (back-pressure instead of unbounded growth).
+    /// no more in, and a PR whose outbox fills computes its next batches itself (back-pressure
+    /// instead of unbounded growth; `requests_kept` in --stats).
     /// The message that brings it there may overshoot it by up to --send plus a pixel's
     /// samples (a PR sends once a pixel's requests reach --send).
     #[arg(long = "pa-queue", default_value_t = 65536, allow_negative_numbers = true)]

@@ -129,6 +129,10 @@ pub struct RankReport {
     pub requests_computed: u64,
     #[serde(default)]
     pub requests_forwarded: u64,
+    /// Component mode, PR: requests it computed itself because its outbox was full (its PA's
+    /// queue: back-pressure), never sent, so in neither count above.
+    #[serde(default)]
+    pub requests_kept: u64,
     /// Component mode: seconds this rank spent handling requests as messages, timed where it
     /// happens: a PR encoding and queueing its batches, a PA decoding and queueing what arrives.
     /// What a request costs beyond the indirect light it asks for.
@@ -211,6 +215,8 @@ pub struct RenderStats {
     pub requests_sent: u64,
     pub requests_computed: u64,
     pub requests_forwarded: u64,
+    /// Component mode: requests PRs computed themselves, their outboxes full.
+    pub requests_kept: u64,
     /// Component mode: seconds all ranks spent handling requests as messages.
     pub request_handling_s: f64,
     pub rays: RayStats,
@@ -314,6 +320,7 @@ impl RenderStats {
         self.requests_sent = ranks.iter().map(|r| r.requests_sent).sum();
         self.requests_computed = ranks.iter().map(|r| r.requests_computed).sum();
         self.requests_forwarded = ranks.iter().map(|r| r.requests_forwarded).sum();
+        self.requests_kept = ranks.iter().map(|r| r.requests_kept).sum();
         self.request_handling_s = ranks.iter().map(|r| r.request_handling_s).sum();
         self.rays = RayStats::sum(ranks.iter().map(|r| &r.rays));
         self.mrays_per_s = self.rays.total as f64 / self.render_s.max(1e-9) / 1e6;

@@ -1,22 +1,21 @@
 //! A PR rank: renders the tiles the master hands out, everything but the indirect diffuse light
 //! its cache (records relayed by the master) cannot give: that becomes requests, sent --send at
-//! a time to the PA of their tile. With no tile left it flushes its buffer and, when the master
-//! asks, computes requests forwarded from a loaded PA. Each finished tile goes to the master with
+//! a time to the PA of their tile; a batch that no longer fits its outbox (its PA is behind) it
+//! computes itself. With no tile left it flushes its buffer and, when the master asks, computes
+//! requests forwarded from a loaded PA. Each finished tile goes to the master with
 //! the next tile's request, and what it computes for PAs as results.
 
 use super::{Roles, compute_request, send_results};
-use crate::parallel::comm::{Comm, Counters, Envelope, Marker, kind};
+use crate::parallel::comm::{Comm, Counters, Marker, kind};
 use crate::parallel::protocol::{FinishedTile, Kind, Message, Records, Requests};
 use crate::parallel::{Intake, Setup, send_report};
 use crate::render::{ThreadClock, ThreadStats, render_tile};
 use crate::shading::Integrator;
-use crate::shading::request::RequestBuffer;
-use std::cell::RefCell;
+use crate::shading::request::{AmbientRequest, RequestBuffer, RequestResult};
 use std::collections::HashMap;
-use std::sync::atomic::AtomicU64;
 use std::sync::atomic::Ordering::Relaxed;
 use std::sync::mpsc::{Receiver, SyncSender, TrySendError, sync_channel};
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 /// Request batches waiting for the courier thread; at this many the renderer waits too.
 const BATCHES_IN_FLIGHT: usize = 16;
@@ -25,63 +24,64 @@ const BATCHES_IN_FLIGHT: usize = 16;
 /// which then reuses its own records for the tile's neighbouring points; spreading a tile over
 /// every PA had several compute near-identical records for one spot (Cornell box, 8 ranks:
 /// 934-968 records against 765-772, fewer than centralised or broadcast sharing).
-struct Sender<'c> {
+struct Sender {
     outbox: Option<SyncSender<(i32, Message)>>,
-    /// The renderer's own link, for taking the master's answer in while it waits.
-    comm: Comm<'c>,
-    early: &'c EarlyAnswer,
-    /// Where the renderer's waits for a full outbox are counted (its idle time).
-    idle_ns: &'c AtomicU64,
     /// Each tile's PA (none without PAs).
     pa_of_tile: Vec<i32>,
     /// The PA of the tile being rendered.
     pa: Option<i32>,
     sent: u64,
-    /// Nanoseconds spent taking, encoding and queueing batches (not waiting: that is idle time).
+    /// Nanoseconds spent taking, encoding and queueing batches.
     handling_ns: u64,
 }
 
-impl Sender<'_> {
-    /// Sends the buffered requests to the current tile's PA.
-    fn send(&mut self, sink: &RequestBuffer) {
+impl Sender {
+    /// Sends the buffered requests to the current tile's PA; returns them instead when the
+    /// outbox is full (the PA's queue is: back-pressure), for the PR to compute itself
+    /// (`OwnRequests`). A PR that waited there left the master's answer untaken while the
+    /// master, waiting for it to leave (a standard MPI send of a large message waits for its
+    /// receiver), took no PA status in, and the PA, its status unsent, computed nothing: a
+    /// cycle that held until --timeout (conference room, 320x240, -ab 2, 4 ranks, progressive
+    /// build, the PA's queue at --pa-queue's 65536).
+    fn send(&mut self, sink: &RequestBuffer) -> Vec<AmbientRequest> {
         let handling = Instant::now();
         let batch = sink.take();
         let (Some(outbox), Some(pa), false) = (&self.outbox, self.pa, batch.is_empty()) else {
-            return;
+            return Vec::new();
         };
-        self.sent += batch.len() as u64;
+        let count = batch.len() as u64;
         let queued = outbox.try_send((pa, Message::Requests(Requests::from(batch))));
         self.handling_ns += handling.elapsed().as_nanos() as u64;
-        if let Err(TrySendError::Full(mut message)) = queued {
-            let (waited, counted) = (Instant::now(), self.idle_ns.load(Relaxed));
-            // Waiting for room, the renderer still takes the master's answer in (`EarlyAnswer`).
-            while let Err(TrySendError::Full(back)) = outbox.try_send(message) {
-                message = back;
-                if self.early.borrow().is_some() {
-                    std::thread::sleep(OUTBOX_PAUSE);
-                } else if let Some(answer) = self.comm.receive(&[kind(Some(0), Kind::Work)], Some(OUTBOX_PAUSE)) {
-                    *self.early.borrow_mut() = Some(answer);
-                }
+        match queued {
+            Ok(()) => {
+                self.sent += count;
+                Vec::new()
             }
-            // All of it idle, less what the receives above have counted already.
-            let counted = self.idle_ns.load(Relaxed) - counted;
-            let idle = (waited.elapsed().as_nanos() as u64).saturating_sub(counted);
-            self.idle_ns.fetch_add(idle, Relaxed);
+            Err(TrySendError::Full((_, Message::Requests(back)))) => back.requests,
+            // The courier ends only after the PR's last send.
+            Err(_) => Vec::new(),
         }
     }
 }
 
-/// How long a renderer waiting for room in its outbox waits between looks.
-const OUTBOX_PAUSE: Duration = Duration::from_millis(1);
+/// The requests a PR computed itself, its outbox being full. Their results wait for the help
+/// phase (sent before the PR first reports itself idle, while the master sends it nothing), and
+/// the records they made go out with that report.
+#[derive(Default)]
+struct OwnRequests {
+    stats: ThreadStats,
+    results: Vec<RequestResult>,
+    computed: u64,
+}
 
-/// The master's answer to a PR's `ask` (its next tile and records), taken in while the renderer
-/// waits for room in a full outbox. The master waits for its answer to leave (a standard MPI send
-/// of a large message waits for its receiver), and while it waits it takes in no PA's status; a
-/// PA whose status is not taken in computes nothing, so its queue stays full, the PR's courier
-/// waits for it, and the outbox stays full: a cycle that held until the master's --timeout
-/// (conference room, 320x240, -ab 2, 4 ranks, --tile 32x32, 4 samples where edges cross pixels,
-/// PA queues at --pa-queue's 65536). Taking the answer in breaks it; `Pr::answer` reads it.
-type EarlyAnswer = RefCell<Option<Envelope>>;
+impl OwnRequests {
+    fn compute(&mut self, integrator: &Integrator<'_>, batch: Vec<AmbientRequest>, seed: u64) {
+        for request in &batch {
+            compute_request(integrator, request, seed, &mut self.stats, &mut self.results);
+        }
+        self.computed += batch.len() as u64;
+    }
+}
 
 /// Batches sent to one PA between two markers (see `deliver`).
 const WINDOW: usize = 16;
@@ -90,8 +90,8 @@ const WINDOW: usize = 16;
 /// marker (an empty batch) as a synchronous send, which completes once that PA has taken in
 /// everything before it; it waits for a PA's previous marker before sending the next, so at
 /// most 2 x WINDOW batches wait for a PA. A PA with a full queue takes nothing in: the courier
-/// waits, the outbox fills and the renderer waits (back-pressure), while a PA that keeps up
-/// costs the PR no waiting. It ends once every marker is taken in: nothing is still on its way
+/// waits, the outbox fills and the renderer computes its next batches itself (back-pressure),
+/// while a PA that keeps up costs the PR nothing. It ends once every marker is taken in: nothing is still on its way
 /// when the PR reports itself idle.
 fn deliver(counters: &Counters, inbox: Receiver<(i32, Message)>) {
     let comm = Comm::new(counters);
@@ -116,7 +116,7 @@ fn deliver(counters: &Counters, inbox: Receiver<(i32, Message)>) {
 struct Pr<'a, 'c> {
     setup: &'a Setup<'a>,
     comm: Comm<'c>,
-    early: &'c EarlyAnswer,
+    own: OwnRequests,
     integrator: Integrator<'a>,
     stats: ThreadStats,
     intake: Intake,
@@ -126,7 +126,6 @@ pub fn run(setup: &Setup<'_>, roles: &Roles) {
     let counters = Counters::default();
     let courier_counters = Counters::default();
     let sink = RequestBuffer::default();
-    let early = EarlyAnswer::default();
     let mut integrator = setup.integrator();
     if !roles.pas.is_empty() {
         integrator = integrator.deferring(&sink);
@@ -134,7 +133,7 @@ pub fn run(setup: &Setup<'_>, roles: &Roles) {
     let mut pr = Pr {
         setup,
         comm: Comm::new(&counters),
-        early: &early,
+        own: OwnRequests::default(),
         integrator,
         stats: ThreadStats::default(),
         intake: Intake::default(),
@@ -143,9 +142,6 @@ pub fn run(setup: &Setup<'_>, roles: &Roles) {
     let (outbox, inbox) = sync_channel(BATCHES_IN_FLIGHT);
     let mut sender = Sender {
         outbox: Some(outbox),
-        comm: Comm::new(&counters),
-        early: &early,
-        idle_ns: &counters.idle_ns,
         pa_of_tile: pa_of_tiles(&setup.tiles, roles.pas.len())
             .into_iter()
             .filter_map(|i| roles.pas.get(i).copied())
@@ -157,7 +153,8 @@ pub fn run(setup: &Setup<'_>, roles: &Roles) {
     std::thread::scope(|scope| {
         let courier = scope.spawn(|| deliver(&courier_counters, inbox));
         pr.render_tiles(&mut sender, &sink);
-        sender.send(&sink);
+        let left = sender.send(&sink);
+        pr.own.compute(&pr.integrator, left, setup.job_in.seed);
         // No more requests: the courier ends once it has delivered what it holds. Every batch
         // must have reached its PA before this PR counts as flushed (the master may end the job
         // once the counts close, and a PA stops taking requests then).
@@ -167,6 +164,7 @@ pub fn run(setup: &Setup<'_>, roles: &Roles) {
         counters.idle_ns.fetch_add(waited.elapsed().as_nanos() as u64, Relaxed);
     });
     let helped = pr.help(sender.sent);
+    pr.stats.absorb(&pr.own.stats);
     clock.stop(&mut pr.stats);
 
     let mut report = setup.report(&pr.comm, "pr", vec![pr.stats], &courier_counters);
@@ -174,6 +172,7 @@ pub fn run(setup: &Setup<'_>, roles: &Roles) {
     report.requests_sent = sender.sent;
     report.request_handling_s = sender.handling_ns as f64 * 1e-9;
     report.requests_computed = helped;
+    report.requests_kept = pr.own.computed;
     send_report(&pr.comm, report);
 }
 
@@ -185,11 +184,7 @@ impl Pr<'_, '_> {
 
     /// The master's answer to `ask`: a tile or none, and the records this PR lacks.
     fn answer(&self) -> Option<u32> {
-        let taken_early = self.early.borrow_mut().take();
-        let reply = match taken_early {
-            Some(reply) => reply,
-            None => self.comm.receive(&[kind(Some(0), Kind::Work)], None)?,
-        };
+        let reply = self.comm.receive(&[kind(Some(0), Kind::Work)], None)?;
         let Ok(Message::Work { tile, records, .. }) = reply.message else {
             return None;
         };
@@ -204,7 +199,7 @@ impl Pr<'_, '_> {
     /// trip (a few tenths of a millisecond; a 16x16 tile is under one) overlaps the rendering;
     /// the request carries the tile finished before, and the records that
     /// come with the next tile are one tile older.
-    fn render_tiles(&mut self, sender: &mut Sender<'_>, sink: &RequestBuffer) {
+    fn render_tiles(&mut self, sender: &mut Sender, sink: &RequestBuffer) {
         let send_at = self.setup.job_in.send.max(1) as usize;
         self.ask(None);
         let mut finished: Option<FinishedTile> = None;
@@ -215,16 +210,18 @@ impl Pr<'_, '_> {
                 sender.pa = sender.pa_of_tile.get(index as usize).copied();
                 // The outgoing buffer is empty here (flushed at every tile's end), so what this
                 // tile sent is the change in the count sent.
-                let sent_before = sender.sent;
+                let (sent_before, own_before) = (sender.sent, self.own.computed);
                 let (camera, settings) = (&self.setup.job.camera, &self.setup.job.settings);
-                let pixels = render_tile(&self.integrator, camera, settings, tile, &mut self.stats.rays, |_| {
+                let (integrator, own, seed) = (&self.integrator, &mut self.own, self.setup.job_in.seed);
+                let pixels = render_tile(integrator, camera, settings, tile, &mut self.stats.rays, |_| {
                     if sink.len() >= send_at {
-                        sender.send(sink);
+                        own.compute(integrator, sender.send(sink), seed);
                     }
                 });
                 // The tile's last requests go to its PA now, not with the next tile's.
-                sender.send(sink);
-                let requests = (sender.sent - sent_before) as u32;
+                own.compute(integrator, sender.send(sink), seed);
+                // Every request of the tile, sent or computed here: the results it awaits.
+                let requests = (sender.sent - sent_before + own.computed - own_before) as u32;
                 finished = Some(FinishedTile {
                     tile: index,
                     requests,
@@ -245,7 +242,7 @@ impl Pr<'_, '_> {
         let (setup, comm, intake) = (self.setup, &self.comm, &self.intake);
         let seed = setup.job_in.seed;
         let pixels = setup.job.camera.width * setup.job.camera.height;
-        let mut results = Vec::new();
+        let mut results = std::mem::take(&mut self.own.results);
         let mut helped = 0u64;
         loop {
             send_results(comm, &mut results);
