@@ -50,8 +50,9 @@ def ensure_module(name, package=None):
 # The paper's modes make their records as they render (the renderer's default, the prepass,
 # places every record first and leaves the modes nothing to share): every run of the paper's
 # comparison builds its cache progressively.
-# With one sample in every pixel, as the paper's renderers took (--edge-samples defaults to 4).
-PAPER_BUILD = ["--ic-build", "progressive", "--edge-samples", "0"]
+# With one sample in every pixel, as the paper's renderers took (--edge-samples defaults to 4),
+# and PRs that wait for a PA that is behind rather than compute its requests (--pr-waits).
+PAPER_BUILD = ["--ic-build", "progressive", "--edge-samples", "0", "--pr-waits"]
 # Scanline order without the overture (--overture 0): how the paper's renderers computed, and the
 # order of the serial runs whose cache traces bench/icsim.py replays.
 RASTER_ORDER = PAPER_BUILD + ["--overture", "0"]

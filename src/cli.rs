@@ -194,6 +194,11 @@ pub struct RenderArgs {
     /// samples (a PR sends once a pixel's requests reach --send).
     #[arg(long = "pa-queue", default_value_t = 65536, allow_negative_numbers = true)]
     pub pa_queue: u32,
+    /// Component mode: a PR whose outbox is full waits for room instead of computing the batch
+    /// itself, as the paper's PRs (which compute no indirect light while tiles are left); the
+    /// paper bench passes it.
+    #[arg(long = "pr-waits")]
+    pub pr_waits: bool,
     /// Ranks that act as PAs in component mode (default: half the workers).
     #[arg(long = "pa", allow_negative_numbers = true)]
     pub pa: Option<u32>,

@@ -761,6 +761,7 @@ fn run_parallel(args: &RenderArgs, mode: Mode) -> CommandResult {
         send: args.send,
         pa: args.pa,
         pa_queue: args.pa_queue,
+        pr_waits: args.pr_waits,
         silence_limit: std::time::Duration::from_secs_f64(args.timeout.max(1.0)),
         seed: args.seed,
         cache_file: args.ambient_file.is_some(),

@@ -74,6 +74,8 @@ pub struct ParallelJob<'a> {
     pub send: u32,
     pub pa: Option<u32>,
     pub pa_queue: u32,
+    /// --pr-waits: a PR whose outbox is full waits (the paper's PRs) rather than compute.
+    pub pr_waits: bool,
     /// How long a rank may be silent before it counts as lost (see `liveness`).
     pub silence_limit: Duration,
     pub seed: u64,

@@ -6,16 +6,18 @@
 //! the next tile's request, and what it computes for PAs as results.
 
 use super::{Roles, compute_request, send_results};
-use crate::parallel::comm::{Comm, Counters, Marker, kind};
+use crate::parallel::comm::{Comm, Counters, Envelope, Marker, kind};
 use crate::parallel::protocol::{FinishedTile, Kind, Message, Records, Requests};
 use crate::parallel::{Intake, Setup, send_report};
 use crate::render::{ThreadClock, ThreadStats, render_tile};
 use crate::shading::Integrator;
 use crate::shading::request::{AmbientRequest, RequestBuffer, RequestResult};
+use std::cell::RefCell;
 use std::collections::HashMap;
+use std::sync::atomic::AtomicU64;
 use std::sync::atomic::Ordering::Relaxed;
 use std::sync::mpsc::{Receiver, SyncSender, TrySendError, sync_channel};
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 /// Request batches waiting for the courier thread; at this many the renderer waits too.
 const BATCHES_IN_FLIGHT: usize = 16;
@@ -24,25 +26,29 @@ const BATCHES_IN_FLIGHT: usize = 16;
 /// which then reuses its own records for the tile's neighbouring points; spreading a tile over
 /// every PA had several compute near-identical records for one spot (Cornell box, 8 ranks:
 /// 934-968 records against 765-772, fewer than centralised or broadcast sharing).
-struct Sender {
+struct Sender<'c> {
     outbox: Option<SyncSender<(i32, Message)>>,
     /// Each tile's PA (none without PAs).
     pa_of_tile: Vec<i32>,
     /// The PA of the tile being rendered.
     pa: Option<i32>,
     sent: u64,
-    /// Nanoseconds spent taking, encoding and queueing batches.
+    /// Nanoseconds spent taking, encoding and queueing batches (not waiting: that is idle time).
     handling_ns: u64,
+    /// --pr-waits: wait for room in a full outbox (the paper's PRs) rather than compute.
+    waits: bool,
+    /// Where the renderer's waits for a full outbox are counted (its idle time).
+    idle_ns: &'c AtomicU64,
+    /// The renderer's own link, for taking the master's answer in while it waits.
+    comm: Comm<'c>,
+    early: &'c EarlyAnswer,
 }
 
-impl Sender {
-    /// Sends the buffered requests to the current tile's PA; returns them instead when the
-    /// outbox is full (the PA's queue is: back-pressure), for the PR to compute itself
-    /// (`OwnRequests`). A PR that waited there left the master's answer untaken while the
-    /// master, waiting for it to leave (a standard MPI send of a large message waits for its
-    /// receiver), took no PA status in, and the PA, its status unsent, computed nothing: a
-    /// cycle that held until --timeout (conference room, 320x240, -ab 2, 4 ranks, progressive
-    /// build, the PA's queue at --pa-queue's 65536).
+impl Sender<'_> {
+    /// Sends the buffered requests to the current tile's PA. When the outbox is full (the PA's
+    /// queue is: back-pressure) it returns them for the PR to compute itself (`OwnRequests`),
+    /// or with --pr-waits waits for room, taking the master's answer in meanwhile
+    /// (`EarlyAnswer`).
     fn send(&mut self, sink: &RequestBuffer) -> Vec<AmbientRequest> {
         let handling = Instant::now();
         let batch = sink.take();
@@ -52,17 +58,45 @@ impl Sender {
         let count = batch.len() as u64;
         let queued = outbox.try_send((pa, Message::Requests(Requests::from(batch))));
         self.handling_ns += handling.elapsed().as_nanos() as u64;
-        match queued {
-            Ok(()) => {
+        let mut message = match queued {
+            Err(TrySendError::Full((_, Message::Requests(back)))) if !self.waits => return back.requests,
+            Err(TrySendError::Full(message)) => message,
+            // Queued; or the courier is gone, which happens only after the PR's last send.
+            _ => {
                 self.sent += count;
-                Vec::new()
+                return Vec::new();
             }
-            Err(TrySendError::Full((_, Message::Requests(back)))) => back.requests,
-            // The courier ends only after the PR's last send.
-            Err(_) => Vec::new(),
+        };
+        self.sent += count;
+        let (waited, counted) = (Instant::now(), self.idle_ns.load(Relaxed));
+        while let Err(TrySendError::Full(back)) = outbox.try_send(message) {
+            message = back;
+            if self.early.borrow().is_some() {
+                std::thread::sleep(OUTBOX_PAUSE);
+            } else if let Some(answer) = self.comm.receive(&[kind(Some(0), Kind::Work)], Some(OUTBOX_PAUSE)) {
+                *self.early.borrow_mut() = Some(answer);
+            }
         }
+        // All of it idle, less what the receives above have counted already.
+        let counted = self.idle_ns.load(Relaxed) - counted;
+        let idle = (waited.elapsed().as_nanos() as u64).saturating_sub(counted);
+        self.idle_ns.fetch_add(idle, Relaxed);
+        Vec::new()
     }
 }
+
+/// How long a renderer waiting for room in its outbox waits between looks.
+const OUTBOX_PAUSE: Duration = Duration::from_millis(1);
+
+/// The master's answer to a PR's `ask` (its next tile and records), taken in while the renderer
+/// waits for room in a full outbox (--pr-waits). The master waits for its answer to leave (a
+/// standard MPI send of a large message waits for its receiver), and while it waits it takes in
+/// no PA's status; a PA whose status is not taken in computes nothing, so its queue stays full,
+/// the PR's courier waits for it, and the outbox stays full: a cycle that held until the
+/// master's --timeout (conference room, 320x240, -ab 2, 4 ranks, progressive build, the PA's
+/// queue at --pa-queue's 65536). Taking the answer in breaks it; `Pr::answer` reads it. Without
+/// --pr-waits the PR does not wait at all (`OwnRequests`).
+type EarlyAnswer = RefCell<Option<Envelope>>;
 
 /// The requests a PR computed itself, its outbox being full. Their results wait for the help
 /// phase (sent before the PR first reports itself idle, while the master sends it nothing), and
@@ -116,6 +150,7 @@ fn deliver(counters: &Counters, inbox: Receiver<(i32, Message)>) {
 struct Pr<'a, 'c> {
     setup: &'a Setup<'a>,
     comm: Comm<'c>,
+    early: &'c EarlyAnswer,
     own: OwnRequests,
     integrator: Integrator<'a>,
     stats: ThreadStats,
@@ -126,6 +161,7 @@ pub fn run(setup: &Setup<'_>, roles: &Roles) {
     let counters = Counters::default();
     let courier_counters = Counters::default();
     let sink = RequestBuffer::default();
+    let early = EarlyAnswer::default();
     let mut integrator = setup.integrator();
     if !roles.pas.is_empty() {
         integrator = integrator.deferring(&sink);
@@ -133,6 +169,7 @@ pub fn run(setup: &Setup<'_>, roles: &Roles) {
     let mut pr = Pr {
         setup,
         comm: Comm::new(&counters),
+        early: &early,
         own: OwnRequests::default(),
         integrator,
         stats: ThreadStats::default(),
@@ -149,6 +186,10 @@ pub fn run(setup: &Setup<'_>, roles: &Roles) {
         pa: None,
         sent: 0,
         handling_ns: 0,
+        waits: setup.job_in.pr_waits,
+        idle_ns: &counters.idle_ns,
+        comm: Comm::new(&counters),
+        early: &early,
     };
     std::thread::scope(|scope| {
         let courier = scope.spawn(|| deliver(&courier_counters, inbox));
@@ -184,7 +225,11 @@ impl Pr<'_, '_> {
 
     /// The master's answer to `ask`: a tile or none, and the records this PR lacks.
     fn answer(&self) -> Option<u32> {
-        let reply = self.comm.receive(&[kind(Some(0), Kind::Work)], None)?;
+        let taken_early = self.early.borrow_mut().take();
+        let reply = match taken_early {
+            Some(reply) => reply,
+            None => self.comm.receive(&[kind(Some(0), Kind::Work)], None)?,
+        };
         let Ok(Message::Work { tile, records, .. }) = reply.message else {
             return None;
         };
@@ -199,7 +244,7 @@ impl Pr<'_, '_> {
     /// trip (a few tenths of a millisecond; a 16x16 tile is under one) overlaps the rendering;
     /// the request carries the tile finished before, and the records that
     /// come with the next tile are one tile older.
-    fn render_tiles(&mut self, sender: &mut Sender, sink: &RequestBuffer) {
+    fn render_tiles(&mut self, sender: &mut Sender<'_>, sink: &RequestBuffer) {
         let send_at = self.setup.job_in.send.max(1) as usize;
         self.ask(None);
         let mut finished: Option<FinishedTile> = None;
