@@ -235,6 +235,10 @@ pub struct RenderStats {
     pub denoised_layers: Vec<String>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub denoise_s: Option<f64>,
+    /// The pixels the filter ran on over all layers filtered (`image::noisy_patches`: where the
+    /// pixels measured their noise, only where it is).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub denoise_filtered_pixels: Option<usize>,
     /// With --frames or --frame: the frame, its scene time (seconds) and the records the cache
     /// held when the frame began (read from -af and made for earlier frames: carried).
     #[serde(skip_serializing_if = "Option::is_none")]

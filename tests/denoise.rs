@@ -469,3 +469,42 @@ fn punctual_light_traced_exactly_leaves_nothing_to_denoise() {
         }
     }
 }
+
+#[test]
+fn the_filter_runs_only_where_the_pixels_measured_noise() {
+    // 16 samples a pixel, -ab 0: the direct light is noisy in the penumbrae, clean elsewhere;
+    // the filter sees the noisy rectangles with their margins, not the whole of each layer.
+    let dir = tempfile::tempdir().unwrap();
+    let (image, stats) = (dir.path().join("r.exr"), dir.path().join("r.json"));
+    let scene = cornell();
+    run_ok(&[
+        "render",
+        &scene,
+        "-o",
+        image.to_str().unwrap(),
+        "-x",
+        "128",
+        "-y",
+        "128",
+        "--ab",
+        "0",
+        "--spp",
+        "16",
+        "--denoise",
+        "-q",
+        "--no-preview",
+        "--stats",
+        stats.to_str().unwrap(),
+    ]);
+    let stats: Value = serde_json::from_str(&std::fs::read_to_string(&stats).unwrap()).unwrap();
+    let layers = stats["denoised_layers"].as_array().unwrap().len() - 1;
+    let filtered = stats["denoise_filtered_pixels"].as_u64().unwrap() as usize;
+    assert!(layers >= 1 && filtered > 0, "{stats}");
+    assert!(
+        filtered < layers * 128 * 128,
+        "{filtered} pixels filtered over {layers} layers: {stats}"
+    );
+    let how = read_image(&image, &["icrender/denoise"]).unwrap();
+    let how = how.attribute("icrender/denoise").unwrap();
+    assert!(how.contains("the filter ran where the measured noise is"), "{how}");
+}

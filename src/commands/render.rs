@@ -333,6 +333,7 @@ impl Outputs {
         if let Some(d) = &denoised {
             stats.denoised_layers = d.names();
             stats.denoise_s = Some(d.seconds);
+            stats.denoise_filtered_pixels = Some(d.filtered_pixels);
         }
         let stats_json = serde_json::to_string(&stats)?;
         let command_line: Vec<String> = std::env::args().collect();
@@ -552,13 +553,26 @@ fn denoise_attributes(d: &denoise::DenoisedFrame, args: &RenderArgs) -> Vec<(Str
             filtered.join(", "),
             weighing_text(d, args.spp),
             left_raw_text(d),
-        )
+        ) + &patches_text(d)
     };
     vec![
         ("icrender/denoised".to_string(), d.names().join(" ")),
         ("icrender/denoise".to_string(), how),
         ("icrender/denoise_time_s".to_string(), format!("{:.3}", d.seconds)),
     ]
+}
+
+/// Where the filter ran, if not on every filtered layer's whole image: a layer whose pixels
+/// measured their noise is filtered where that noise is (`image::noisy_patches`).
+fn patches_text(d: &denoise::DenoisedFrame) -> String {
+    let whole = d.composite.len() * d.filtered().len();
+    if whole == 0 || d.filtered_pixels >= whole {
+        return String::new();
+    }
+    format!(
+        "; the filter ran where the measured noise is: {:.0} % of the filtered layers' pixels",
+        100.0 * d.filtered_pixels as f64 / whole as f64
+    )
 }
 
 /// How the filtered layers were weighed against the raw ones (`denoise::PixelSampling`).

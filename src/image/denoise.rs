@@ -26,6 +26,7 @@
 
 use super::data::LayerNoise;
 use super::framebuffer::{FrameBuffer, Layer};
+use super::noisy_patches::{Patch, crop, noisy_patches, paste};
 use crate::scene::light::luminance;
 pub use crate::sys::oidn::Quality;
 use crate::sys::oidn::{Device, RtFilter};
@@ -100,6 +101,17 @@ pub struct FilterGuides {
     normal: Vec<f32>,
     /// Prefiltered, and so given to the filter as clean (`cleanAux`).
     clean: bool,
+}
+
+impl FilterGuides {
+    /// The guides on `rect` of an image `width` wide: a patch's.
+    fn crop(&self, width: usize, rect: super::noisy_patches::Rect) -> FilterGuides {
+        FilterGuides {
+            albedo: crop(&self.albedo, width, 3, rect),
+            normal: crop(&self.normal, width, 3, rect),
+            clean: self.clean,
+        }
+    }
 }
 
 /// A committed OIDN device and the quality its filters run at.
@@ -197,6 +209,31 @@ impl Denoiser {
         })?;
         Ok(vectors(&output))
     }
+
+    /// `color` denoised on `patches` only (each seen with its margin, its output kept on its
+    /// kept rectangle), the raw value elsewhere.
+    pub fn denoise_patches(
+        &self,
+        color: &[Vec3],
+        guides: Option<&FilterGuides>,
+        width: u32,
+        patches: &[Patch],
+    ) -> Result<Vec<Vec3>, String> {
+        let w = width as usize;
+        let mut out = color.to_vec();
+        for patch in patches {
+            let seen = patch.seen;
+            let guides = guides.map(|g| g.crop(w, seen));
+            let filtered = self.denoise(
+                &crop(color, w, 1, seen),
+                guides.as_ref(),
+                seen.width() as u32,
+                seen.height() as u32,
+            )?;
+            paste(&mut out, w, patch, &filtered);
+        }
+        Ok(out)
+    }
 }
 
 /// What `--denoise` made of a frame.
@@ -219,6 +256,9 @@ pub struct DenoisedFrame {
     pub denoiser: String,
     /// The denoiser's own time: its device, the guides' prefiltering and every filter.
     pub seconds: f64,
+    /// The pixels the filter ran on, over all layers filtered (patches' margins included): a
+    /// layer whose noise the pixels measured is filtered where that noise is (`noisy_patches`).
+    pub filtered_pixels: usize,
 }
 
 impl DenoisedFrame {
@@ -412,6 +452,23 @@ pub enum LeftRaw {
 /// luminance is floored at a hundredth of the squared mean, so that black pixels do not weigh
 /// without bound.
 fn relative_noise(frame: &FrameBuffer, layers: &[Layer]) -> Vec<f64> {
+    let weights = relative_weights(frame);
+    let pixels = weights.len().max(1) as f64;
+    layers
+        .iter()
+        .map(|&layer| {
+            let sum: f64 = relative_variance(frame, layer, &weights)
+                .iter()
+                .map(|v| *v as f64)
+                .sum();
+            sum / pixels
+        })
+        .collect()
+}
+
+/// Each pixel's weight in relMSE: one over the squared luminance of its raw composite, floored
+/// at a hundredth of the squared mean (`relative_noise`).
+fn relative_weights(frame: &FrameBuffer) -> Vec<f64> {
     let composite: Vec<f64> = (0..frame.data().len())
         .map(|i| {
             let light: Vec3 = Layer::ALL.iter().map(|l| frame.layer(*l)[i]).sum();
@@ -421,17 +478,17 @@ fn relative_noise(frame: &FrameBuffer, layers: &[Layer]) -> Vec<f64> {
     let pixels = composite.len().max(1) as f64;
     let mean = composite.iter().sum::<f64>() / pixels;
     let floor = (0.1 * mean).powi(2).max(f64::MIN_POSITIVE);
-    layers
+    composite.iter().map(|c| 1.0 / (c * c).max(floor)).collect()
+}
+
+/// Each pixel's variance of `layer` times its `relative_weights`: its share of the relMSE the
+/// layer's noise makes.
+fn relative_variance(frame: &FrameBuffer, layer: Layer, weights: &[f64]) -> Vec<f32> {
+    frame
+        .data()
         .iter()
-        .map(|&layer| {
-            let sum: f64 = frame
-                .data()
-                .iter()
-                .zip(&composite)
-                .map(|(d, c)| noise_of(&d.noise, layer) as f64 / (c * c).max(floor))
-                .sum();
-            sum / pixels
-        })
+        .zip(weights)
+        .map(|(d, w)| (noise_of(&d.noise, layer) as f64 * w) as f32)
         .collect()
 }
 
@@ -495,6 +552,8 @@ pub fn denoise_frame(
         .map(|(layer, (n, s))| weighs(*layer).then(|| left_raw_because(*n, s)).flatten())
         .collect();
     let mut weighed = Vec::new();
+    let mut weights = None;
+    let mut filtered_pixels = 0;
     // Guides, like the device, are made for the first layer filtered.
     let mut clean = None;
     let mut layers = Vec::new();
@@ -514,7 +573,21 @@ pub fn denoise_frame(
             let guides = planes.as_ref().map(|(albedo, normal)| Guides { albedo, normal });
             clean = guides.map(|g| denoiser.guides(g, w, h, prefilter)).transpose()?;
         }
-        let mut plane = denoiser.denoise(frame.layer(layer), clean.as_ref(), w, h)?;
+        // A layer whose pixels measured their noise is filtered where the noise is; the
+        // filter's output elsewhere would be weighed away (`blend_by_noise`).
+        let patches = weighs(layer)
+            .then(|| {
+                let noise = relative_variance(frame, layer, weights.get_or_insert_with(|| relative_weights(frame)));
+                noisy_patches(&noise, w as usize, h as usize)
+            })
+            .flatten();
+        let mut plane = match &patches {
+            Some(patches) => denoiser.denoise_patches(frame.layer(layer), clean.as_ref(), w, patches)?,
+            None => denoiser.denoise(frame.layer(layer), clean.as_ref(), w, h)?,
+        };
+        filtered_pixels += patches
+            .as_ref()
+            .map_or(w as usize * h as usize, |p| p.iter().map(|p| p.seen.area()).sum());
         if weighs(layer) {
             let variance: Vec<f32> = frame.data().iter().map(|d| noise_of(&d.noise, layer)).collect();
             let size = (w as usize, h as usize);
@@ -550,6 +623,7 @@ pub fn denoise_frame(
             Denoiser::describe,
         ),
         seconds: start.elapsed().as_secs_f64(),
+        filtered_pixels,
     })
 }
 
@@ -849,6 +923,11 @@ mod tests {
     /// `direct_noise` times the clean value's squared luminance) and a tenth of it as its
     /// specular light (`specular_noise` likewise), every pixel a surface.
     fn frame_with_noise(direct: &[Vec3], direct_noise: f32, specular_noise: f32) -> FrameBuffer {
+        frame_with_noise_at(direct, |_| direct_noise, specular_noise)
+    }
+
+    /// `frame_with_noise` with pixel `i`'s direct noise `direct_noise(i)`.
+    fn frame_with_noise_at(direct: &[Vec3], direct_noise: impl Fn(usize) -> f32, specular_noise: f32) -> FrameBuffer {
         let mut frame = FrameBuffer::new(W, H);
         for (i, (d, c)) in direct.iter().zip(clean()).enumerate() {
             let mut surface = PixelData {
@@ -856,7 +935,7 @@ mod tests {
                 normal: Vec3::Z,
                 depth: 1.0,
                 noise: LayerNoise {
-                    direct: direct_noise * luminance(c).powi(2),
+                    direct: direct_noise(i) * luminance(c).powi(2),
                     specular: specular_noise * luminance(c).powi(2),
                     indirect: 0.0,
                 },
@@ -905,6 +984,32 @@ mod tests {
         assert_eq!(left_raw_because(2e-6, 1.0), Some(LeftRaw::Invisible(2e-6)));
         assert_eq!(left_raw_because(1e-3, 0.005), Some(LeftRaw::SmallShare(0.005)));
         assert_eq!(left_raw_because(1e-3, 0.5), None);
+    }
+
+    #[test]
+    fn a_frame_noisy_in_one_corner_is_filtered_there_only() {
+        // Noise (and its measured variance) in the top left 32x32 pixels, the rest clean.
+        let corner = |i: usize| (i % W as usize) < 32 && (i / W as usize) < 32;
+        let clean = clean();
+        let noisy = noisy(&clean, 7);
+        let direct: Vec<Vec3> = (0..clean.len())
+            .map(|i| if corner(i) { noisy[i] } else { clean[i] })
+            .collect();
+        let frame = frame_with_noise_at(&direct, |i| if corner(i) { 0.25 } else { 0.0 }, 0.0);
+        let written = [Layer::Direct];
+        let denoised = denoise_frame(&frame, &written, false, four_samples(), Quality::Fast, Some(2), false).unwrap();
+        // The filter saw the corner and its margin of context, 48x48 pixels, not the 96x80.
+        assert_eq!(denoised.filtered_pixels, 48 * 48);
+        let (_, plane) = &denoised.layers[0];
+        let inside: Vec<usize> = (0..plane.len()).filter(|&i| corner(i)).collect();
+        let pick = |p: &[Vec3]| inside.iter().map(|&i| p[i]).collect::<Vec<_>>();
+        let (before, after) = (rmse(&pick(&direct), &pick(&clean)), rmse(&pick(plane), &pick(&clean)));
+        assert!(
+            after < before / 2.0,
+            "rmse {before:.4} raw, {after:.4} denoised in the corner"
+        );
+        // Everywhere else the layer is as rendered, exactly.
+        assert!((0..plane.len()).filter(|&i| !corner(i)).all(|i| plane[i] == direct[i]));
     }
 
     #[test]

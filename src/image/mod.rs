@@ -7,6 +7,7 @@ pub mod data;
 pub mod denoise;
 pub mod framebuffer;
 pub mod metrics;
+pub mod noisy_patches;
 pub mod output;
 pub mod preview;
 pub mod region;
