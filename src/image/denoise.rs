@@ -451,16 +451,12 @@ pub enum LeftRaw {
 /// filtering a layer can lower the composite's error by at most this much. The squared
 /// luminance is floored at a hundredth of the squared mean, so that black pixels do not weigh
 /// without bound.
-fn relative_noise(frame: &FrameBuffer, layers: &[Layer]) -> Vec<f64> {
-    let weights = relative_weights(frame);
+fn relative_noise(frame: &FrameBuffer, layers: &[Layer], weights: &[f64]) -> Vec<f64> {
     let pixels = weights.len().max(1) as f64;
     layers
         .iter()
         .map(|&layer| {
-            let sum: f64 = relative_variance(frame, layer, &weights)
-                .iter()
-                .map(|v| *v as f64)
-                .sum();
+            let sum: f64 = relative_variance(frame, layer, weights).iter().map(|v| *v as f64).sum();
             sum / pixels
         })
         .collect()
@@ -544,7 +540,9 @@ pub fn denoise_frame(
     let guided = carries_data(frame);
     let weighs = |layer: Layer| guided && sampling.measures(layer);
     let candidates = layers_to_denoise(written, per_pixel_indirect);
-    let noise = relative_noise(frame, &candidates);
+    // Each pixel's weight in relMSE, for the layers' noise and where it is.
+    let weights = relative_weights(frame);
+    let noise = relative_noise(frame, &candidates, &weights);
     let shares = noise_shares(&noise);
     let verdicts: Vec<Option<LeftRaw>> = candidates
         .iter()
@@ -552,7 +550,6 @@ pub fn denoise_frame(
         .map(|(layer, (n, s))| weighs(*layer).then(|| left_raw_because(*n, s)).flatten())
         .collect();
     let mut weighed = Vec::new();
-    let mut weights = None;
     let mut filtered_pixels = 0;
     // Guides, like the device, are made for the first layer filtered.
     let mut clean = None;
@@ -577,7 +574,7 @@ pub fn denoise_frame(
         // filter's output elsewhere would be weighed away (`blend_by_noise`).
         let patches = weighs(layer)
             .then(|| {
-                let noise = relative_variance(frame, layer, weights.get_or_insert_with(|| relative_weights(frame)));
+                let noise = relative_variance(frame, layer, &weights);
                 noisy_patches(&noise, w as usize, h as usize)
             })
             .flatten();
@@ -957,14 +954,14 @@ mod tests {
     #[test]
     fn noise_shares_are_each_layers_part_of_the_relative_variance() {
         let frame = frame_with_noise(&clean(), 0.03, 0.01);
-        let noise = relative_noise(&frame, &[Layer::Direct, Layer::Specular]);
+        let noise = relative_noise(&frame, &[Layer::Direct, Layer::Specular], &relative_weights(&frame));
         let shares = noise_shares(&noise);
         assert!(
             (shares[0] - 0.75).abs() < 1e-9 && (shares[1] - 0.25).abs() < 1e-9,
             "{shares:?}"
         );
         let quiet = frame_with_noise(&clean(), 0.0, 0.0);
-        let noise = relative_noise(&quiet, &[Layer::Direct, Layer::Specular]);
+        let noise = relative_noise(&quiet, &[Layer::Direct, Layer::Specular], &relative_weights(&quiet));
         assert_eq!(noise, [0.0, 0.0]);
         assert_eq!(noise_shares(&noise), [0.0, 0.0]);
     }
@@ -974,7 +971,7 @@ mod tests {
         // The composite is the direct light and a tenth of it as specular light: a variance of
         // 0.03 times the direct light squared is 0.03 / 1.1^2 of the composite's light squared.
         let frame = frame_with_noise(&clean(), 0.03, 0.0);
-        let noise = relative_noise(&frame, &[Layer::Direct]);
+        let noise = relative_noise(&frame, &[Layer::Direct], &relative_weights(&frame));
         assert!((noise[0] - 0.03 / 1.21).abs() < 1e-4, "{noise:?}");
     }
 
