@@ -251,6 +251,10 @@ pub fn paste<T: Copy>(plane: &mut [T], width: usize, patch: &Patch, filtered: &[
 mod tests {
     use super::*;
 
+    fn rect(x0: usize, y0: usize, x1: usize, y1: usize) -> Rect {
+        Rect { x0, y0, x1, y1 }
+    }
+
     fn noise_at(width: usize, height: usize, spots: &[(usize, usize, f32)]) -> Vec<f32> {
         let mut noise = vec![0.0; width * height];
         for &(x, y, v) in spots {
@@ -275,42 +279,10 @@ mod tests {
         let noise = noise_at(w, h, &[(20, 20, 1.0), (200, 180, 1.0)]);
         let patches = noisy_patches(&noise, w, h).unwrap();
         assert_eq!(patches.len(), 2);
-        assert_eq!(
-            patches[0].kept,
-            Rect {
-                x0: 16,
-                y0: 16,
-                x1: 32,
-                y1: 32
-            }
-        );
-        assert_eq!(
-            patches[0].seen,
-            Rect {
-                x0: 0,
-                y0: 0,
-                x1: 48,
-                y1: 48
-            }
-        );
-        assert_eq!(
-            patches[1].kept,
-            Rect {
-                x0: 192,
-                y0: 176,
-                x1: 208,
-                y1: 192
-            }
-        );
-        assert_eq!(
-            patches[1].seen,
-            Rect {
-                x0: 176,
-                y0: 160,
-                x1: 224,
-                y1: 208
-            }
-        );
+        assert_eq!(patches[0].kept, rect(16, 16, 32, 32));
+        assert_eq!(patches[0].seen, rect(0, 0, 48, 48));
+        assert_eq!(patches[1].kept, rect(192, 176, 208, 192));
+        assert_eq!(patches[1].seen, rect(176, 160, 224, 208));
     }
 
     #[test]
@@ -321,15 +293,7 @@ mod tests {
         let noise = noise_at(w, h, &[(20, 20, 1.0), (52, 20, 1.0)]);
         let patches = noisy_patches(&noise, w, h).unwrap();
         assert_eq!(patches.len(), 1);
-        assert_eq!(
-            patches[0].kept,
-            Rect {
-                x0: 16,
-                y0: 16,
-                x1: 64,
-                y1: 32
-            }
-        );
+        assert_eq!(patches[0].kept, rect(16, 16, 64, 32));
         // An L of noise along two sides of a square: two strips, not the square.
         let mut spots = Vec::new();
         for i in 0..8 {
@@ -355,15 +319,7 @@ mod tests {
         let noise = noise_at(w, h, &[(20, 20, 199.0), (200, 200, 1.0)]);
         let patches = noisy_patches(&noise, w, h).unwrap();
         assert_eq!(patches.len(), 1);
-        assert_eq!(
-            patches[0].kept,
-            Rect {
-                x0: 16,
-                y0: 16,
-                x1: 32,
-                y1: 32
-            }
-        );
+        assert_eq!(patches[0].kept, rect(16, 16, 32, 32));
     }
 
     #[test]
