@@ -32,8 +32,9 @@ import common
 
 SCENE = os.path.join(common.SHARED_SCENES, "cornell_box", "CornellBox-Original.gltf")
 SIZE = (256, 256)
-# The peers bench's three cheapest Cornell box settings (bench/peers.py), and two at one sample
-# a pixel with more shadow rays (5 Dec: there the raw error levels off at the edges' without
+# The peers bench's three cheapest Cornell box settings until 5 Dec (bench/peers.py, where the
+# two-sample one is now one sample with 8 shadow rays and 4 edge samples: the fourth setting
+# here at --edge-samples 8 is the closest), and two at one sample a pixel with more shadow rays (5 Dec: there the raw error levels off at the edges' without
 # edge samples: 8.2e-4, 6.9e-4, 6.6e-4 with 8, 16, 32 shadow rays).
 SETTINGS = [
     "-aa 0.3 -ad 64 -as 16 --spp 2 --light-samples 2 --emission-samples 32",
