@@ -323,6 +323,28 @@ mod tests {
     }
 
     #[test]
+    fn partial_blocks_at_the_borders_stay_inside_the_image() {
+        // 200x150: the last column and row of blocks are 8 and 6 pixels wide.
+        let (w, h) = (200, 150);
+        let noise = noise_at(w, h, &[(199, 149, 1.0), (2, 3, 1.0)]);
+        let patches = noisy_patches(&noise, w, h).unwrap();
+        assert_eq!(patches.len(), 2);
+        assert_eq!(patches[0].kept, rect(0, 0, 16, 16));
+        assert_eq!(patches[0].seen, rect(0, 0, 32, 32));
+        assert_eq!(patches[1].kept, rect(192, 144, 200, 150));
+        assert_eq!(patches[1].seen, rect(176, 128, 200, 150));
+        // Cropped and pasted back whole.
+        let plane: Vec<u32> = (0..(w * h) as u32).collect();
+        let mut out = plane.clone();
+        for p in &patches {
+            let seen = crop(&plane, w, 1, p.seen);
+            assert_eq!(seen.len(), p.seen.area());
+            paste(&mut out, w, p, &seen);
+        }
+        assert_eq!(out, plane);
+    }
+
+    #[test]
     fn crop_and_paste_put_the_kept_pixels_back_where_they_were() {
         let (w, h) = (40, 30);
         let plane: Vec<u32> = (0..(w * h) as u32).collect();
