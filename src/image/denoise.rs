@@ -20,6 +20,10 @@
 //! has 0.074 (the raw composite 0.077), for about the same relMSE (1.07e-2 and 1.14e-2; raw
 //! 2.5e-2).
 //!
+//! A layer whose pixels measured their own noise is filtered only on the rectangles that hold
+//! it (`noisy_patches`), and the filter's output weighed against the raw layer by that noise
+//! (`blend_by_noise`); a layer not measured is filtered whole and kept as filtered.
+//!
 //! Guides are given to the filter as rendered, as guides that may carry noise (`cleanAux`
 //! off: `Denoiser::guides` says why), or with `--denoise-prefilter` prefiltered once per image
 //! (each by an RT filter of its own) and then given as clean.
