@@ -58,9 +58,12 @@ def mix_bound(rays, rates):
     rate from `bench rays`: primary rays as primary, shadow as shadow, hemisphere (ambient) as
     hemisphere, specular as incoherent. What the renderer's rate would be with no shading, light
     sampling or cache work at all: the ceiling on its ratio to the incoherent rate."""
-    kind_rate = {"primary": "primary", "shadow": "shadow", "ambient": "hemisphere", "specular": "incoherent"}
-    seconds = sum(rays[k] / rates[r] for k, r in kind_rate.items())
-    return sum(rays[k] for k in kind_rate) / seconds if seconds > 0 else 0.0
+    # `continued`: a ray's further queries past a surface it passes through (alpha-masked or
+    # see-through), as incoherent rays.
+    kind_rate = {"primary": "primary", "shadow": "shadow", "ambient": "hemisphere", "specular": "incoherent",
+                 "continued": "incoherent"}
+    seconds = sum(rays.get(k, 0) / rates[r] for k, r in kind_rate.items())
+    return sum(rays.get(k, 0) for k in kind_rate) / seconds if seconds > 0 else 0.0
 
 
 def renderer_rate(scene, work):

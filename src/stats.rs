@@ -12,6 +12,9 @@ pub struct RayStats {
     pub shadow: u64,
     pub specular: u64,
     pub ambient: u64,
+    /// Rays traced on past a surface they passed through (`RayCounts::continued`).
+    #[serde(default)]
+    pub continued: u64,
     pub total: u64,
 }
 
@@ -23,6 +26,7 @@ impl RayStats {
             shadow: a.shadow + b.shadow,
             specular: a.specular + b.specular,
             ambient: a.ambient + b.ambient,
+            continued: a.continued + b.continued,
             total: a.total + b.total,
         })
     }
@@ -35,6 +39,7 @@ impl From<&RayCounts> for RayStats {
             shadow: c.shadow,
             specular: c.specular,
             ambient: c.ambient,
+            continued: c.continued,
             total: c.total(),
         }
     }

@@ -297,8 +297,10 @@ impl Tracer {
     }
 
     /// Fraction of light that gets from `org` along unit `dir` over `distance` (1 unobstructed,
-    /// 0 blocked). Only scenes with transparent materials pay for walking through hits.
-    pub fn transmittance(&self, scene: &Scene, org: Vec3, dir: Vec3, distance: f32) -> f32 {
+    /// 0 blocked). Only scenes with transparent materials pay for walking through hits; each
+    /// query past the first (the walk's, or the walk after the opaque geometry's test) is
+    /// added to `continued`.
+    pub fn transmittance(&self, scene: &Scene, org: Vec3, dir: Vec3, distance: f32, continued: &mut u64) -> f32 {
         match &self.shadows {
             Shadows::Opaque => {
                 if self.embree.occluded(org.to_array(), dir.to_array(), 0.0, distance) {
@@ -307,35 +309,42 @@ impl Tracer {
                     1.0
                 }
             }
-            Shadows::Walk => self.walk_through(scene, &self.embree, None, (org, dir, distance)),
+            Shadows::Walk => {
+                let (through, queries) = self.walk_through(scene, &self.embree, None, (org, dir, distance));
+                *continued += queries - 1;
+                through
+            }
             Shadows::Split { see_through, meshes } => {
                 let (o, d) = (org.to_array(), dir.to_array());
                 if self.embree.occluded_masked(o, d, 0.0, distance, OPAQUE_MASK) {
                     0.0
                 } else {
-                    self.walk_through(scene, see_through, Some(meshes), (org, dir, distance))
+                    let (through, queries) = self.walk_through(scene, see_through, Some(meshes), (org, dir, distance));
+                    *continued += queries;
+                    through
                 }
             }
         }
     }
 
     /// The product of (1 - opacity) over the surfaces of `embree` the ray (origin, unit
-    /// direction, distance) passes, closest first, 0 once one blocks it. `meshes` names the
-    /// scene's mesh of each of `embree`'s geometries where they are not the scene's own ids.
+    /// direction, distance) passes, closest first, 0 once one blocks it, and the queries it
+    /// took (at least one). `meshes` names the scene's mesh of each of `embree`'s geometries
+    /// where they are not the scene's own ids.
     fn walk_through(
         &self,
         scene: &Scene,
         embree: &embree::Scene,
         meshes: Option<&[u32]>,
         (org, dir, distance): (Vec3, Vec3, f32),
-    ) -> f32 {
+    ) -> (f32, u64) {
         let mut through = 1.0;
         let mut origin = org;
         let mut left = distance;
-        for _ in 0..MAX_TRANSPARENT_PASSES {
+        for queries in 1..=MAX_TRANSPARENT_PASSES as u64 {
             let found = embree.intersect(origin.to_array(), dir.to_array(), 0.0, left, Coherence::Incoherent);
             let Some(mut found) = found else {
-                return through;
+                return (through, queries);
             };
             if let Some(meshes) = meshes {
                 found.geom_id = meshes[found.geom_id as usize];
@@ -345,16 +354,16 @@ impl Tracer {
             let opacity = material.at(hit.uv, &scene.textures).opacity;
             through *= 1.0 - opacity;
             if through <= 0.0 {
-                return 0.0;
+                return (0.0, queries);
             }
             let next = self.spawn_point(&hit, dir);
             left -= (next - origin).dot(dir);
             origin = next;
             if left <= 0.0 {
-                return through;
+                return (through, queries);
             }
         }
-        0.0
+        (0.0, MAX_TRANSPARENT_PASSES as u64)
     }
 
     /// Distance to the first surface along a unit direction (for the automatic view).

@@ -272,7 +272,26 @@ fn a_point_lights_shadow_rays_through_glass_panes_keep_half_the_light_per_pane()
             .to_vec();
         args.extend(["-x", "16", "-y", "16", "-ab", "0", "--no-preview"].map(String::from));
         args.extend(view_down(0.0, 5.0, 2.0));
+        let stats = dir.path().join(format!("{name}.json"));
+        args.extend(["--stats".to_string(), stats.to_str().unwrap().to_string()]);
         run_ok(&args.iter().map(String::as_str).collect::<Vec<_>>());
+        // Each shadow ray goes on past every pane it passes: a further Embree query each, and
+        // one more where the see-through meshes are walked apart after the opaque ones' test.
+        let stats: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&stats).unwrap()).unwrap();
+        let count = |kind: &str| stats["rays"][kind].as_u64().unwrap();
+        let (shadow, continued) = (count("shadow"), count("continued"));
+        if !opaque {
+            let passes = panes as u64;
+            assert!(
+                (passes * shadow..=(passes + 1) * shadow).contains(&continued),
+                "{name}: {continued} rays continued past the panes for {shadow} shadow rays"
+            );
+        }
+        let kinds: u64 = ["primary", "shadow", "specular", "ambient", "continued"]
+            .map(count)
+            .iter()
+            .sum();
+        assert_eq!(count("total"), kinds, "{name}: {}", stats["rays"]);
         let [r, _, _] = rgb(&read_exr(&out), "");
         let through = if opaque { 0.0 } else { 0.5f64.powi(panes) };
         let mut worst = 0.0f64;

@@ -634,8 +634,9 @@ fn rays_through_instances_hit_what_rays_through_copies_hit() {
             _ => differ += 1,
         }
         let length = (b - a).length();
-        let s = ts.transmittance(&shared, a, dir, length);
-        let c = tc.transmittance(&copied, a, dir, length);
+        let (mut s_continued, mut c_continued) = (0, 0);
+        let s = ts.transmittance(&shared, a, dir, length, &mut s_continued);
+        let c = tc.transmittance(&copied, a, dir, length, &mut c_continued);
         blocked += (c < 1.0) as usize;
         blocked_differ += ((s - c).abs() > 1e-6) as usize;
     }

@@ -339,7 +339,7 @@ pub fn direct_light(
                 continue;
             }
             counts.shadow += 1;
-            let visible = tracer.transmittance(scene, origin, to_light / length, reach);
+            let visible = tracer.transmittance(scene, origin, to_light / length, reach, &mut counts.continued);
             if visible > 0.0 {
                 sum += contribution * visible;
             }
@@ -435,7 +435,7 @@ impl<'a> PunctualLit<'a> {
             f32::INFINITY
         };
         counts.shadow += 1;
-        let visible = tracer.transmittance(integrator.scene, origin, wi, reach);
+        let visible = tracer.transmittance(integrator.scene, origin, wi, reach, &mut counts.continued);
         if visible > 0.0 {
             self.light * visible
         } else {

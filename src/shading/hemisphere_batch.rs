@@ -61,7 +61,7 @@ impl Integrator<'_> {
         counts: &mut Work<'_>,
     ) -> Vec<CellSample> {
         let rays = self.trace_batch(hit, frame, n, cells, rng, counts);
-        let surfaces = self.batch_surfaces(&rays, next);
+        let surfaces = self.batch_surfaces(&rays, next, counts);
         let reads = self.batch_grid_reads(&surfaces, next);
         let floor = self.tracer.epsilon_at(hit.position);
         rays.iter()
@@ -127,7 +127,12 @@ impl Integrator<'_> {
     }
 
     /// Pass 2: the surface each ray stops at (past fully transparent ones, as `first_surface`).
-    fn batch_surfaces(&self, rays: &[BatchRay], next: PathState) -> Vec<Option<(SurfaceHit, SurfacePoint)>> {
+    fn batch_surfaces(
+        &self,
+        rays: &[BatchRay],
+        next: PathState,
+        counts: &mut Work<'_>,
+    ) -> Vec<Option<(SurfaceHit, SurfacePoint)>> {
         let grid = self.cache.and_then(|cache| cache.last_bounce());
         let corners = |ray: &BatchRay| {
             if let Some(found) = &ray.found {
@@ -145,7 +150,7 @@ impl Integrator<'_> {
                 if let Some(grid) = grid {
                     grid.prefetch(hit.position, hit.normal);
                 }
-                self.first_surface_from(hit, ray.direction, Coherence::Incoherent, next.spread)
+                self.first_surface_from(hit, ray.direction, Coherence::Incoherent, next.spread, counts)
             })
             .collect()
     }

@@ -69,7 +69,8 @@ impl Integrator<'_> {
             let (origin, dir) = camera.ray(x as f32 + rng.next_f32(), y as f32 + rng.next_f32());
             // The site's own rays count as the render's: a camera ray, then a path's segments.
             counts.primary += 1;
-            let Some((mut hit, mut surface)) = self.first_surface(origin, dir, Coherence::Incoherent, 0.0) else {
+            let Some((mut hit, mut surface)) = self.first_surface(origin, dir, Coherence::Incoherent, 0.0, counts)
+            else {
                 continue;
             };
             let mut reached = true;
@@ -81,7 +82,7 @@ impl Integrator<'_> {
                 }
                 let from = self.tracer.spawn_point(&hit, wi);
                 counts.ambient += 1;
-                match self.first_surface(from, wi, Coherence::Incoherent, 0.0) {
+                match self.first_surface(from, wi, Coherence::Incoherent, 0.0, counts) {
                     Some(next) => (hit, surface) = next,
                     None => {
                         reached = false;

@@ -81,6 +81,10 @@ pub struct RayCounts {
     pub shadow: u64,
     pub specular: u64,
     pub ambient: u64,
+    /// Rays traced on past a surface the ray passed through (alpha-masked points, the
+    /// see-through surfaces a shadow ray walks): each an Embree query of its own, counted apart
+    /// from the ray it continues (which counts once as its kind).
+    pub continued: u64,
     /// Contributions that came out NaN or infinite and were dropped (should stay 0).
     pub nonfinite: u64,
     /// Cache lookups, and those answered by existing records.
@@ -190,6 +194,7 @@ impl RayCounts {
         self.shadow += o.shadow;
         self.specular += o.specular;
         self.ambient += o.ambient;
+        self.continued += o.continued;
         self.nonfinite += o.nonfinite;
         self.lookups += o.lookups;
         self.hits += o.hits;
@@ -202,7 +207,7 @@ impl RayCounts {
         self.deferred += o.deferred;
     }
     pub fn total(&self) -> u64 {
-        self.primary + self.shadow + self.specular + self.ambient
+        self.primary + self.shadow + self.specular + self.ambient + self.continued
     }
 }
 
@@ -361,7 +366,7 @@ impl<'a> Integrator<'a> {
             return;
         }
         counts.primary += 1;
-        if let Some((hit, surface)) = self.first_surface(origin, dir, Coherence::Coherent, 0.0)
+        if let Some((hit, surface)) = self.first_surface(origin, dir, Coherence::Coherent, 0.0, counts)
             && surface.diffuse.max_element() > 0.0
         {
             self.ambient_radiance(&hit, PathState::eye(false), rng, counts);
@@ -395,7 +400,7 @@ impl<'a> Integrator<'a> {
             } else {
                 Coherence::Incoherent
             };
-            let Some((hit, surface)) = self.first_surface(origin, dir, coherence, spread) else {
+            let Some((hit, surface)) = self.first_surface(origin, dir, coherence, spread, counts) else {
                 continue;
             };
             if surface.diffuse.max_element() > 0.0 {
@@ -449,10 +454,11 @@ impl<'a> Integrator<'a> {
         dir: Vec3,
         coherence: Coherence,
         spread: f32,
+        counts: &mut RayCounts,
     ) -> Option<(SurfaceHit, crate::scene::material::SurfacePoint)> {
         let found = self.tracer.nearest_hit(origin, dir, coherence)?;
         let hit = self.tracer.surface_hit(self.scene, &found, dir);
-        self.first_surface_from(hit, dir, coherence, spread)
+        self.first_surface_from(hit, dir, coherence, spread, counts)
     }
 
     /// `first_surface` from the point Embree's first hit along `dir` made.
@@ -462,6 +468,7 @@ impl<'a> Integrator<'a> {
         dir: Vec3,
         coherence: Coherence,
         spread: f32,
+        counts: &mut RayCounts,
     ) -> Option<(SurfaceHit, crate::scene::material::SurfacePoint)> {
         let mut hit = hit;
         for pass in 1..=MAX_MASKED_PASSES {
@@ -473,6 +480,7 @@ impl<'a> Integrator<'a> {
             if pass == MAX_MASKED_PASSES {
                 break;
             }
+            counts.continued += 1;
             let found = self
                 .tracer
                 .nearest_hit(self.tracer.spawn_point(&hit, dir), dir, coherence)?;
@@ -486,7 +494,7 @@ impl<'a> Integrator<'a> {
     /// (`render::edges`).
     pub fn eye_surface(&self, origin: Vec3, dir: Vec3, counts: &mut Work<'_>) -> Option<SurfaceHit> {
         counts.primary += 1;
-        self.first_surface(origin, dir, Coherence::Coherent, 0.0)
+        self.first_surface(origin, dir, Coherence::Coherent, 0.0, counts)
             .map(|(hit, _)| hit)
     }
 
@@ -495,7 +503,10 @@ impl<'a> Integrator<'a> {
     pub fn first_emission(&self, origin: Vec3, dir: Vec3, counts: &mut Work<'_>) -> Vec3 {
         counts.primary += 1;
         let mut origin = origin;
-        for _ in 0..MAX_MASKED_PASSES {
+        for pass in 0..MAX_MASKED_PASSES {
+            if pass > 0 {
+                counts.continued += 1;
+            }
             let Some(hit) = self.tracer.intersect(self.scene, origin, dir, Coherence::Coherent) else {
                 return Vec3::ZERO;
             };
@@ -530,7 +541,7 @@ impl<'a> Integrator<'a> {
         rng: &mut Rng,
         counts: &mut Work<'_>,
     ) -> (Components, f32) {
-        let Some((hit, surface)) = self.first_surface(origin, dir, coherence, state.spread) else {
+        let Some((hit, surface)) = self.first_surface(origin, dir, coherence, state.spread, counts) else {
             return (Components::default(), f32::INFINITY);
         };
         if state.level == 0 && state.specular_depth == 0 {
