@@ -96,8 +96,8 @@ pub const MOST_OF_THE_IMAGE: f64 = 0.6;
 /// `width` x `height` image of each pixel's relative variance, >= 0), or None where they would
 /// see most of the image (the whole image is filtered) or no noise was measured at all.
 pub fn noisy_patches(noise: &[f32], width: usize, height: usize) -> Option<Vec<Patch>> {
-    let blocks = noisy_blocks(noise, width, height)?;
-    let patches = partition(&blocks, width, height);
+    let grid = noisy_blocks(noise, width, height)?;
+    let patches = partition(&grid, width, height);
     let seen: usize = patches.iter().map(|p| p.seen.area()).sum();
     if seen as f64 >= MOST_OF_THE_IMAGE * (width * height) as f64 {
         return None;
@@ -105,9 +105,9 @@ pub fn noisy_patches(noise: &[f32], width: usize, height: usize) -> Option<Vec<P
     Some(patches)
 }
 
-/// The blocks that hold all but `LEFT_RAW_SHARE` of the noise, the noisiest first; None where
-/// there is no noise.
-fn noisy_blocks(noise: &[f32], width: usize, height: usize) -> Option<Vec<Rect>> {
+/// The blocks that hold all but `LEFT_RAW_SHARE` of the noise (the noisiest taken first); None
+/// where there is no noise.
+fn noisy_blocks(noise: &[f32], width: usize, height: usize) -> Option<BlockGrid> {
     let (columns, rows) = (width.div_ceil(BLOCK), height.div_ceil(BLOCK));
     let mut sums = vec![0.0f64; columns * rows];
     for (i, v) in noise.iter().enumerate() {
@@ -121,21 +121,15 @@ fn noisy_blocks(noise: &[f32], width: usize, height: usize) -> Option<Vec<Rect>>
     let mut order: Vec<usize> = (0..sums.len()).collect();
     order.sort_by(|a, b| sums[*b].total_cmp(&sums[*a]));
     let mut covered = 0.0;
-    let mut blocks = Vec::new();
+    let mut noisy = vec![false; columns * rows];
     for i in order {
         if covered >= (1.0 - LEFT_RAW_SHARE) * total {
             break;
         }
         covered += sums[i];
-        let (bx, by) = (i % columns, i / columns);
-        blocks.push(Rect {
-            x0: bx * BLOCK,
-            y0: by * BLOCK,
-            x1: ((bx + 1) * BLOCK).min(width),
-            y1: ((by + 1) * BLOCK).min(height),
-        });
+        noisy[i] = true;
     }
-    Some(blocks)
+    Some(BlockGrid { noisy, columns, rows })
 }
 
 /// The noisy blocks, as a grid of `columns` x `rows` flags.
@@ -175,13 +169,7 @@ impl BlockGrid {
 /// first, and each part cut again the same way. So a penumbra along a box's base and one on
 /// the far side of the image are filtered apart, and the clean image between them is not.
 /// Patches may see the same pixels in their margins, never keep the same ones.
-fn partition(blocks: &[Rect], width: usize, height: usize) -> Vec<Patch> {
-    let (columns, rows) = (width.div_ceil(BLOCK), height.div_ceil(BLOCK));
-    let mut noisy = vec![false; columns * rows];
-    for b in blocks {
-        noisy[(b.y0 / BLOCK) * columns + b.x0 / BLOCK] = true;
-    }
-    let grid = BlockGrid { noisy, columns, rows };
+fn partition(grid: &BlockGrid, width: usize, height: usize) -> Vec<Patch> {
     let in_pixels = |b: Blocks| Rect {
         x0: b.x0 * BLOCK,
         y0: b.y0 * BLOCK,
