@@ -4,6 +4,7 @@
 
 use crate::scene::Scene;
 use crate::scene::instancing::{self, HitTriangle};
+pub use crate::sys::embree::PACKET;
 use crate::sys::embree::{self, Coherence, Device, InstanceData, TriangleMeshData};
 use crate::sys::prefetch::prefetch;
 use glam::{DVec3, Vec3};
@@ -322,6 +323,53 @@ impl Tracer {
                     let (through, queries) = self.walk_through(scene, see_through, Some(meshes), (org, dir, distance));
                     *continued += queries;
                     through
+                }
+            }
+        }
+    }
+
+    /// `transmittance` for up to `PACKET` rays at once (origin, unit direction, distance),
+    /// into `through`. A full packet's rays have the opaque geometry's test as one packet
+    /// (`embree::Scene::occluded_packet`); fewer go one at a time, as a packet half empty cost
+    /// more than it saved (the Cornell box, 8 samples a pixel of 4 shadow rays each: the render
+    /// at 1.017x the time with them in packets of 4; 32 rays a point, packets of 8: 0.96x).
+    pub fn transmittances(&self, scene: &Scene, rays: &[(Vec3, Vec3, f32)], through: &mut [f32], continued: &mut u64) {
+        if rays.len() < PACKET {
+            for (t, &(o, d, r)) in through.iter_mut().zip(rays) {
+                *t = self.transmittance(scene, o, d, r, continued);
+            }
+            return;
+        }
+        let opaque_test = |mask: u32, blocked: &mut [bool; PACKET]| {
+            let mut packet = [([0.0f32; 3], [0.0f32; 3], 0.0f32); PACKET];
+            for (p, &(o, d, t)) in packet.iter_mut().zip(rays) {
+                *p = (o.to_array(), d.to_array(), t);
+            }
+            self.embree.occluded_packet(&packet[..rays.len()], mask, blocked);
+        };
+        let mut blocked = [false; PACKET];
+        match &self.shadows {
+            Shadows::Opaque => {
+                opaque_test(embree::ALL_MASKS, &mut blocked);
+                for (t, b) in through.iter_mut().zip(&blocked[..rays.len()]) {
+                    *t = if *b { 0.0 } else { 1.0 };
+                }
+            }
+            Shadows::Split { see_through, meshes } => {
+                opaque_test(OPAQUE_MASK, &mut blocked);
+                for ((t, b), &ray) in through.iter_mut().zip(&blocked).zip(rays) {
+                    *t = if *b {
+                        0.0
+                    } else {
+                        let (passed, queries) = self.walk_through(scene, see_through, Some(meshes), ray);
+                        *continued += queries;
+                        passed
+                    };
+                }
+            }
+            Shadows::Walk => {
+                for (t, &(o, d, r)) in through.iter_mut().zip(rays) {
+                    *t = self.transmittance(scene, o, d, r, continued);
                 }
             }
         }

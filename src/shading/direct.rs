@@ -13,7 +13,7 @@ use super::{Integrator, RayCounts, glossy};
 use crate::sampling::Rng;
 use crate::scene::light::{LightSample, PunctualLight, luminance};
 use crate::scene::material::SurfacePoint;
-use crate::tracer::SurfaceHit;
+use crate::tracer::{PACKET, SurfaceHit};
 use glam::Vec3;
 use std::f32::consts::PI;
 
@@ -301,6 +301,7 @@ pub fn direct_light(
         let per_ray = diffuse_brdf / emitter_samples as f32;
         let mut sampler = scene.emitters.sampler(hit.position, hit.normal);
         let strata = strata.reduced();
+        let mut pending = PendingShadows::default();
         for k in 0..emitter_samples {
             let (u1, u2, u3) = strata.uniforms(k, rng);
             let Some(light) = sampler.as_mut().and_then(|s| s.sample(u1, u2, u3)) else {
@@ -339,13 +340,16 @@ pub fn direct_light(
                 continue;
             }
             counts.shadow += 1;
-            let visible = tracer.transmittance(scene, origin, to_light / length, reach, &mut counts.continued);
-            if visible > 0.0 {
-                sum += contribution * visible;
+            pending.push(
+                contribution,
+                luminance(per_ray * contribution),
+                (origin, to_light / length, reach),
+            );
+            if pending.is_full() {
+                pending.trace(integrator, counts, &mut sum, &mut spread);
             }
-            let unblocked = luminance(per_ray * contribution);
-            spread.add(unblocked * visible, unblocked);
         }
+        pending.trace(integrator, counts, &mut sum, &mut spread);
         match unshadowed {
             // Ratio estimator: the exact unblocked irradiance times the share of the rays'
             // unblocked contribution that got through. Exact where the emitters are wholly
@@ -373,11 +377,18 @@ pub fn direct_light(
     if strata.eye_path || lights.len() < 2 {
         // On the eye path every punctual light gets its ray: a pixel's few samples are its
         // direct light, and a light left out would be noise the image shows.
+        // Their rays leave one point, so they go together (`PendingShadows`).
+        let mut pending = PendingShadows::default();
         for light in lights {
             if let Some(lit) = PunctualLit::at(light, hit, wo, surface, diffuse_brdf) {
-                exact += lit.traced(integrator, hit, counts);
+                counts.shadow += 1;
+                pending.push(lit.light, 0.0, lit.ray(integrator, hit));
+                if pending.is_full() {
+                    pending.trace(integrator, counts, &mut exact, &mut RaySpread::default());
+                }
             }
         }
+        pending.trace(integrator, counts, &mut exact, &mut RaySpread::default());
         total += exact;
     } else if let Some((lit, probability)) = pick_punctual(lights, hit, wo, surface, diffuse_brdf, rng) {
         // Away from the eye path (a record's hemisphere rays, the paths below them) one light
@@ -393,6 +404,52 @@ pub fn direct_light(
         ratio: shadow_ratio,
         exact,
         sampled_noise,
+    }
+}
+
+/// Shadow rays from one point (to emitters, or to punctual lights) waiting to be traced
+/// together (`Tracer::transmittances`), with what each brings if it gets through and its
+/// luminance for the rays' spread.
+#[derive(Default)]
+struct PendingShadows {
+    len: usize,
+    light: [Vec3; PACKET],
+    unblocked: [f32; PACKET],
+    rays: [(Vec3, Vec3, f32); PACKET],
+}
+
+impl PendingShadows {
+    fn push(&mut self, light: Vec3, unblocked: f32, ray: (Vec3, Vec3, f32)) {
+        self.light[self.len] = light;
+        self.unblocked[self.len] = unblocked;
+        self.rays[self.len] = ray;
+        self.len += 1;
+    }
+
+    fn is_full(&self) -> bool {
+        self.len == PACKET
+    }
+
+    /// Traces the waiting rays and adds what passed to `sum` and `spread`, in the rays' order.
+    fn trace(&mut self, integrator: &Integrator<'_>, counts: &mut RayCounts, sum: &mut Vec3, spread: &mut RaySpread) {
+        if self.len == 0 {
+            return;
+        }
+        let mut through = [0.0f32; PACKET];
+        integrator.tracer.transmittances(
+            integrator.scene,
+            &self.rays[..self.len],
+            &mut through[..self.len],
+            &mut counts.continued,
+        );
+        let waiting = self.light.iter().zip(&self.unblocked).zip(through).take(self.len);
+        for ((&light, &unblocked), visible) in waiting {
+            if visible > 0.0 {
+                *sum += light * visible;
+            }
+            spread.add(unblocked * visible, unblocked);
+        }
+        self.len = 0;
     }
 }
 
@@ -424,18 +481,25 @@ impl<'a> PunctualLit<'a> {
         (light.max_element() > 0.0 && light.is_finite()).then_some(PunctualLit { source, sample, light })
     }
 
-    /// The light times what passes along the shadow ray to the light.
-    fn traced(&self, integrator: &Integrator<'_>, hit: &SurfaceHit, counts: &mut RayCounts) -> Vec3 {
-        let tracer = integrator.tracer;
+    /// The shadow ray to the light: origin, direction and reach.
+    fn ray(&self, integrator: &Integrator<'_>, hit: &SurfaceHit) -> (Vec3, Vec3, f32) {
         let wi = self.sample.to_light;
-        let origin = tracer.spawn_point(hit, wi);
+        let origin = integrator.tracer.spawn_point(hit, wi);
         let reach = if self.sample.distance.is_finite() {
             (self.source.position - origin).length()
         } else {
             f32::INFINITY
         };
+        (origin, wi, reach)
+    }
+
+    /// The light times what passes along the shadow ray to the light.
+    fn traced(&self, integrator: &Integrator<'_>, hit: &SurfaceHit, counts: &mut RayCounts) -> Vec3 {
+        let (origin, wi, reach) = self.ray(integrator, hit);
         counts.shadow += 1;
-        let visible = tracer.transmittance(integrator.scene, origin, wi, reach, &mut counts.continued);
+        let visible = integrator
+            .tracer
+            .transmittance(integrator.scene, origin, wi, reach, &mut counts.continued);
         if visible > 0.0 {
             self.light * visible
         } else {

@@ -86,6 +86,13 @@ impl Device {
         unsafe { rtc::rtcGetDeviceProperty(self.raw, rtc::RTC_DEVICE_PROPERTY_RAY_MASK_SUPPORTED) != 0 }
     }
 
+    /// Whether packets of `PACKET` rays are traced by kernels of that width (a build for
+    /// AVX or later on a processor that has it).
+    pub fn native_packets(&self) -> bool {
+        // SAFETY: querying a property of a live device.
+        unsafe { rtc::rtcGetDeviceProperty(self.raw, rtc::RTC_DEVICE_PROPERTY_NATIVE_RAY8_SUPPORTED) != 0 }
+    }
+
     /// Version of the library actually loaded, e.g. "3.13.5".
     pub fn version(&self) -> String {
         // SAFETY: querying a property of a live device.
@@ -124,6 +131,9 @@ pub struct Scene {
     raw: rtc::RTCScene,
     /// The prototypes its instances refer to, kept alive as long as it is.
     prototypes: Vec<Arc<Scene>>,
+    /// Whether the library traces packets of `PACKET` rays with kernels of that width
+    /// (`occluded_packet`); without them it would split a packet up itself.
+    packets: bool,
 }
 
 // SAFETY: a committed Embree scene may be queried from many threads at once.
@@ -154,6 +164,14 @@ pub enum Coherence {
 
 /// The mask of a geometry every ray sees, and of a ray that sees every geometry.
 pub const ALL_MASKS: u32 = u32::MAX;
+
+/// Rays traced together by `Scene::occluded_packet`.
+pub const PACKET: usize = 8;
+
+/// A packet's valid mask (-1: the ray is traced), aligned as the packet is: Embree loads it
+/// as one vector.
+#[repr(C, align(32))]
+struct ValidMask([i32; PACKET]);
 
 fn make_ray(org: [f32; 3], dir: [f32; 3], tnear: f32, tfar: f32) -> rtc::RTCRay {
     rtc::RTCRay {
@@ -196,6 +214,7 @@ impl Scene {
             device: Arc::clone(device),
             raw,
             prototypes: Vec::new(),
+            packets: device.native_packets(),
         };
         // Robust mode, for rays that do not slip between triangles: without it, rays from inside
         // the Cornell box's room aimed at points on its walls' triangle edges passed through 7 %
@@ -348,6 +367,58 @@ impl Scene {
         ray.tfar < 0.0
     }
 
+    /// Whether each of up to `PACKET` rays (origin, unit direction, tfar; tnear 0) is blocked by
+    /// a geometry whose mask shares a bit with `mask`, into `blocked[i]` for `rays[i]`. Traced
+    /// as one Embree packet where the library has kernels of its width: rays from one point
+    /// to one light cross much the same nodes, which the packet's traversal visits once for
+    /// all (the conference room at -ab 2, 16 shadow rays a point on the eye path: the whole
+    /// render at 1.066x the rays a second of one ray at a time, images identical). Elsewhere
+    /// ray by ray.
+    pub fn occluded_packet(&self, rays: &[([f32; 3], [f32; 3], f32)], mask: u32, blocked: &mut [bool]) {
+        assert!(rays.len() <= PACKET && blocked.len() >= rays.len());
+        if !self.packets {
+            for (b, &(org, dir, tfar)) in blocked.iter_mut().zip(rays) {
+                *b = self.occluded_masked(org, dir, 0.0, tfar, mask);
+            }
+            return;
+        }
+        let mut packet = rtc::RTCRay8::default();
+        let mut valid = ValidMask([0i32; PACKET]);
+        for (i, &(org, dir, tfar)) in rays.iter().enumerate() {
+            packet.org_x[i] = org[0];
+            packet.org_y[i] = org[1];
+            packet.org_z[i] = org[2];
+            packet.dir_x[i] = dir[0];
+            packet.dir_y[i] = dir[1];
+            packet.dir_z[i] = dir[2];
+            packet.tfar[i] = tfar;
+            packet.mask[i] = mask;
+            valid.0[i] = -1;
+        }
+        self.raw_occluded8(&valid, &mut packet);
+        for (i, b) in blocked.iter_mut().take(rays.len()).enumerate() {
+            // Embree marks a blocked ray by setting tfar to -inf.
+            *b = packet.tfar[i] < 0.0;
+        }
+    }
+
+    #[cfg(not(embree4))]
+    #[inline]
+    fn raw_occluded8(&self, valid: &ValidMask, packet: &mut rtc::RTCRay8) {
+        let mut context = intersect_context(Coherence::Coherent);
+        // SAFETY: committed scene, a valid mask of PACKET ints, a context and a packet on the
+        // stack (RTCRay8 is 32-byte aligned as Embree asks).
+        unsafe { rtc::rtcOccluded8(valid.0.as_ptr(), self.raw, &mut context, packet) };
+    }
+
+    #[cfg(embree4)]
+    #[inline]
+    fn raw_occluded8(&self, valid: &ValidMask, packet: &mut rtc::RTCRay8) {
+        // SAFETY: committed scene, a valid mask of PACKET ints and a 32-byte aligned packet on
+        // the stack; NULL arguments select Embree's defaults.
+        unsafe { rtc::rtcOccluded8(valid.0.as_ptr(), self.raw, packet, std::ptr::null_mut()) };
+    }
+
     #[cfg(not(embree4))]
     #[inline]
     fn raw_intersect(&self, rayhit: &mut rtc::RTCRayHit, coherence: Coherence) {
@@ -451,7 +522,7 @@ mod tests {
             .collect();
         let scene = Scene::build(&device, &meshes).unwrap();
         let mut rng = crate::sampling::Rng::new(3, 4);
-        let mut leaked = 0;
+        let (mut leaked, mut leaked_in_packets) = (0, 0);
         let rays = 200_000;
         for _ in 0..rays {
             let wall = &walls[(rng.next_u32() % 6) as usize];
@@ -472,8 +543,22 @@ mod tests {
             let stopped = scene.occluded(o, d, 0.0, length)
                 && scene.intersect(o, d, 0.0, length, Coherence::Incoherent).is_some();
             leaked += u32::from(!stopped);
+            // The same ray in a packet, beside rays from the same point aimed a little apart
+            // (as a point's shadow rays to one light are traced).
+            let mut packet = [(o, d, length); PACKET];
+            for (k, ray) in packet.iter_mut().enumerate().skip(1) {
+                let aside = (target + (b - a) * (0.01 * k as f32) - inside) * 1.5;
+                *ray = (o, aside.normalize().to_array(), aside.length());
+            }
+            let mut blocked = [false; PACKET];
+            scene.occluded_packet(&packet, ALL_MASKS, &mut blocked);
+            leaked_in_packets += u32::from(!blocked[0]);
         }
         assert_eq!(leaked, 0, "{leaked} of {rays} rays passed through the walls");
+        assert_eq!(
+            leaked_in_packets, 0,
+            "{leaked_in_packets} of {rays} rays in packets passed through the walls"
+        );
     }
 
     #[test]
@@ -604,5 +689,62 @@ mod tests {
         assert!(scene.occluded_masked(from, down, 0.0, 1.5, 2));
         assert!(!scene.occluded_masked(from, down, 0.0, 1.5, 1));
         assert!(scene.occluded_masked(from, down, 0.0, 3.0, 1));
+    }
+
+    /// A packet answers each of its rays as that ray alone does: rays from a few points past a
+    /// triangle, beside it and falling short of it, with and without the mask that passes it,
+    /// packets full and partial.
+    #[test]
+    fn a_packet_of_occlusion_rays_answers_each_ray_as_it_alone_is_answered() {
+        let device = Arc::new(Device::new().unwrap());
+        let positions = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
+        let indices = [[0u32, 1, 2]];
+        let scene = Scene::build(
+            &device,
+            &[TriangleMeshData {
+                positions: &positions,
+                indices: &indices,
+                mask: 2,
+            }],
+        )
+        .unwrap();
+        let masks = if device.supports_ray_masks() {
+            vec![ALL_MASKS, 1]
+        } else {
+            vec![ALL_MASKS]
+        };
+        let mut rng = crate::sampling::Rng::new(5, 6);
+        let (mut blocked_rays, mut total) = (0, 0);
+        for _ in 0..2000 {
+            let origin = Vec3::new(rng.next_f32() - 0.2, rng.next_f32() - 0.2, 0.5 + rng.next_f32());
+            let count = 1 + (rng.next_u32() as usize % PACKET);
+            let rays: Vec<([f32; 3], [f32; 3], f32)> = (0..count)
+                .map(|_| {
+                    let target = Vec3::new(1.4 * rng.next_f32() - 0.2, 1.4 * rng.next_f32() - 0.2, 0.0);
+                    let offset = target - origin;
+                    // Past the plane, or stopping short of it.
+                    let reach = offset.length() * (0.5 + rng.next_f32());
+                    (origin.to_array(), offset.normalize().to_array(), reach)
+                })
+                .collect();
+            for &mask in &masks {
+                let mut blocked = [false; PACKET];
+                scene.occluded_packet(&rays, mask, &mut blocked);
+                for (&(o, d, t), b) in rays.iter().zip(blocked) {
+                    assert_eq!(
+                        b,
+                        scene.occluded_masked(o, d, 0.0, t, mask),
+                        "ray {o:?} {d:?} {t} mask {mask}"
+                    );
+                    blocked_rays += u32::from(b);
+                    total += 1;
+                }
+            }
+        }
+        // Both answers occur, so the comparison tested something.
+        assert!(
+            blocked_rays > 500 && total - blocked_rays > 500,
+            "{blocked_rays} of {total}"
+        );
     }
 }
