@@ -561,20 +561,25 @@ mod tests {
         );
     }
 
-    #[test]
-    fn closest_hit_and_occlusion_on_one_triangle() {
-        let device = Arc::new(Device::new().unwrap());
+    /// A scene of one triangle, (0,0,0) (1,0,0) (0,1,0), with geometry mask `mask`.
+    fn unit_triangle(device: &Arc<Device>, mask: u32) -> Scene {
         let positions = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
         let indices = [[0u32, 1, 2]];
-        let scene = Scene::build(
-            &device,
+        Scene::build(
+            device,
             &[TriangleMeshData {
                 positions: &positions,
                 indices: &indices,
-                mask: ALL_MASKS,
+                mask,
             }],
         )
-        .unwrap();
+        .unwrap()
+    }
+
+    #[test]
+    fn closest_hit_and_occlusion_on_one_triangle() {
+        let device = Arc::new(Device::new().unwrap());
+        let scene = unit_triangle(&device, ALL_MASKS);
         let hit = scene
             .intersect(
                 [0.25, 0.25, 1.0],
@@ -697,17 +702,7 @@ mod tests {
     #[test]
     fn a_packet_of_occlusion_rays_answers_each_ray_as_it_alone_is_answered() {
         let device = Arc::new(Device::new().unwrap());
-        let positions = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
-        let indices = [[0u32, 1, 2]];
-        let scene = Scene::build(
-            &device,
-            &[TriangleMeshData {
-                positions: &positions,
-                indices: &indices,
-                mask: 2,
-            }],
-        )
-        .unwrap();
+        let scene = unit_triangle(&device, 2);
         let masks = if device.supports_ray_masks() {
             vec![ALL_MASKS, 1]
         } else {
