@@ -8,6 +8,7 @@ use super::record::Record;
 use glam::{Vec3, Vec4};
 use std::collections::HashMap;
 use std::hash::{BuildHasherDefault, Hasher};
+use std::ops::ControlFlow;
 use std::sync::RwLock;
 use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 
@@ -289,6 +290,18 @@ impl FrozenIndex {
 
     /// `for_each_near` with each record's position in `records()`.
     pub fn for_each_near_indexed(&self, p: Vec3, mut visit: impl FnMut(usize, &Record)) {
+        let _ = self.try_for_each_near_indexed(p, |i, r| {
+            visit(i, r);
+            ControlFlow::Continue(())
+        });
+    }
+
+    /// `for_each_near_indexed` until `visit` breaks (whether it did).
+    pub fn try_for_each_near_indexed(
+        &self,
+        p: Vec3,
+        mut visit: impl FnMut(usize, &Record) -> ControlFlow<()>,
+    ) -> ControlFlow<()> {
         let mut levels = self.occupied_levels;
         while levels != 0 {
             let level = levels.trailing_zeros();
@@ -298,11 +311,12 @@ impl FrozenIndex {
                 for &i in list {
                     let sphere = self.spheres[i as usize];
                     if (sphere.truncate() - p).length_squared() <= sphere.w {
-                        visit(i as usize, &self.records[i as usize]);
+                        visit(i as usize, &self.records[i as usize])?;
                     }
                 }
             }
         }
+        ControlFlow::Continue(())
     }
 
     pub fn is_empty(&self) -> bool {
