@@ -262,13 +262,13 @@ impl IrradianceCache {
     /// The cached value (irradiance over pi) at a point with its headroom (see
     /// `Record::headroom`), or None when no record may be used.
     pub fn lookup(&self, point: Vec3, normal: Vec3, headroom: f32, level: u32) -> Option<Vec3> {
-        self.interpolate(point, normal, headroom, level, None).map(|i| i.value)
+        self.interpolate(point, normal, headroom, level).map(|i| i.value)
     }
 
     /// `lookup`'s value with the smallest radius among the records that gave it: how far from
     /// the point the interpolation may change much.
     pub fn lookup_with_scale(&self, point: Vec3, normal: Vec3, headroom: f32, level: u32) -> Option<(Vec3, f32)> {
-        self.interpolate(point, normal, headroom, level, None)
+        self.interpolate(point, normal, headroom, level)
             .map(|i| (i.value, i.smallest_radius))
     }
 
@@ -279,9 +279,9 @@ impl IrradianceCache {
     }
 
     /// Whether the records of `snapshot` cover the point firmly: their weights there add up to
-    /// at least `FIRM_COVERAGE`.
-    /// Only the weights are summed, and only until they reach it: the prepass asks this of
-    /// every site, most of them covered.
+    /// at least `FIRM_COVERAGE`. Only the weights are summed (no record's value is needed to
+    /// say so), and only until they reach it: the prepass asks this at every site, most of
+    /// them covered.
     pub fn covered_in(&self, snapshot: &FrozenIndex, point: Vec3, normal: Vec3, headroom: f32, level: u32) -> bool {
         let mut total = 0.0f32;
         snapshot
@@ -307,16 +307,9 @@ impl IrradianceCache {
             .filter(|w| *w > 0.0)
     }
 
-    /// The weighted mean of the records that may be used at the point, from `snapshot`, else
-    /// the frozen index, else the live one.
-    fn interpolate(
-        &self,
-        point: Vec3,
-        normal: Vec3,
-        headroom: f32,
-        level: u32,
-        snapshot: Option<&FrozenIndex>,
-    ) -> Option<Interpolation> {
+    /// The weighted mean of the records that may be used at the point, from the frozen index
+    /// if there is one, else the live one.
+    fn interpolate(&self, point: Vec3, normal: Vec3, headroom: f32, level: u32) -> Option<Interpolation> {
         let (mut sum, mut total, mut smallest_radius) = (Vec3::ZERO, 0.0f32, f32::INFINITY);
         let weigh = |r: &Record| {
             self.lookup_weight(r, point, normal, headroom, level)
@@ -329,7 +322,7 @@ impl IrradianceCache {
                 smallest_radius = smallest_radius.min(r.radii[0].min(r.radii[1]));
             }
         };
-        match snapshot.or(self.frozen.get()) {
+        match self.frozen.get() {
             Some(frozen) => frozen.for_each_near(point, &mut add),
             None => self.index.for_each_near(point, &mut add),
         }
