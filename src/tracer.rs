@@ -197,8 +197,8 @@ impl Tracer {
         }
     }
 
-    /// Starts loading the corners' positions and normals of the triangle `hit` found (reads
-    /// its indices: best after `prefetch_triangle` had time to bring them).
+    /// Starts loading the corners' positions, normals and texture coordinates of the triangle
+    /// `hit` found (reads its indices: best after `prefetch_triangle` had time to bring them).
     #[inline]
     pub fn prefetch_corners(&self, scene: &Scene, hit: &embree::RayHit) {
         if hit.instance.is_none() {
@@ -207,6 +207,9 @@ impl Tracer {
                 prefetch(&mesh.positions[i as usize]);
                 if let Some(normals) = &mesh.normals {
                     prefetch(&normals[i as usize]);
+                }
+                if let Some(texcoords) = &mesh.texcoords {
+                    prefetch(&texcoords[i as usize]);
                 }
             }
         }
