@@ -56,6 +56,9 @@ fn wrap(coord: i64, size: u32, mode: i32) -> usize {
             let period = coord.rem_euclid(2 * n);
             if period < n { period } else { 2 * n - 1 - period }
         }
+        // Repeat. A power-of-two size (most textures) wraps by a mask, which is the Euclidean
+        // remainder in two's complement, where the remainder is a 64-bit division.
+        _ if size.is_power_of_two() => coord & (n - 1),
         _ => coord.rem_euclid(n),
     };
     i as usize
@@ -247,6 +250,16 @@ mod tests {
         assert_eq!(wrap(-1, 4, WRAP_MIRROR), 0);
         assert_eq!(wrap(4, 4, WRAP_MIRROR), 3);
         assert_eq!(wrap(9, 4, WRAP_CLAMP), 3);
+        // Repeat: the mask of a power-of-two size is the remainder, negative coordinates too.
+        for size in [1u32, 2, 4, 512, 3, 6] {
+            for coord in [-1_000_000_007i64, -513, -512, -5, -1, 0, 1, 5, 511, 512, 1 << 40] {
+                assert_eq!(
+                    wrap(coord, size, 10497),
+                    coord.rem_euclid(size as i64) as usize,
+                    "{coord} {size}"
+                );
+            }
+        }
     }
 
     /// A `size` x `size` sRGB checkerboard of single texels, 0.2 and 0.8 linear.
