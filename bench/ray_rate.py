@@ -103,8 +103,14 @@ def main():
         print(f"ray_rate: {name}: Embree alone {incoherent:.2f} Mrays/s incoherent (runs {runs}); "
               f"renderer {best_wall:.2f} Mrays/s by busy time (runs {' '.join(f'{w:.2f}' for w in wall)}), "
               f"{best_cpu:.2f} by CPU time, the render's busy time {min(busy):.2f} s; rays {json.dumps(kinds)}")
+        # The machine's speed drifts over minutes (other guests): each repeat's pair of runs,
+        # back to back, gives a ratio of its own, and their median is steadier than the ratio
+        # of the bests when the drift is slow.
+        paired = sorted(w / e["incoherent"] for w, e in zip(wall, embree))
+        median = paired[len(paired) // 2] if len(paired) % 2 else sum(paired[len(paired) // 2 - 1:][:2]) / 2
         print(f"ray_rate: {name}: the renderer's rate is {best_wall / incoherent * 100:.0f} % of Embree's "
-              f"({best_cpu / incoherent * 100:.0f} % by CPU time; target 60 %)")
+              f"({best_cpu / incoherent * 100:.0f} % by CPU time; target 60 %); repeat by repeat "
+              f"{' '.join(f'{r * 100:.0f}' for r in paired)} %, median {median * 100:.0f} %")
         print(f"ray_rate: {name}: Embree alone on hemisphere rays from the surfaces the view sees "
               f"{hemisphere:.2f} Mrays/s ({hemisphere / incoherent * 100:.0f} % of its incoherent rate); "
               f"the renderer's rate is {best_wall / hemisphere * 100:.0f} % of that")
