@@ -64,6 +64,26 @@ pub struct SurfaceHit {
     pub prim_id: u32,
 }
 
+#[cfg(test)]
+impl SurfaceHit {
+    /// A test's hit on a floor (normal +y everywhere) at `position`, `distance` from where the
+    /// ray left, of material 0 and `object`, without texture coordinates.
+    pub fn on_floor(position: Vec3, distance: f32, object: u32) -> SurfaceHit {
+        SurfaceHit {
+            position,
+            distance,
+            geometric_normal: Vec3::Y,
+            normal: Vec3::Y,
+            facing_normal: Vec3::Y,
+            uv: None,
+            uv_per_length: 0.0,
+            material: 0,
+            object,
+            prim_id: 0,
+        }
+    }
+}
+
 impl SurfaceHit {
     /// Whether two hits lie on one plane (as far as a record or a pixel's corners are
     /// concerned): normals within about 8 degrees, and each within 2 % of their distance from

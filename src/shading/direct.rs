@@ -695,18 +695,7 @@ mod tests {
                 cos_outer: 0.0,
             })
             .collect();
-        let hit = SurfaceHit {
-            position: Vec3::ZERO,
-            distance: 1.0,
-            geometric_normal: Vec3::Y,
-            normal: Vec3::Y,
-            facing_normal: Vec3::Y,
-            uv: None,
-            uv_per_length: 0.0,
-            material: 0,
-            object: 0,
-            prim_id: 0,
-        };
+        let hit = SurfaceHit::on_floor(Vec3::ZERO, 1.0, 0);
         let grey = SurfacePoint {
             diffuse: Vec3::splat(0.5),
             specular: Vec3::ZERO,

@@ -1120,16 +1120,9 @@ mod tests {
 
     fn hit_at(distance: f32, uv_per_length: f32) -> SurfaceHit {
         SurfaceHit {
-            position: Vec3::ZERO,
-            distance,
-            geometric_normal: Vec3::Y,
-            normal: Vec3::Y,
-            facing_normal: Vec3::Y,
             uv: Some([0.5, 0.5]),
             uv_per_length,
-            material: 0,
-            object: 0,
-            prim_id: 0,
+            ..SurfaceHit::on_floor(Vec3::ZERO, distance, 0)
         }
     }
 

@@ -113,18 +113,7 @@ mod tests {
 
     /// A hit on the floor (y = 0, normal up) of object 1, seen from 5 units away.
     fn floor_hit(x: f32, z: f32) -> SurfaceHit {
-        SurfaceHit {
-            position: Vec3::new(x, 0.0, z),
-            distance: 5.0,
-            geometric_normal: Vec3::Y,
-            normal: Vec3::Y,
-            facing_normal: Vec3::Y,
-            uv: None,
-            uv_per_length: 0.0,
-            material: 0,
-            object: 1,
-            prim_id: 0,
-        }
+        SurfaceHit::on_floor(Vec3::new(x, 0.0, z), 5.0, 1)
     }
 
     fn shared_at_origin() -> PixelIrradiance {
