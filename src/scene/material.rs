@@ -72,23 +72,25 @@ impl Material {
     /// glTF's default material (used by primitives without one): white, metallic 1,
     /// roughness 1, as the specification defines it.
     pub fn gltf_default() -> Material {
-        Material::from_gltf(
-            &GltfMaterial {
-                name: "(default)".into(),
-                base_color: [1.0; 4],
-                base_color_texture: None,
-                metallic: 1.0,
-                roughness: 1.0,
-                emissive: [0.0; 3],
-                emissive_strength: 1.0,
-                specular_factor: 1.0,
-                specular_color: [1.0; 3],
-                alpha_mode: AlphaMode::Opaque,
-                alpha_cutoff: 0.5,
-                double_sided: false,
-            },
-            DEFAULT_SPECULAR_THRESHOLD,
-        )
+        Material::from_gltf(&Material::gltf_default_description(), DEFAULT_SPECULAR_THRESHOLD)
+    }
+
+    /// glTF's default material as a file would describe it (what `gltf_default` maps).
+    pub fn gltf_default_description() -> GltfMaterial {
+        GltfMaterial {
+            name: "(default)".into(),
+            base_color: [1.0; 4],
+            base_color_texture: None,
+            metallic: 1.0,
+            roughness: 1.0,
+            emissive: [0.0; 3],
+            emissive_strength: 1.0,
+            specular_factor: 1.0,
+            specular_color: [1.0; 3],
+            alpha_mode: AlphaMode::Opaque,
+            alpha_cutoff: 0.5,
+            double_sided: false,
+        }
     }
 
     /// Maps a glTF material; out-of-range or non-finite factors are clamped to the valid range.

@@ -221,27 +221,12 @@ mod tests {
     /// (their hits draw no random numbers where the grid answers) of `opacity` (below 1 a
     /// ray also passes through, out of the box).
     fn closed_box(opacity: f32) -> Scene {
-        let mut white = if opacity < 1.0 {
-            Material::from_gltf(
-                &crate::sys::scene_io::GltfMaterial {
-                    name: "see-through".into(),
-                    base_color: [1.0, 1.0, 1.0, opacity],
-                    base_color_texture: None,
-                    metallic: 0.0,
-                    roughness: 1.0,
-                    emissive: [0.0; 3],
-                    emissive_strength: 1.0,
-                    specular_factor: 0.0,
-                    specular_color: [1.0; 3],
-                    alpha_mode: crate::sys::scene_io::AlphaMode::Blend,
-                    alpha_cutoff: 0.5,
-                    double_sided: true,
-                },
-                0.01,
-            )
-        } else {
-            Material::gltf_default()
-        };
+        let mut description = Material::gltf_default_description();
+        description.base_color[3] = opacity;
+        if opacity < 1.0 {
+            description.alpha_mode = crate::sys::scene_io::AlphaMode::Blend;
+        }
+        let mut white = Material::from_gltf(&description, crate::scene::material::DEFAULT_SPECULAR_THRESHOLD);
         white.make_lambertian();
         let corner = |i: u32| [(i & 1) as f32, (i >> 1 & 1) as f32, (i >> 2 & 1) as f32];
         let walls: [[u32; 4]; 6] = [
