@@ -22,7 +22,7 @@
 //! Without a grid (`--ic-deep paths`) nothing is batched: every hit traces a path, whose loads
 //! are not the ones that dominate.
 
-use super::{GridRead, Integrator, PathState, Work, finite_light};
+use super::{GridRead, Integrator, PathState, Work};
 use crate::irradiance::hemisphere::{CellSample, Frame, cell_direction};
 use crate::irradiance::last_bounce::Received;
 use crate::sampling::Rng;
@@ -71,15 +71,10 @@ impl Integrator<'_> {
                 let (light, distance) = match surface {
                     Some(found) if ray.traced => {
                         let (hit, surface) = (&found.0, &found.1);
-                        match self.grid_light_alone(hit, surface, read, next, counts) {
-                            Some(light) => (light, (hit.position - ray.origin).length().max(floor)),
-                            None => {
-                                let grid = GridRead::Read(read);
-                                let (c, distance) =
-                                    self.light_from(ray.origin, ray.direction, (hit, surface), next, grid, rng, counts);
-                                (c.total(), distance.max(floor))
-                            }
-                        }
+                        let grid = GridRead::Read(read);
+                        let (c, distance) =
+                            self.light_from(ray.origin, ray.direction, (hit, surface), next, grid, rng, counts);
+                        (c.total(), distance.max(floor))
                     }
                     // Nothing found, or not traced: no light, from no distance.
                     _ => (Vec3::ZERO, f32::INFINITY),
@@ -91,35 +86,6 @@ impl Integrator<'_> {
                 }
             })
             .collect()
-    }
-
-    /// What `light_from` gives for a hit whose light the grid's read is all of: an opaque
-    /// surface with no specular part and no emission counted, at the grid's level (past the
-    /// eye, so no albedo layer to feed). It would add the albedo times the grid's two means
-    /// and nothing else, through its general path (emission, light sampling, specular and
-    /// transparency branches); this is the same sum, in the same order, without it. None
-    /// where `light_from` has more to do. Measured at the ray-rate bench's settings (one
-    /// thread, paired runs): Sibenik 0.975x, 0.995x and 0.993x the time at 160x120 (8-10 pairs
-    /// each) and 0.994x at 320x240, the conference room 0.979x: small, within the machine's
-    /// spread, but below 1 every time; images identical.
-    fn grid_light_alone(
-        &self,
-        hit: &SurfaceHit,
-        surface: &SurfacePoint,
-        read: Option<Received>,
-        next: PathState,
-        counts: &mut Work<'_>,
-    ) -> Option<Vec3> {
-        let received = read?;
-        let material = &self.scene.materials[hit.material as usize];
-        let alone = next.level > 0
-            && surface.opacity >= 1.0
-            && surface.specular.max_element() <= 0.0
-            && !(next.count_emission && material.is_emissive());
-        alone.then(|| {
-            finite_light(surface.diffuse * received.direct, counts)
-                + finite_light(surface.diffuse * received.indirect, counts)
-        })
     }
 
     /// Pass 1: each cell's direction and Embree's hit along it.
@@ -286,8 +252,8 @@ mod tests {
 
     #[test]
     fn a_batch_gives_each_cell_what_its_ray_traced_alone_gives() {
-        // Opaque walls: the grid's read is all of a hit's light (`grid_light_alone`); partly
-        // transparent ones: the general path, which also follows the ray out of the box.
+        // Opaque walls: the grid's read is all of a hit's light; partly transparent ones: the
+        // ray also passes through, out of the box.
         for opacity in [1.0, 0.9] {
             batch_against_rays_alone(closed_box(opacity));
         }

@@ -1098,22 +1098,19 @@ fn timed_ambient<'w, T>(counts: &mut Work<'w>, work: impl FnOnce(&mut Work<'w>) 
 /// Drops (and counts) a component that is not a finite, non-negative colour, so no NaN or Inf
 /// can reach the image whatever the scene's numbers.
 fn sanitize(c: Components, counts: &mut RayCounts) -> Components {
+    let fix = |v: Vec3, counts: &mut RayCounts| {
+        if v.is_finite() {
+            v.max(Vec3::ZERO)
+        } else {
+            counts.nonfinite += 1;
+            Vec3::ZERO
+        }
+    };
     Components {
-        emission: finite_light(c.emission, counts),
-        direct: finite_light(c.direct, counts),
-        specular: finite_light(c.specular, counts),
-        indirect: finite_light(c.indirect, counts),
-    }
-}
-
-/// One component as `sanitize` keeps it: a finite colour's non-negative part, else zero (and
-/// counted).
-fn finite_light(v: Vec3, counts: &mut RayCounts) -> Vec3 {
-    if v.is_finite() {
-        v.max(Vec3::ZERO)
-    } else {
-        counts.nonfinite += 1;
-        Vec3::ZERO
+        emission: fix(c.emission, counts),
+        direct: fix(c.direct, counts),
+        specular: fix(c.specular, counts),
+        indirect: fix(c.indirect, counts),
     }
 }
 
