@@ -25,6 +25,7 @@ import argparse
 import json
 import os
 import re
+import statistics
 import subprocess
 import sys
 
@@ -107,7 +108,7 @@ def main():
         # back to back, gives a ratio of its own, and their median is steadier than the ratio
         # of the bests when the drift is slow.
         paired = sorted(w / e["incoherent"] for w, e in zip(wall, embree))
-        median = paired[len(paired) // 2] if len(paired) % 2 else sum(paired[len(paired) // 2 - 1:][:2]) / 2
+        median = statistics.median(paired)
         print(f"ray_rate: {name}: the renderer's rate is {best_wall / incoherent * 100:.0f} % of Embree's "
               f"({best_cpu / incoherent * 100:.0f} % by CPU time; target 60 %); repeat by repeat "
               f"{' '.join(f'{r * 100:.0f}' for r in paired)} %, median {median * 100:.0f} %")
