@@ -25,7 +25,7 @@ use crate::image::window::PixelWindow;
 use crate::irradiance::IrradianceCache;
 use crate::irradiance::index::FrozenIndex;
 use crate::irradiance::last_bounce::{self, LastBounceGrid};
-use crate::irradiance::record::{Record, RecordIdentity};
+use crate::irradiance::record::Record;
 use crate::render::edges;
 use crate::render::pixel::{RenderSettings, ThreadClock, ThreadStats, eye_spread, pixel_offset};
 use crate::sampling::Rng;
@@ -187,15 +187,6 @@ pub fn rounds_in(region: Region) -> Vec<Vec<Site>> {
 /// How many of `rounds(width, height)`'s rounds are its finest level's (every pixel).
 fn finest_rounds(width: u32, height: u32) -> usize {
     (width.min(3) * height.min(3)) as usize
-}
-
-/// The identities of the last `count` records pushed to `snapshot` (a round's).
-fn last_records(snapshot: &FrozenIndex, count: usize) -> std::collections::HashSet<RecordIdentity> {
-    let all = snapshot.records();
-    all[all.len().saturating_sub(count)..]
-        .iter()
-        .map(Record::identity)
-        .collect()
 }
 
 /// Rounds of the sample positions of the pixels of `window` (`needs`: how many samples each
@@ -592,19 +583,15 @@ fn run_watched<E>(
     // round but the finest level's, whose rounds fill the gaps shrinking opens.
     let coarse = lattice.len().saturating_sub(finest_rounds(area.width(), area.height()));
     // Only this prepass's records shrink: those it found (a cache file's, an earlier frame's)
-    // are final, so the views they were made for stay covered.
-    let mut made_here = std::collections::HashSet::new();
+    // are final, so the views they were made for stay covered. The snapshot keeps its order
+    // (records shrink in place), so this prepass's records are those past the ones it found.
+    let found = snapshot.len();
     let mut go_on = true;
     for (k, sites) in lattice.into_iter().enumerate() {
-        let before = outcome.records;
+        let before = snapshot.len();
         run(sites, &mut snapshot, &mut outcome)?;
-        if k < coarse && outcome.records > before {
-            let fresh = last_records(&snapshot, (outcome.records - before) as usize);
-            made_here.extend(fresh.iter().copied());
-            let revisable = |r: &Record| made_here.contains(&r.identity());
-            if cache.shrink_where_neighbours_disagree(revisable, |r| fresh.contains(&r.identity())) > 0 {
-                snapshot = cache.snapshot();
-            }
+        if k < coarse && snapshot.len() > before {
+            cache.shrink_where_neighbours_disagree(&mut snapshot, |i| i >= found, |i| i >= before);
         }
         go_on = watch(outcome.rounds, total);
         if !go_on {

@@ -283,6 +283,19 @@ impl FrozenIndex {
         self.records.len()
     }
 
+    /// Puts `smaller`, record `index` with its radii shrunk, in its place. The record stays
+    /// listed in the cells of its old reach, which hold its new one: a query still visits it
+    /// once wherever it now reaches, and tests the new reach.
+    pub fn shrink(&mut self, index: usize, smaller: Record) {
+        let old = &self.records[index];
+        assert!(
+            smaller.position == old.position && smaller.reach() <= old.reach(),
+            "a record may only shrink in place"
+        );
+        self.spheres[index] = smaller.position.extend(smaller.reach() * smaller.reach());
+        self.records[index] = smaller;
+    }
+
     /// The records, in the order they were listed.
     pub fn records(&self) -> &[Record] {
         &self.records
@@ -358,6 +371,55 @@ mod tests {
             far += usize::from((r.position - Vec3::new(1.5, 0.0, 0.0)).length() <= r.reach())
         });
         assert_eq!(far, 0);
+    }
+
+    /// Records shrunk in a snapshot (`FrozenIndex::shrink`, as the prepass does between
+    /// rounds) leave it answering every query as a snapshot built afresh from the shrunk
+    /// records does: each record that reaches the point, once, in its new form.
+    #[test]
+    fn a_snapshot_shrunk_in_place_answers_as_one_built_afresh() {
+        let index = RecordIndex::new(0.01);
+        let mut rng = Rng::new(7, 8);
+        for k in 0..1500 {
+            let mut r = flat_record(k as f32, 0.01 + 0.5 * rng.next_f32().powi(3));
+            r.position = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 4.0 - 2.0;
+            index.insert(r);
+        }
+        let mut snapshot = index.snapshot();
+        for i in (0..snapshot.len()).step_by(3) {
+            let old = snapshot.records()[i].clone();
+            let mut smaller = old.clone();
+            // Down to a sixteenth: many move to a finer level of the index.
+            smaller.radii = old.radii.map(|r| r * (0.0625 + 0.9 * rng.next_f32()));
+            assert!(index.replace(&old, smaller.clone()));
+            snapshot.shrink(i, smaller);
+        }
+        let afresh = index.snapshot();
+        let found = |index: &FrozenIndex, p: Vec3| {
+            let mut out = Vec::new();
+            index.for_each_near(p, |r| out.push((r.value.x, r.radii[0].to_bits())));
+            out.sort_by(|a, b| a.0.total_cmp(&b.0));
+            out
+        };
+        let mut nonempty = 0;
+        for _ in 0..2000 {
+            let p = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 4.0 - 2.0;
+            let ours = found(&snapshot, p);
+            nonempty += usize::from(!ours.is_empty());
+            assert_eq!(ours, found(&afresh, p), "at {p}");
+        }
+        assert!(nonempty > 500, "the queries reach records ({nonempty} of 2000)");
+    }
+
+    #[test]
+    #[should_panic(expected = "only shrink")]
+    fn a_snapshot_record_may_not_grow_in_place() {
+        let index = RecordIndex::new(0.01);
+        index.insert(flat_record(1.0, 0.1));
+        let mut snapshot = index.snapshot();
+        let mut larger = snapshot.records()[0].clone();
+        larger.radii = [0.2, 0.2];
+        snapshot.shrink(0, larger);
     }
 
     #[test]

@@ -334,31 +334,35 @@ impl IrradianceCache {
             .filter(|i| i.value.is_finite())
     }
 
-    /// Shrinks the records `revisable` picks whose extrapolation misses a neighbouring
-    /// record's value (`validation::shrink_factors`), checking only pairs with a record
-    /// `fresh` picks; a shrunk record's new form is appended to the file, where it replaces
-    /// the old one on loading. Returns how many shrank.
+    /// Shrinks the records of `snapshot` (which holds every record of this cache's level 0,
+    /// the prepass's copy) that `revisable` picks (by their place in it) whose extrapolation
+    /// misses a neighbouring record's value (`validation::shrink_factors`), checking only pairs
+    /// with a record `fresh` picks; each shrinks in this cache and in `snapshot` alike, and a
+    /// shrunk record's new form is appended to the file, where it replaces the old one on
+    /// loading. Returns how many shrank. A record's factor is the smallest its neighbours ask
+    /// for, whatever their order, so the snapshot's order (not the canonical one) gives the
+    /// same records as any process's copy would.
     pub fn shrink_where_neighbours_disagree(
         &self,
-        revisable: impl Fn(&Record) -> bool,
-        fresh: impl Fn(&Record) -> bool,
+        snapshot: &mut FrozenIndex,
+        revisable: impl Fn(usize) -> bool,
+        fresh: impl Fn(usize) -> bool,
     ) -> usize {
-        let frozen = self.index.frozen();
-        let records = frozen.records();
-        let revisable: Vec<bool> = records.iter().map(&revisable).collect();
-        let fresh: Vec<bool> = records.iter().map(&fresh).collect();
+        let revisable: Vec<bool> = (0..snapshot.len()).map(&revisable).collect();
+        let fresh: Vec<bool> = (0..snapshot.len()).map(&fresh).collect();
         let factors = validation::shrink_factors(
-            &frozen,
+            snapshot,
             self.settings.metric,
             self.settings.accuracy,
             &revisable,
             &fresh,
         );
         let mut shrunk = 0;
-        for (old, factor) in records.iter().zip(factors) {
+        for (index, factor) in factors.into_iter().enumerate() {
             if factor >= 1.0 {
                 continue;
             }
+            let old = &snapshot.records()[index];
             let floor = self.settings.min_radius_at(old.position) * STEEP_RADIUS_FRACTION;
             let mut new = old.clone();
             new.radii = old.radii.map(|r| (r * factor).max(floor).min(r));
@@ -368,7 +372,8 @@ impl IrradianceCache {
             if let Some(file) = &self.file {
                 file.append(&new);
             }
-            self.index.replace(old, new);
+            self.index.replace(old, new.clone());
+            snapshot.shrink(index, new);
             shrunk += 1;
         }
         shrunk
