@@ -283,6 +283,14 @@ impl FrozenIndex {
         self.records.len()
     }
 
+    /// A copy holding only the records at `picked` (places here), its k-th `picked[k]`.
+    pub fn subset(&self, picked: &[usize]) -> FrozenIndex {
+        FrozenIndex::of(
+            self.base_cell,
+            picked.iter().map(|&i| self.records[i].clone()).collect(),
+        )
+    }
+
     /// Puts `smaller`, record `index` with its radii shrunk, in its place. The record stays
     /// listed in the cells of its old reach, which hold its new one: a query still visits it
     /// once wherever it now reaches, and tests the new reach.
@@ -420,6 +428,38 @@ mod tests {
         let mut larger = snapshot.records()[0].clone();
         larger.radii = [0.2, 0.2];
         snapshot.shrink(0, larger);
+    }
+
+    /// A subset finds, at every point, the records of the whole it holds, as the whole
+    /// finds them (its k-th record is the whole's `picked[k]`).
+    #[test]
+    fn a_subset_finds_its_records_as_the_whole_does() {
+        let index = RecordIndex::new(0.01);
+        let mut rng = Rng::new(9, 10);
+        for k in 0..800 {
+            let mut r = flat_record(k as f32, 0.01 + 0.4 * rng.next_f32().powi(3));
+            r.position = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 4.0 - 2.0;
+            index.insert(r);
+        }
+        let all = index.snapshot();
+        let picked: Vec<usize> = (0..all.len()).filter(|i| i % 7 == 3).collect();
+        let subset = all.subset(&picked);
+        let mut found_some = 0;
+        for _ in 0..4000 {
+            let p = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 4.0 - 2.0;
+            let mut expected = Vec::new();
+            all.for_each_near_indexed(p, |i, _| expected.extend(picked.binary_search(&i).ok()));
+            let mut found = Vec::new();
+            subset.for_each_near_indexed(p, |k, r| {
+                assert_eq!(r, &all.records()[picked[k]]);
+                found.push(k);
+            });
+            expected.sort();
+            found.sort();
+            found_some += usize::from(!found.is_empty());
+            assert_eq!(found, expected, "at {p}");
+        }
+        assert!(found_some > 100, "the subset reaches some points ({found_some})");
     }
 
     #[test]
