@@ -381,18 +381,25 @@ mod tests {
         assert_eq!(far, 0);
     }
 
+    /// `count` records scattered in the cube [-2, 2]^3, mostly small (radii up to 0.01 +
+    /// `largest`), record k holding the value k.
+    fn scattered(count: usize, largest: f32, rng: &mut Rng) -> RecordIndex {
+        let index = RecordIndex::new(0.01);
+        for k in 0..count {
+            let mut r = flat_record(k as f32, 0.01 + largest * rng.next_f32().powi(3));
+            r.position = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 4.0 - 2.0;
+            index.insert(r);
+        }
+        index
+    }
+
     /// Records shrunk in a snapshot (`FrozenIndex::shrink`, as the prepass does between
     /// rounds) leave it answering every query as a snapshot built afresh from the shrunk
     /// records does: each record that reaches the point, once, in its new form.
     #[test]
     fn a_snapshot_shrunk_in_place_answers_as_one_built_afresh() {
-        let index = RecordIndex::new(0.01);
         let mut rng = Rng::new(7, 8);
-        for k in 0..1500 {
-            let mut r = flat_record(k as f32, 0.01 + 0.5 * rng.next_f32().powi(3));
-            r.position = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 4.0 - 2.0;
-            index.insert(r);
-        }
+        let index = scattered(1500, 0.5, &mut rng);
         let mut snapshot = index.snapshot();
         for i in (0..snapshot.len()).step_by(3) {
             let old = snapshot.records()[i].clone();
@@ -434,13 +441,8 @@ mod tests {
     /// finds them (its k-th record is the whole's `picked[k]`).
     #[test]
     fn a_subset_finds_its_records_as_the_whole_does() {
-        let index = RecordIndex::new(0.01);
         let mut rng = Rng::new(9, 10);
-        for k in 0..800 {
-            let mut r = flat_record(k as f32, 0.01 + 0.4 * rng.next_f32().powi(3));
-            r.position = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 4.0 - 2.0;
-            index.insert(r);
-        }
+        let index = scattered(800, 0.4, &mut rng);
         let all = index.snapshot();
         let picked: Vec<usize> = (0..all.len()).filter(|i| i % 7 == 3).collect();
         let subset = all.subset(&picked);
