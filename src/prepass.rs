@@ -622,12 +622,13 @@ fn run_watched<E>(
             }
         }
     }
-    // The record set is complete: each record's overshoot is fitted from its neighbours.
+    // The record set is complete: each record's overshoot is fitted from its neighbours, and
+    // from now on lookups read the cache's lock-free copy.
     if go_on {
-        cache.fit_curvatures();
+        cache.fit_curvatures_and_freeze();
+    } else {
+        cache.freeze();
     }
-    // The cache is complete: from now on lookups read its lock-free copy.
-    cache.freeze();
     outcome.edges = edges.map(std::sync::Arc::new);
     outcome.seconds = start.elapsed().as_secs_f64();
     Ok(outcome)

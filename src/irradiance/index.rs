@@ -304,6 +304,12 @@ impl FrozenIndex {
         self.records[index] = smaller;
     }
 
+    /// Sets record `index`'s fitted curvature (which changes neither its reach nor its
+    /// identity).
+    pub fn set_curvature(&mut self, index: usize, curvature: f32) {
+        self.records[index].curvature = curvature;
+    }
+
     /// The records, in the order they were listed.
     pub fn records(&self) -> &[Record] {
         &self.records
