@@ -339,7 +339,7 @@ impl IrradianceCache {
     /// misses a neighbouring record's value (`validation::shrink_factors`), checking only pairs
     /// with a record `fresh` picks; each shrinks in this cache and in `snapshot` alike, and a
     /// shrunk record's new form is appended to the file, where it replaces the old one on
-    /// loading. Returns how many shrank. A record's factor is the smallest its neighbours ask
+    /// loading. A record's factor is the smallest its neighbours ask
     /// for, whatever their order, so the snapshot's order (not the canonical one) gives the
     /// same records as any process's copy would.
     pub fn shrink_where_neighbours_disagree(
@@ -347,7 +347,7 @@ impl IrradianceCache {
         snapshot: &mut FrozenIndex,
         revisable: impl Fn(usize) -> bool,
         fresh: impl Fn(usize) -> bool,
-    ) -> usize {
+    ) {
         let revisable: Vec<bool> = (0..snapshot.len()).map(&revisable).collect();
         let fresh: Vec<bool> = (0..snapshot.len()).map(&fresh).collect();
         let factors = validation::shrink_factors(
@@ -357,7 +357,6 @@ impl IrradianceCache {
             &revisable,
             &fresh,
         );
-        let mut shrunk = 0;
         for (index, factor) in factors.into_iter().enumerate() {
             if factor >= 1.0 {
                 continue;
@@ -374,9 +373,7 @@ impl IrradianceCache {
             }
             self.index.replace(old, new.clone());
             snapshot.shrink(index, new);
-            shrunk += 1;
         }
-        shrunk
     }
 
     /// Fits every record's `curvature` from its neighbours (`validation::fit_curvatures`) once
