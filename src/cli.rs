@@ -146,6 +146,13 @@ pub struct RenderArgs {
     /// follows the view. 0: -ar's floor alone (as Radiance).
     #[arg(long = "ic-min-pixels", default_value_t = 3.0, allow_negative_numbers = true)]
     pub ic_min_pixels: f32,
+    /// How many times its placed radii each record is read over once the record set is
+    /// complete (after the prepass): -aa sets how densely records are placed, this how many
+    /// of them each point blends, which averages the records' own noise. 1 reads them as
+    /// placed, as Radiance does (and as --ic-build progressive always does, having no moment
+    /// when the set is complete). From 1 to 4.
+    #[arg(long = "ic-blend", default_value_t = crate::irradiance::DEFAULT_BLEND, allow_negative_numbers = true)]
+    pub ic_blend: f32,
     /// -af FILE: persistent irradiance cache, loaded at start and appended to while rendering.
     #[arg(long = "af")]
     pub ambient_file: Option<PathBuf>,

@@ -72,6 +72,9 @@ pub fn validate(args: &RenderArgs) -> Result<(), String> {
     if !(args.ic_min_pixels.is_finite() && args.ic_min_pixels >= 0.0) {
         return Err("--ic-min-pixels must be a finite, non-negative number".into());
     }
+    if !(args.ic_blend.is_finite() && (1.0..=4.0).contains(&args.ic_blend)) {
+        return Err("--ic-blend must be a number from 1 to 4".into());
+    }
     if args.threads == Some(0) {
         return Err("--threads must be at least 1".into());
     }
@@ -296,7 +299,8 @@ impl Job {
                 metric,
                 scene.cube_size(),
             )
-            .with_view_floor(&camera, args.ic_min_pixels);
+            .with_view_floor(&camera, args.ic_min_pixels)
+            .with_blend(args.ic_blend);
             let cache = IrradianceCache::new(settings);
             let cache = match &args.ambient_file {
                 Some(path) => {

@@ -251,6 +251,10 @@ fn bad_options_are_refused() {
         &["-vu"],
     );
     expect_failure(&scene, &["-vv", "200"], &c.out(), &["-vv"]);
+    // Narrower than placed would leave gaps between records; NaN and far wider make no sense.
+    for blend in ["0.9", "NaN", "4.5"] {
+        expect_failure(&scene, &["--ic-blend", blend], &c.out(), &["--ic-blend", "from 1 to 4"]);
+    }
 }
 
 #[test]

@@ -115,7 +115,7 @@ pub fn options_line(args: &RenderArgs) -> String {
     let av = args.ambient_value.as_deref().unwrap_or(&[0.0, 0.0, 0.0]);
     format!(
         "-x {} -y {} -ab {} -aa {} -ad {} -as {} -ar {} -av {} {} {} -st {} -lr {} -lw {} --ic-metric {:?} \
-         --light-samples {} --direct {} --spp {} --seed {} --ic-build {} --ic-deep {}{}{}{}{}",
+         --light-samples {} --direct {} --spp {} --seed {} --ic-build {} --ic-deep {} --ic-blend {}{}{}{}{}",
         args.width,
         args.height,
         args.ambient_bounces,
@@ -146,6 +146,7 @@ pub fn options_line(args: &RenderArgs) -> String {
             crate::cli::DeepArg::Records => "records",
             crate::cli::DeepArg::Grid => "grid",
         },
+        args.ic_blend,
         if args.ic_min_pixels > 0.0 {
             format!(" --ic-min-pixels {}", args.ic_min_pixels)
         } else {

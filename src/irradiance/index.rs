@@ -207,6 +207,15 @@ impl RecordIndex {
         FrozenIndex::of(self.base_cell, records)
     }
 
+    /// The records in `frozen`'s canonical order as they were placed, and the frozen index of
+    /// them widened by `blend` (`Record::widened`), listed in that order.
+    pub fn frozen_widened(&self, blend: f32) -> (Vec<Record>, FrozenIndex) {
+        let mut placed = self.all();
+        placed.sort_by_key(Record::identity);
+        let read = placed.iter().map(|r| r.widened(blend)).collect();
+        (placed, FrozenIndex::of(self.base_cell, read))
+    }
+
     /// A read-only copy in no particular order, for lookups whose answer is only whether a
     /// record covers the point (the prepass's), extended with `FrozenIndex::push`.
     pub fn snapshot(&self) -> FrozenIndex {

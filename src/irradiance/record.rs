@@ -123,6 +123,18 @@ impl Record {
         self.normal.cross(self.u_axis)
     }
 
+    /// The record as a finished cache reads it (`CacheSettings::blend`): its radii, and Ward's
+    /// split-sphere distance, `blend` times those it was placed with; its curvature per unit of
+    /// the wider `t2`, so that it subtracts the same overshoot at the same point.
+    pub fn widened(&self, blend: f32) -> Record {
+        Record {
+            radii: self.radii.map(|r| r * blend),
+            harmonic_distance: self.harmonic_distance * blend,
+            curvature: self.curvature * blend * blend,
+            ..self.clone()
+        }
+    }
+
     /// Largest distance from the record's position at which it can contribute.
     pub fn reach(&self) -> f32 {
         self.radii[0].max(self.radii[1])
