@@ -157,6 +157,48 @@ fn statistics_json_and_header() {
     assert!(options.contains("-ab 1") && options.contains("-ad 16"), "{options}");
 }
 
+/// A reference renders pass after pass; its statistics list each thread once, with every
+/// pass's rays, so they add up to the totals (not once per thread and pass).
+#[test]
+fn a_references_statistics_list_each_thread_once() {
+    let dir = tempfile::tempdir().unwrap();
+    let stats = dir.path().join("ref.json");
+    let out = dir.path().join("ref.exr");
+    run_ok(&[
+        "reference",
+        &default_scene(),
+        "-o",
+        out.to_str().unwrap(),
+        "-q",
+        "--no-preview",
+        "-x",
+        "32",
+        "-y",
+        "16",
+        "--tile",
+        "8x8",
+        "-ad",
+        "16",
+        "--threads",
+        "2",
+        "--noise",
+        "1e-9",
+        "--max-seconds",
+        "0.5",
+        "--stats",
+        stats.to_str().unwrap(),
+    ]);
+    let json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&stats).unwrap()).unwrap();
+    let passes = json["reference_passes"].as_u64().unwrap();
+    assert!(passes >= 3, "passes: {passes}");
+    let threads = json["per_thread"].as_array().unwrap();
+    assert_eq!(threads.len(), 2, "{}", json["per_thread"]);
+    let rays: u64 = threads.iter().map(|t| t["rays"]["total"].as_u64().unwrap()).sum();
+    assert_eq!(rays, json["rays"]["total"].as_u64().unwrap());
+    // Every pass traces a camera ray a pixel at least.
+    assert!(json["rays"]["primary"].as_u64().unwrap() >= passes * 32 * 16);
+}
+
 /// Every ray the render traces is in its statistics, the last bounce's grid's too: each of its
 /// sites (one a pixel at this size) starts with a camera ray, which a render tracing its last
 /// bounce as paths does not make; the rest of the two renders' eye rays are the same.
