@@ -188,7 +188,6 @@ impl Record {
         let average_normal = (normal + self.normal) * 0.5;
         let along = offset.dot(average_normal);
         let tangent_offset = offset - self.normal * offset.dot(self.normal);
-        let distance = tangent_offset.length();
         let cos_normals = normal.dot(self.normal).clamp(-1.0, 1.0);
         if along < -0.05 * self.radii[0].min(self.radii[1]) || cos_normals <= 0.0 {
             return None;
@@ -198,15 +197,18 @@ impl Record {
         // of stopping there, so no step follows a record's horizon into the image.
         let unblocked = |weight: f32| {
             let horizon = self.horizon[self.sector_of(tangent_offset)];
-            let fade = ((horizon - distance) / (HORIZON_FADE * horizon)).min(1.0);
+            let fade = ((horizon - tangent_offset.length()) / (HORIZON_FADE * horizon)).min(1.0);
             (fade > 0.0).then_some(weight * fade)
         };
         match metric {
             Metric::Hessian => {
                 // The ellipse first, the angle (an arccosine) only for records inside it.
-                let du = tangent_offset.dot(self.u_axis) / self.radii[0];
-                let dv = tangent_offset.dot(self.v_axis()) / self.radii[1];
-                let t2 = du * du + dv * dv;
+                // What of the tangent offset is not along u is along v (u, v and the normal are
+                // orthonormal): no cross product for v, no square root.
+                let along_u = tangent_offset.dot(self.u_axis);
+                let along_v2 = (tangent_offset.length_squared() - along_u * along_u).max(0.0);
+                let t2 =
+                    along_u * along_u / (self.radii[0] * self.radii[0]) + along_v2 / (self.radii[1] * self.radii[1]);
                 if t2.is_nan() || t2 >= 1.0 {
                     return None;
                 }
