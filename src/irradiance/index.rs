@@ -202,16 +202,20 @@ impl RecordIndex {
     /// its records in a canonical order (by their bits), so every process that holds the same
     /// records sums them in the same order, whatever order they arrived in.
     pub fn frozen(&self) -> FrozenIndex {
+        FrozenIndex::of(self.base_cell, self.canonical())
+    }
+
+    /// Every record, in the canonical order (by their bits).
+    fn canonical(&self) -> Vec<Record> {
         let mut records = self.all();
         records.sort_by_key(Record::identity);
-        FrozenIndex::of(self.base_cell, records)
+        records
     }
 
     /// The records in `frozen`'s canonical order as they were placed, and the frozen index of
     /// them widened by `blend` (`Record::widened`), listed in that order.
     pub fn frozen_widened(&self, blend: f32) -> (Vec<Record>, FrozenIndex) {
-        let mut placed = self.all();
-        placed.sort_by_key(Record::identity);
+        let placed = self.canonical();
         let read = placed.iter().map(|r| r.widened(blend)).collect();
         (placed, FrozenIndex::of(self.base_cell, read))
     }
