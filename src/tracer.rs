@@ -15,6 +15,9 @@ pub struct Tracer {
     /// Distance rays start off a surface, relative to the scene's size.
     scale_epsilon: f32,
     shadows: Shadows,
+    /// Each world mesh's triangles' `SurfaceHit::uv_per_length` (empty without texture
+    /// coordinates), so that `plain_hit` needs no corner of the triangle.
+    uv_per_length: Vec<Box<[f32]>>,
     pub embree_version: String,
 }
 
@@ -62,6 +65,35 @@ pub struct SurfaceHit {
     /// The object (placed mesh: `WorldMesh::object`, `Placement::object`) hit.
     pub object: u32,
     pub prim_id: u32,
+}
+
+/// What a hit tells without its triangle's corners (`Tracer::plain_hit`): enough to read the
+/// last bounce's grid there, for surfaces whose light at that level is their albedo times the
+/// grid's (`Material::is_plain_diffuse`).
+#[derive(Clone, Copy, Debug)]
+pub struct PlainHit {
+    /// Along the ray, at Embree's distance (not from the corners by the barycentrics).
+    pub position: Vec3,
+    pub distance: f32,
+    /// The triangle's unit normal (Embree's, not the corners' shading normals), turned to the
+    /// side the ray came from.
+    pub facing_normal: Vec3,
+    /// The shading normal, turned to the side the ray came from, as `SurfaceHit::normal`.
+    pub normal: Vec3,
+    pub material: u32,
+}
+
+/// Texture-coordinate units per unit of length on the triangle of `corners` and `texcoords`
+/// (`SurfaceHit::uv_per_length`): the square root of the ratio of its areas in texture and in
+/// world space; 0 where that is not finite.
+fn uv_per_length(corners: [Vec3; 3], texcoords: [[f32; 2]; 3]) -> f32 {
+    let [pa, pb, pc] = corners;
+    let [ta, tb, tc] = texcoords;
+    let across = (pb - pa).cross(pc - pa);
+    let (e1, e2) = ([tb[0] - ta[0], tb[1] - ta[1]], [tc[0] - ta[0], tc[1] - ta[1]]);
+    let uv_area = (e1[0] * e2[1] - e1[1] * e2[0]).abs();
+    let ratio = (uv_area / across.length()).sqrt();
+    if ratio.is_finite() { ratio } else { 0.0 }
 }
 
 #[cfg(test)]
@@ -175,10 +207,23 @@ impl Tracer {
         } else {
             Shadows::Walk
         };
+        let uv_per_length = (scene.meshes.iter())
+            .map(|mesh| match &mesh.texcoords {
+                Some(t) => (mesh.indices.iter())
+                    .map(|&[a, b, c]| {
+                        let [a, b, c] = [a, b, c].map(|i| i as usize);
+                        let corners = [a, b, c].map(|i| Vec3::from(mesh.positions[i]));
+                        uv_per_length(corners, [t[a], t[b], t[c]])
+                    })
+                    .collect(),
+                None => Box::default(),
+            })
+            .collect();
         Ok(Tracer {
             embree: embree_scene,
             scale_epsilon: 1e-5 * scene.size(),
             shadows,
+            uv_per_length,
             embree_version: device.version(),
         })
     }
@@ -300,12 +345,9 @@ impl Tracer {
         let uv = triangle
             .texcoords
             .map(|[ta, tb, tc]| [w * ta[0] + u * tb[0] + v * tc[0], w * ta[1] + u * tb[1] + v * tc[1]]);
-        let uv_per_length = triangle.texcoords.map_or(0.0, |[ta, tb, tc]| {
-            let (e1, e2) = ([tb[0] - ta[0], tb[1] - ta[1]], [tc[0] - ta[0], tc[1] - ta[1]]);
-            let uv_area = (e1[0] * e2[1] - e1[1] * e2[0]).abs();
-            let ratio = (uv_area / across.length()).sqrt();
-            if ratio.is_finite() { ratio } else { 0.0 }
-        });
+        let uv_per_length = triangle
+            .texcoords
+            .map_or(0.0, |texcoords| uv_per_length([pa, pb, pc], texcoords));
         SurfaceHit {
             position,
             distance: hit.t,
@@ -318,6 +360,53 @@ impl Tracer {
             object,
             prim_id: hit.prim_id,
         }
+    }
+
+    /// What Embree's `hit` of the ray from `org` along unit `dir` tells without the triangle's
+    /// corners: the point along the ray, the triangle's normal from Embree, and the shading
+    /// normal. A hit's loads that miss the processor's caches are its corners', normals' and
+    /// texture coordinates' (`surface_hit`); this reads the normals alone, `plain_texcoords`
+    /// the texture coordinates. None through an instance (whose hits need the placement's
+    /// transform) or on a triangle without a normal.
+    pub fn plain_hit(&self, scene: &Scene, hit: &embree::RayHit, org: Vec3, dir: Vec3) -> Option<PlainHit> {
+        if hit.instance.is_some() {
+            return None;
+        }
+        let geometric = Vec3::from(hit.ng).try_normalize()?;
+        let facing_normal = if geometric.dot(dir) > 0.0 {
+            -geometric
+        } else {
+            geometric
+        };
+        let mesh = &scene.meshes[hit.geom_id as usize];
+        let mut normal = facing_normal;
+        if let Some(normals) = &mesh.normals {
+            let [a, b, c] = mesh.indices[hit.prim_id as usize].map(|i| normals[i as usize]);
+            let (u, v) = (hit.u, hit.v);
+            if let Some(n) = ((1.0 - u - v) * a + u * b + v * c).try_normalize() {
+                normal = if n.dot(facing_normal) < 0.0 { -n } else { n };
+            }
+        }
+        Some(PlainHit {
+            position: org + dir * hit.t,
+            distance: hit.t,
+            facing_normal,
+            normal,
+            material: mesh.material,
+        })
+    }
+
+    /// The texture coordinates at a hit `plain_hit` answered for, and the texture's units per
+    /// length there (`SurfaceHit::uv_per_length`), as `surface_hit` gives them; None on a mesh
+    /// without texture coordinates.
+    pub fn plain_texcoords(&self, scene: &Scene, hit: &embree::RayHit) -> Option<([f32; 2], f32)> {
+        let mesh = &scene.meshes[hit.geom_id as usize];
+        let t = mesh.texcoords.as_ref()?;
+        let [a, b, c] = mesh.indices[hit.prim_id as usize].map(|i| t[i as usize]);
+        let (u, v) = (hit.u, hit.v);
+        let w = 1.0 - u - v;
+        let uv = [w * a[0] + u * b[0] + v * c[0], w * a[1] + u * b[1] + v * c[1]];
+        Some((uv, self.uv_per_length[hit.geom_id as usize][hit.prim_id as usize]))
     }
 
     /// Fraction of light that gets from `org` along unit `dir` over `distance` (1 unobstructed,
@@ -457,5 +546,87 @@ impl Tracer {
     pub fn raw_intersect(&self, org: Vec3, dir: Vec3, coherence: Coherence) -> Option<embree::RayHit> {
         self.embree
             .intersect(org.to_array(), dir.to_array(), 0.0, f32::INFINITY, coherence)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sampling::Rng;
+    use crate::scene::WorldMesh;
+    use crate::scene::material::Material;
+
+    /// A folded sheet of triangles of uneven sizes, with texture coordinates stretched
+    /// unevenly over it and bent shading normals, for comparing what a hit reads.
+    fn folded_sheet() -> Scene {
+        let (columns, rows) = (7u32, 5u32);
+        let mut positions = Vec::new();
+        let mut texcoords = Vec::new();
+        let mut normals = Vec::new();
+        for j in 0..=rows {
+            for i in 0..=columns {
+                let (x, z) = ((i as f32).powf(1.3), j as f32 * 0.8);
+                positions.push([x, (x * 0.9).sin() + 0.3 * z, z]);
+                texcoords.push([0.37 * x + 0.05 * z, 0.21 * z * z]);
+                normals.push(Vec3::new(-0.4 * (x * 0.9).cos(), 1.0, -0.2).normalize());
+            }
+        }
+        let at = |i: u32, j: u32| j * (columns + 1) + i;
+        let indices = (0..rows)
+            .flat_map(|j| {
+                (0..columns).flat_map(move |i| {
+                    [
+                        [at(i, j), at(i + 1, j), at(i + 1, j + 1)],
+                        [at(i, j), at(i + 1, j + 1), at(i, j + 1)],
+                    ]
+                })
+            })
+            .collect();
+        let mesh = WorldMesh {
+            positions,
+            normals: Some(normals),
+            texcoords: Some(texcoords),
+            indices,
+            material: 0,
+            object: 0,
+        };
+        Scene::of_parts(vec![Material::gltf_default()], vec![mesh], Vec::new())
+    }
+
+    /// `plain_hit` and `plain_texcoords` read what `surface_hit` gives, but for the point,
+    /// taken along the ray (a rounding apart), and the normal, the triangle's own.
+    #[test]
+    fn a_plain_hit_reads_what_the_full_surface_point_gives() {
+        let scene = folded_sheet();
+        let tracer = Tracer::new(&scene).unwrap();
+        let mut rng = Rng::new(3, 9);
+        let mut hits = 0;
+        for _ in 0..2000 {
+            let org = Vec3::new(12.0 * rng.next_f32() - 1.0, 6.0, 5.0 * rng.next_f32() - 0.5);
+            let dir = Vec3::new(rng.next_f32() - 0.5, -1.0, rng.next_f32() - 0.5).normalize();
+            let Some(found) = tracer.nearest_hit(org, dir, Coherence::Incoherent) else {
+                continue;
+            };
+            hits += 1;
+            let full = tracer.surface_hit(&scene, &found, dir);
+            let plain = tracer.plain_hit(&scene, &found, org, dir).unwrap();
+            let (uv, uv_per_length) = tracer.plain_texcoords(&scene, &found).unwrap();
+            assert_eq!(Some(uv), full.uv);
+            assert_eq!(uv_per_length, full.uv_per_length);
+            assert!(uv_per_length > 0.0);
+            assert_eq!(plain.material, full.material);
+            assert_eq!(plain.distance, found.t);
+            let scale = 1.0 + full.position.abs().max_element();
+            assert!(
+                (plain.position - full.position).length() < 1e-5 * scale,
+                "{plain:?} {full:?}"
+            );
+            assert!(
+                (plain.facing_normal - full.facing_normal).length() < 1e-5,
+                "{plain:?} {full:?}"
+            );
+            assert!((plain.normal - full.normal).length() < 1e-6, "{plain:?} {full:?}");
+        }
+        assert!(hits > 800, "{hits} hits");
     }
 }

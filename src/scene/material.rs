@@ -140,6 +140,13 @@ impl Material {
         }
     }
 
+    /// Whether every point of it reflects only diffusely and lets no light through: what it
+    /// sends back is its diffuse albedo times the light it receives, all of it (the last
+    /// bounce's grid answers for such surfaces from the hit alone: `hemisphere_batch`).
+    pub fn is_plain_diffuse(&self) -> bool {
+        !self.traces_specular && !self.may_be_transparent()
+    }
+
     /// Largest diffuse albedo any point can have (for telling whether a scene has diffuse
     /// surfaces at all).
     pub fn max_diffuse(&self) -> f32 {

@@ -245,11 +245,17 @@ fn cell_spread(n: usize) -> f32 {
 /// it hits: its width across the ray (spread times distance), stretched by the slant to the
 /// side of a square of the ellipse's area, in texture units.
 fn texture_footprint(hit: &SurfaceHit, dir: Vec3, spread: f32) -> f32 {
-    if spread <= 0.0 || hit.uv_per_length <= 0.0 {
+    footprint_width(spread, hit.distance, hit.uv_per_length, dir.dot(hit.geometric_normal))
+}
+
+/// `texture_footprint` from its parts: the ray's spread, the distance it went, the texture's
+/// units per length there, and the cosine between the ray and the surface's normal.
+fn footprint_width(spread: f32, distance: f32, uv_per_length: f32, cosine: f32) -> f32 {
+    if spread <= 0.0 || uv_per_length <= 0.0 {
         return 0.0;
     }
-    let slant = dir.dot(hit.geometric_normal).abs().max(1e-3);
-    spread * hit.distance * hit.uv_per_length / slant.sqrt()
+    let slant = cosine.abs().max(1e-3);
+    spread * distance * uv_per_length / slant.sqrt()
 }
 
 impl PathState {
