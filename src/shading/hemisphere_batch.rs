@@ -13,8 +13,6 @@
 //!      grid's slots for its own point;
 //!   3. the grid's reads;
 //!   4. the shading, as `trace` shades a surface it found (`Integrator::light_from`).
-//! Before pass 2, the hits on plain diffuse surfaces the grid covers are answered from the hit
-//! alone (`plain_reads`), and only the others go on to passes 2-4.
 //!
 //! Measured there (farm-bench, 7 pairs): the render 0.95x the time; surface points 5.4 -> 3.2 %
 //! of it, grid reads 7.2 -> 3.1 %. The values are a ray-at-a-time record's, but the random
@@ -23,6 +21,9 @@
 //! differ from the unbatched order's by that noise; they still depend on nothing but the seed.
 //! Without a grid (`--ic-deep paths`) nothing is batched: every hit traces a path, whose loads
 //! are not the ones that dominate.
+//!
+//! Since then, between passes 1 and 2, the hits on plain diffuse surfaces the grid covers are
+//! answered from the hit alone (`plain_reads`), and only the others go on to passes 2-4.
 
 use super::{GridRead, Integrator, PathState, Work, footprint_width};
 use crate::image::components::Components;
@@ -351,50 +352,30 @@ mod tests {
     #[test]
     fn hits_on_plain_walls_the_grid_covers_are_answered_from_the_hit_alone() {
         for (opacity, plain) in [(1.0, true), (0.9, false)] {
-            let scene = closed_box(opacity);
-            let tracer = Tracer::new(&scene).unwrap();
-            let options = ShadingOptions {
-                ambient_bounces: 2,
-                last_bounce_grid: true,
-                ..ShadingOptions::default()
-            };
-            let cache = IrradianceCache::new(CacheSettings::new(0.1, 64, 0, 0, Metric::Hessian, 1.0));
-            cache.set_last_bounce(grid_over_the_walls(1.0 / 16.0));
-            let integrator = Integrator::new(&scene, &tracer, &options, Some(&cache));
-            let mut totals = RayCounts::default();
-            let mut counts = Work::new(&mut totals);
-            let hit = tracer
-                .intersect(&scene, Vec3::new(0.3, 0.5, 0.6), Vec3::NEG_Y, Coherence::Incoherent)
-                .unwrap();
-            let (tangent, bitangent) = basis(hit.normal);
-            let frame = Frame {
-                normal: hit.normal,
-                tangent,
-                bitangent,
-            };
-            let n = 12;
-            let next = PathState {
-                level: 1,
-                count_emission: false,
-                spread: super::super::cell_spread(n),
-                ..PathState::eye(false)
-            };
-            let cells: Vec<_> = (0..n).flat_map(|i| (0..n).map(move |j| (i, j))).collect();
-            let mut rays = integrator.trace_batch(&hit, frame, n, &cells, &mut Rng::new(7, 11), &mut counts);
-            let found = rays.iter().filter(|r| r.found.is_some()).count();
-            integrator.plain_reads(&mut rays, next);
-            let answered = rays.iter().filter(|r| r.plain.is_some()).count();
-            if plain {
-                assert_eq!(answered, n * n, "every ray meets a plain wall the grid covers");
-                assert!(rays.iter().all(|r| r.found.is_none()));
-            } else {
-                assert_eq!((answered, found), (0, n * n));
-            }
+            with_a_floor_record(&closed_box(opacity), |integrator, _, hit, frame, next| {
+                let n = 12;
+                let mut totals = RayCounts::default();
+                let mut counts = Work::new(&mut totals);
+                let cells: Vec<_> = (0..n).flat_map(|i| (0..n).map(move |j| (i, j))).collect();
+                let mut rays = integrator.trace_batch(hit, frame, n, &cells, &mut Rng::new(7, 11), &mut counts);
+                let found = rays.iter().filter(|r| r.found.is_some()).count();
+                integrator.plain_reads(&mut rays, next);
+                let answered = rays.iter().filter(|r| r.plain.is_some()).count();
+                if plain {
+                    assert_eq!(answered, n * n, "every ray meets a plain wall the grid covers");
+                    assert!(rays.iter().all(|r| r.found.is_none()));
+                } else {
+                    assert_eq!((answered, found), (0, n * n));
+                }
+            });
         }
     }
 
-    fn batch_against_rays_alone(scene: Scene) {
-        let tracer = Tracer::new(&scene).unwrap();
+    /// Hands `check` an integrator at -ab 2 over `scene` (the closed box) with the grid over
+    /// its walls, a record's hit on the floor, off centre, its frame, and the state of its
+    /// rays' paths for 12 x 12 cells.
+    fn with_a_floor_record(scene: &Scene, check: impl FnOnce(&Integrator<'_>, &Tracer, &SurfaceHit, Frame, PathState)) {
+        let tracer = Tracer::new(scene).unwrap();
         let options = ShadingOptions {
             ambient_bounces: 2,
             last_bounce_grid: true,
@@ -402,12 +383,9 @@ mod tests {
         };
         let cache = IrradianceCache::new(CacheSettings::new(0.1, 64, 0, 0, Metric::Hessian, 1.0));
         cache.set_last_bounce(grid_over_the_walls(1.0 / 16.0));
-        let integrator = Integrator::new(&scene, &tracer, &options, Some(&cache));
-        let mut totals = RayCounts::default();
-        let mut counts = Work::new(&mut totals);
-        // A record on the floor, off centre.
+        let integrator = Integrator::new(scene, &tracer, &options, Some(&cache));
         let hit = tracer
-            .intersect(&scene, Vec3::new(0.3, 0.5, 0.6), Vec3::NEG_Y, Coherence::Incoherent)
+            .intersect(scene, Vec3::new(0.3, 0.5, 0.6), Vec3::NEG_Y, Coherence::Incoherent)
             .unwrap();
         let (tangent, bitangent) = basis(hit.normal);
         let frame = Frame {
@@ -415,48 +393,56 @@ mod tests {
             tangent,
             bitangent,
         };
-        let n = 12;
         let next = PathState {
             level: 1,
             count_emission: false,
-            spread: super::super::cell_spread(n),
+            spread: super::super::cell_spread(12),
             ..PathState::eye(false)
         };
-        assert_eq!(integrator.last_bounce_level(), Some(next.level));
-        let cells: Vec<_> = (0..n).flat_map(|i| (0..n).map(move |j| (i, j))).collect();
-        let mut batch_rng = Rng::new(7, 11);
-        let batch = integrator.grid_level_samples(&hit, frame, n, &cells, next, &mut batch_rng, &mut counts);
-        let mut alone_rng = Rng::new(7, 11);
-        let floor = tracer.epsilon_at(hit.position);
-        for (&cell, got) in cells.iter().zip(&batch) {
-            let direction = cell_direction(frame, n, cell, (alone_rng.next_f32(), alone_rng.next_f32()));
-            let origin = tracer.spawn_point(&hit, direction);
-            let (light, distance) = integrator.trace(
-                origin,
-                direction,
-                next,
-                Coherence::Incoherent,
-                &mut alone_rng,
-                &mut counts,
-            );
-            assert_eq!(got.direction, direction);
-            assert_eq!(got.radiance, light.total(), "cell {cell:?}");
-            // A hit on a plain wall takes Embree's distance, the full point's distance from
-            // the corners: a rounding apart.
-            let expected = distance.max(floor);
-            assert!(
-                (got.distance - expected).abs() <= 1e-6 * expected,
-                "cell {cell:?}: {} against {expected}",
-                got.distance
-            );
-            assert!(
-                got.radiance.min_element() > 0.0,
-                "every ray meets a wall the grid covers"
-            );
-        }
-        // Both drew the same random numbers.
-        assert_eq!(batch_rng.next_f32(), alone_rng.next_f32());
-        // The batch counted its rays (the reference loop above counts none).
-        assert_eq!(counts.ambient, (n * n) as u64);
+        check(&integrator, &tracer, &hit, frame, next);
+    }
+
+    fn batch_against_rays_alone(scene: Scene) {
+        with_a_floor_record(&scene, |integrator, tracer, hit, frame, next| {
+            let n = 12;
+            let mut totals = RayCounts::default();
+            let mut counts = Work::new(&mut totals);
+            assert_eq!(integrator.last_bounce_level(), Some(next.level));
+            let cells: Vec<_> = (0..n).flat_map(|i| (0..n).map(move |j| (i, j))).collect();
+            let mut batch_rng = Rng::new(7, 11);
+            let batch = integrator.grid_level_samples(hit, frame, n, &cells, next, &mut batch_rng, &mut counts);
+            let mut alone_rng = Rng::new(7, 11);
+            let floor = tracer.epsilon_at(hit.position);
+            for (&cell, got) in cells.iter().zip(&batch) {
+                let direction = cell_direction(frame, n, cell, (alone_rng.next_f32(), alone_rng.next_f32()));
+                let origin = tracer.spawn_point(hit, direction);
+                let (light, distance) = integrator.trace(
+                    origin,
+                    direction,
+                    next,
+                    Coherence::Incoherent,
+                    &mut alone_rng,
+                    &mut counts,
+                );
+                assert_eq!(got.direction, direction);
+                assert_eq!(got.radiance, light.total(), "cell {cell:?}");
+                // A hit on a plain wall takes Embree's distance, the full point's distance from
+                // the corners: a rounding apart.
+                let expected = distance.max(floor);
+                assert!(
+                    (got.distance - expected).abs() <= 1e-6 * expected,
+                    "cell {cell:?}: {} against {expected}",
+                    got.distance
+                );
+                assert!(
+                    got.radiance.min_element() > 0.0,
+                    "every ray meets a wall the grid covers"
+                );
+            }
+            // Both drew the same random numbers.
+            assert_eq!(batch_rng.next_f32(), alone_rng.next_f32());
+            // The batch counted its rays (the reference loop above counts none).
+            assert_eq!(counts.ambient, (n * n) as u64);
+        });
     }
 }
