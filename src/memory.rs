@@ -11,7 +11,8 @@ use crate::scene::Scene;
 /// the shared libraries' pages are shared and reclaimable, so they are not counted).
 const RUNTIME_BYTES: u64 = 48 << 20;
 /// Embree's BVH per triangle (the conference room: about 100 bytes per triangle in the process's
-/// peak memory after the build; rounded up).
+/// peak memory after the build; rounded up), with the tracer's own 4 bytes a textured
+/// triangle (`Tracer`'s `uv_per_length`) inside the rounding.
 const BVH_BYTES_PER_TRIANGLE: u64 = 128;
 /// One pixel of a frame: four RGB float layers, the records plane and the data layers.
 const FRAME_BYTES_PER_PIXEL: u64 = 4 * 12 + 4 + 4 * crate::image::data::DATA_VALUES as u64;
