@@ -37,10 +37,13 @@ Peers are bench tools, installed with pip when missing; never dependencies of th
 """
 
 import argparse
+import contextlib
 import csv
+import io
 import json
 import math
 import os
+import re
 import subprocess
 import sys
 import time
@@ -474,6 +477,55 @@ def report_targets(name, rows):
             targets(name, rows, metric, clock, ("icrender",), ours_name="icrender+oidn", on_frontiers=True)
 
 
+# The README's names of the views, in its tables' order (`--readme-tables`).
+README_VIEWS = [("cornell", "default", "Cornell box, -ab 1"), ("cornell", "corner", "Cornell box, inside corner"),
+                ("conference", "default", "conference room, -ab 2"),
+                ("conference", "corner", "conference room, high corner"),
+                ("sibenik", "default", "Sibenik, -ab 2"), ("sibenik", "aisle", "Sibenik, aisle")]
+
+
+def read_rows(path):
+    """A view's rows as `measure` made them, from its CSV in docs/peers."""
+    with open(path) as f:
+        return [{k: (v if k in ("scene", "renderer", "settings", "seconds_all") else int(v) if k == "spp" else float(v))
+                 for k, v in r.items()} for r in csv.DictReader(f)]
+
+
+def verdict_cell(name, rows, metric, peer_names, ours_name):
+    """One cell of the README's tables: `targets`' verdict (CPU time over the cores), as
+    "below at every time, at least Rx" or "above from T s, Rx at T s"."""
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        targets(name, rows, metric, "core_seconds", peer_names, ours_name=ours_name)
+    match = re.search(r"worst at ([0-9.]+) s: .*\(peer error / ours ([0-9.]+)\)(; \S+ at or above it from ([0-9.]+) s)?",
+                      out.getvalue())
+    if not match:
+        return "not measured"
+    at, ratio, losing_from = float(match.group(1)), float(match.group(2)), match.group(4)
+    if ratio > 1:
+        return f"below at every time, at least {ratio:.2f}x"
+    return f"above from {float(losing_from):.2f} s, {ratio:.2f}x at {at:.2f} s"
+
+
+def readme_tables(plots):
+    """The README's two tables of verdicts (issue 18's against the peers, issue 21's of the
+    denoised curve), from the CSVs in `plots`, as Markdown."""
+    first = ["| scene, view | relMSE vs raw path tracers | relMSE vs every peer | 4x4 relMSE vs raw | "
+             "4x4 relMSE vs every peer |", "|---|---|---|---|---|"]
+    second = ["| scene, view | relMSE vs icrender raw | relMSE vs Cycles + OIDN | 4x4 relMSE vs icrender raw | "
+              "4x4 relMSE vs Cycles + OIDN |", "|---|---|---|---|---|"]
+    for name, view, title in README_VIEWS:
+        rows = read_rows(os.path.join(plots, f"peers-{label(name, view)}.csv"))
+        against_peers = [verdict_cell(label(name, view), rows, metric, peers, "icrender")
+                         for metric in ("relmse", "relmse_4x4")
+                         for peers in (("mitsuba", "cycles"), ("mitsuba", "cycles", "cycles+oidn"))]
+        denoised = [verdict_cell(label(name, view), rows, metric, peers, "icrender+oidn")
+                    for metric in ("relmse", "relmse_4x4") for peers in (("icrender",), ("cycles+oidn",))]
+        first.append(f"| {title} | " + " | ".join(against_peers) + " |")
+        second.append(f"| {title} | " + " | ".join(denoised) + " |")
+    return "\n".join(first) + "\n\n" + "\n".join(second)
+
+
 def plot(name, cfg, rows, path):
     plt = common.ensure_module("matplotlib.pyplot", "matplotlib")
     fig, axes = plt.subplots(2, 3, figsize=(17, 10))
@@ -523,6 +575,8 @@ def main():
                              "not timed, so they can be made ahead, on a busy machine")
     parser.add_argument("--report-only", action="store_true",
                         help="re-read docs/peers/peers-SCENE.csv, print the targets and redraw the plot")
+    parser.add_argument("--readme-tables", action="store_true",
+                        help="print the README's two tables of verdicts from docs/peers/*.csv (all six views) and stop")
     parser.add_argument("--no-denoise", action="store_true", help="no icrender+oidn curve (icrender --denoise)")
     parser.add_argument("--denoise-quality", default="fast", choices=("fast", "balanced", "high"),
                         help="icrender --denoise-quality for the icrender+oidn curve")
@@ -534,11 +588,12 @@ def main():
     args = parser.parse_args()
     jobs = [(name, view) for name in args.scenes.split(",") for view in SCENES[name]["views"]
             if args.views == "all" or view in args.views.split(",")]
+    if args.readme_tables:
+        print(readme_tables(args.plots))
+        return
     if args.report_only:
         for name, view in jobs:
-            with open(os.path.join(args.plots, f"peers-{label(name, view)}.csv")) as f:
-                rows = [{k: (v if k in ("scene", "renderer", "settings", "seconds_all") else int(v) if k == "spp" else float(v))
-                         for k, v in r.items()} for r in csv.DictReader(f)]
+            rows = read_rows(os.path.join(args.plots, f"peers-{label(name, view)}.csv"))
             plot(label(name, view), SCENES[name], rows, os.path.join(args.plots, f"peers-{label(name, view)}.png"))
             report_targets(label(name, view), rows)
         return
