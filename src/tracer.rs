@@ -16,7 +16,8 @@ pub struct Tracer {
     scale_epsilon: f32,
     shadows: Shadows,
     /// Each world mesh's triangles' `SurfaceHit::uv_per_length` (empty without texture
-    /// coordinates), so that `plain_hit` needs no corner of the triangle.
+    /// coordinates or a texture to read them), so that `plain_texcoords` needs no corner of
+    /// the triangle.
     uv_per_length: Vec<Box<[f32]>>,
     pub embree_version: String,
 }
@@ -94,6 +95,26 @@ fn uv_per_length(corners: [Vec3; 3], texcoords: [[f32; 2]; 3]) -> f32 {
     let uv_area = (e1[0] * e2[1] - e1[1] * e2[0]).abs();
     let ratio = (uv_area / across.length()).sqrt();
     if ratio.is_finite() { ratio } else { 0.0 }
+}
+
+/// The texture coordinates at barycentrics (u, v) of a triangle whose corners have `texcoords`.
+fn interpolated_uv([ta, tb, tc]: [[f32; 2]; 3], u: f32, v: f32) -> [f32; 2] {
+    let w = 1.0 - u - v;
+    [w * ta[0] + u * tb[0] + v * tc[0], w * ta[1] + u * tb[1] + v * tc[1]]
+}
+
+/// The shading normal at barycentrics (u, v) of a triangle whose corners have `normals`, kept
+/// on the side the ray sees (`facing_normal`'s); `facing_normal` itself where the corners have
+/// none or they cancel out.
+fn shading_normal(normals: Option<[Vec3; 3]>, u: f32, v: f32, facing_normal: Vec3) -> Vec3 {
+    let Some([na, nb, nc]) = normals else {
+        return facing_normal;
+    };
+    match ((1.0 - u - v) * na + u * nb + v * nc).try_normalize() {
+        Some(n) if n.dot(facing_normal) < 0.0 => -n,
+        Some(n) => n,
+        None => facing_normal,
+    }
 }
 
 #[cfg(test)]
@@ -207,16 +228,19 @@ impl Tracer {
         } else {
             Shadows::Walk
         };
+        // Only where a texture reads the coordinates (`plain_texcoords`' only callers).
+        let textured =
+            |mesh: &crate::scene::WorldMesh| scene.materials[mesh.material as usize].base_color_texture.is_some();
         let uv_per_length = (scene.meshes.iter())
             .map(|mesh| match &mesh.texcoords {
-                Some(t) => (mesh.indices.iter())
+                Some(t) if textured(mesh) => (mesh.indices.iter())
                     .map(|&[a, b, c]| {
                         let [a, b, c] = [a, b, c].map(|i| i as usize);
                         let corners = [a, b, c].map(|i| Vec3::from(mesh.positions[i]));
                         uv_per_length(corners, [t[a], t[b], t[c]])
                     })
                     .collect(),
-                None => Box::default(),
+                _ => Box::default(),
             })
             .collect();
         Ok(Tracer {
@@ -334,17 +358,8 @@ impl Tracer {
         let geometric_normal = across.try_normalize().unwrap_or(-dir);
         let toward_ray = if geometric_normal.dot(dir) > 0.0 { -1.0 } else { 1.0 };
         let facing_normal = geometric_normal * toward_ray;
-        let mut normal = facing_normal;
-        if let Some([na, nb, nc]) = triangle.normals {
-            let interpolated = w * na + u * nb + v * nc;
-            if let Some(n) = interpolated.try_normalize() {
-                // Keep the shading normal on the side the ray sees.
-                normal = if n.dot(facing_normal) < 0.0 { -n } else { n };
-            }
-        }
-        let uv = triangle
-            .texcoords
-            .map(|[ta, tb, tc]| [w * ta[0] + u * tb[0] + v * tc[0], w * ta[1] + u * tb[1] + v * tc[1]]);
+        let normal = shading_normal(triangle.normals, u, v, facing_normal);
+        let uv = triangle.texcoords.map(|texcoords| interpolated_uv(texcoords, u, v));
         let uv_per_length = triangle
             .texcoords
             .map_or(0.0, |texcoords| uv_per_length([pa, pb, pc], texcoords));
@@ -379,34 +394,26 @@ impl Tracer {
             geometric
         };
         let mesh = &scene.meshes[hit.geom_id as usize];
-        let mut normal = facing_normal;
-        if let Some(normals) = &mesh.normals {
-            let [a, b, c] = mesh.indices[hit.prim_id as usize].map(|i| normals[i as usize]);
-            let (u, v) = (hit.u, hit.v);
-            if let Some(n) = ((1.0 - u - v) * a + u * b + v * c).try_normalize() {
-                normal = if n.dot(facing_normal) < 0.0 { -n } else { n };
-            }
-        }
+        let corners = mesh.indices[hit.prim_id as usize];
+        let normals = mesh.normals.as_ref().map(|ns| corners.map(|i| ns[i as usize]));
         Some(PlainHit {
             position: org + dir * hit.t,
             distance: hit.t,
             facing_normal,
-            normal,
+            normal: shading_normal(normals, hit.u, hit.v, facing_normal),
             material: mesh.material,
         })
     }
 
     /// The texture coordinates at a hit `plain_hit` answered for, and the texture's units per
     /// length there (`SurfaceHit::uv_per_length`), as `surface_hit` gives them; None on a mesh
-    /// without texture coordinates.
+    /// without texture coordinates or whose material reads no texture.
     pub fn plain_texcoords(&self, scene: &Scene, hit: &embree::RayHit) -> Option<([f32; 2], f32)> {
         let mesh = &scene.meshes[hit.geom_id as usize];
         let t = mesh.texcoords.as_ref()?;
-        let [a, b, c] = mesh.indices[hit.prim_id as usize].map(|i| t[i as usize]);
-        let (u, v) = (hit.u, hit.v);
-        let w = 1.0 - u - v;
-        let uv = [w * a[0] + u * b[0] + v * c[0], w * a[1] + u * b[1] + v * c[1]];
-        Some((uv, self.uv_per_length[hit.geom_id as usize][hit.prim_id as usize]))
+        let uv_per_length = *self.uv_per_length[hit.geom_id as usize].get(hit.prim_id as usize)?;
+        let texcoords = mesh.indices[hit.prim_id as usize].map(|i| t[i as usize]);
+        Some((interpolated_uv(texcoords, hit.u, hit.v), uv_per_length))
     }
 
     /// Fraction of light that gets from `org` along unit `dir` over `distance` (1 unobstructed,
@@ -590,11 +597,14 @@ mod tests {
             material: 0,
             object: 0,
         };
-        Scene::of_parts(vec![Material::gltf_default()], vec![mesh], Vec::new())
+        // A material that reads a texture there (none is loaded: only the coordinates matter).
+        let mut material = Material::gltf_default();
+        material.base_color_texture = Some(0);
+        Scene::of_parts(vec![material], vec![mesh], Vec::new())
     }
 
-    /// `plain_hit` and `plain_texcoords` read what `surface_hit` gives, but for the point,
-    /// taken along the ray (a rounding apart), and the normal, the triangle's own.
+    /// `plain_hit` and `plain_texcoords` read what `surface_hit` gives, but for the point
+    /// and the facing normal, taken along the ray and from Embree (a rounding apart).
     #[test]
     fn a_plain_hit_reads_what_the_full_surface_point_gives() {
         let scene = folded_sheet();
@@ -628,5 +638,13 @@ mod tests {
             assert!((plain.normal - full.normal).length() < 1e-6, "{plain:?} {full:?}");
         }
         assert!(hits > 800, "{hits} hits");
+        // Where no texture reads the coordinates, none are read.
+        let mut untextured = folded_sheet();
+        untextured.materials[0].base_color_texture = None;
+        let tracer = Tracer::new(&untextured).unwrap();
+        let found = tracer
+            .nearest_hit(Vec3::new(3.0, 6.0, 2.0), Vec3::NEG_Y, Coherence::Incoherent)
+            .unwrap();
+        assert!(tracer.plain_texcoords(&untextured, &found).is_none());
     }
 }
