@@ -158,6 +158,17 @@ impl Material {
         probe.diffuse.max_element()
     }
 
+    /// The diffuse albedo of a plain diffuse material (`is_plain_diffuse`) where a hemisphere's
+    /// cell ray meets it, its texture read over the ray's footprint as `Texture::sample_cell`
+    /// reads it.
+    pub fn cell_albedo(&self, uv: Option<[f32; 2]>, width: f32, textures: &[Texture]) -> Vec3 {
+        let mut base = self.base_color;
+        if let (Some(t), Some(uv)) = (self.base_color_texture.and_then(|i| textures.get(i)), uv) {
+            base *= t.sample_cell(uv, width).truncate();
+        }
+        self.at_base(base).diffuse
+    }
+
     fn at_base(&self, base: Vec3) -> SurfacePoint {
         let m = self.metallic;
         let f0 = self.dielectric_f0;

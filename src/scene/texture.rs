@@ -9,7 +9,9 @@
 //! its footprint (`sample_footprint`): a mip pyramid of linear 2x2 means, each level half the
 //! size of the one above. The cell's radiance is the mean over the cell, so the averaged
 //! albedo is what the ray should see; it has less variance than one texel, and the coarse
-//! levels it reads are small enough to stay in the processor's caches.
+//! levels it reads are small enough to stay in the processor's caches. Where the last bounce's
+//! grid answers a cell ray from its hit alone, the hit reads one texel of that level
+//! (`sample_cell`) rather than four.
 
 use crate::sys::scene_io::GltfTexture;
 use glam::Vec4;
@@ -125,6 +127,16 @@ fn bilinear(
     top * (1.0 - fy) + bottom * fy
 }
 
+/// `x.log2().round()` for a finite or infinite `x` above 1, from the float's bits: its exponent,
+/// plus one where the mantissa is at least the square root of two (log2 of the mantissa at
+/// least a half). libm's log2f was 0.8 % of a render at -ab 2 (Sibenik), a call per footprint.
+fn round_log2(x: f32) -> u32 {
+    const SQRT2_MANTISSA: u32 = 0x3504F3;
+    let bits = x.to_bits();
+    let exponent = ((bits >> 23) & 0xff).saturating_sub(127);
+    exponent + u32::from(bits & 0x7f_ffff >= SQRT2_MANTISSA)
+}
+
 impl Texture {
     /// Bytes its texels take, the pyramid's included.
     pub fn memory_bytes(&self) -> u64 {
@@ -205,7 +217,7 @@ impl Texture {
         if texels.is_nan() || texels <= 1.0 {
             return 0;
         }
-        (texels.log2().round() as usize).min(self.mips.len())
+        (round_log2(texels) as usize).min(self.mips.len())
     }
 
     /// The texture averaged over a footprint `width` wide in texture coordinates: bilinear in
@@ -219,6 +231,28 @@ impl Texture {
                 bilinear(uv, (mip.width, mip.height), (self.wrap_s, self.wrap_t), |i| {
                     from_unit16(mip.texels[i])
                 })
+            }
+            level => from_unit16(self.mips[level - 1].texels[0]),
+        }
+    }
+
+    /// The texture averaged over a footprint `width` wide, as one of many random points of a
+    /// hemisphere's cell sees it: the texel under `uv` in the level whose texels are that wide
+    /// (the stored image's bilinear sample for a footprint of a texel or less). One texel
+    /// where `sample_footprint` blends four: over the cell's random point it is the box mean
+    /// of the footprint where the other is a tent, the same mean with a little more variance,
+    /// which the record's hundreds of rays average away. Not for camera rays, whose texels
+    /// would show as blocks. On Sibenik at -ab 2 the last bounce's reads took 1.5 % less time.
+    pub fn sample_cell(&self, uv: [f32; 2], width: f32) -> Vec4 {
+        match self.level_for(width) {
+            0 => self.sample(uv),
+            level if uv[0].is_finite() && uv[1].is_finite() => {
+                let mip = &self.mips[level - 1];
+                let (w, h) = (mip.width, mip.height);
+                let index = |t: f32, size: u32| (t * size as f32).floor().clamp(-1e15, 1e15) as i64;
+                let col = wrap(index(uv[0], w), w, self.wrap_s);
+                let row = wrap(index(uv[1], h), h, self.wrap_t);
+                from_unit16(mip.texels[row * w as usize + col])
             }
             level => from_unit16(self.mips[level - 1].texels[0]),
         }
@@ -239,6 +273,20 @@ mod tests {
         assert_eq!(t.sample([0.25, 0.5]).x, 0.0);
         assert!((t.sample([0.75, 0.5]).x - 1.0).abs() < 1e-6);
         assert!((t.sample([0.5, 0.5]).x - 0.5).abs() < 1e-6);
+    }
+
+    #[test]
+    fn rounded_log2_from_the_bits_matches_libm() {
+        let mut x = 1.0f32;
+        while x < 1e30 {
+            assert_eq!(round_log2(x), x.log2().round() as u32, "{x}");
+            x *= 1.0137;
+        }
+        // Either side of a rounding boundary (2^2.5 = 5.657) and of a power of two.
+        for x in [5.6568, 5.6570, 3.9999, 4.0, 4.0001, 1.4141, 1.4143] {
+            assert_eq!(round_log2(x), x.log2().round() as u32, "{x}");
+        }
+        assert!(round_log2(f32::INFINITY) >= 128);
     }
 
     #[test]
@@ -356,5 +404,44 @@ mod tests {
             assert!((t.sample_footprint(uv, 4.0 * texel).x - 0.5).abs() < 0.01, "{uv:?}");
         }
         assert!(t.sample_footprint([f32::NAN, 0.5], 1.0).is_finite());
+    }
+
+    #[test]
+    fn a_cell_ray_reads_the_box_mean_of_the_texels_under_its_footprint() {
+        // 16x16 texels of random bytes: at a footprint of 4 texels, the mean of the 4x4 block
+        // the point falls in (level 2 of the pyramid), wherever in the block and however the
+        // coordinates wrap.
+        let mut rng = crate::sampling::Rng::new(7, 0);
+        let rgba: Vec<u8> = (0..16 * 16 * 4).map(|_| (rng.next_u32() & 0xff) as u8).collect();
+        let t = Texture::from_gltf(&GltfTexture {
+            name: "noise".into(),
+            rgba,
+            width: 16,
+            height: 16,
+            wrap_s: 10497,
+            wrap_t: 10497,
+            srgb: true,
+        });
+        let texel = 1.0 / 16.0;
+        for _ in 0..200 {
+            let (u, v) = (rng.next_f32(), rng.next_f32());
+            let (bx, by) = ((u * 4.0) as usize, (v * 4.0) as usize);
+            let mut mean = Vec4::ZERO;
+            for y in 4 * by..4 * by + 4 {
+                for x in 4 * bx..4 * bx + 4 {
+                    mean += t.texel(y * 16 + x) / 16.0;
+                }
+            }
+            for shift in [0.0, 3.0, -2.0] {
+                let read = t.sample_cell([u + shift, v - shift], 4.0 * texel);
+                assert!(
+                    (read - mean).abs().max_element() < 1e-4,
+                    "{u} {v}: {read} against {mean}"
+                );
+            }
+        }
+        // A footprint of a texel or less: the stored image's bilinear sample.
+        assert_eq!(t.sample_cell([0.3, 0.6], 0.5 * texel), t.sample([0.3, 0.6]));
+        assert!(t.sample_cell([f32::NAN, 0.5], 1.0).is_finite());
     }
 }

@@ -145,8 +145,10 @@ impl Integrator<'_> {
     /// steps that the full point reads (passes 2-4). The light is what shading the full point
     /// gives (`light_from` at the grid's level: albedo times the grid's direct and indirect
     /// means, summed as `Components::total` sums them), for the point taken along the ray
-    /// (a rounding apart) and Embree's distance. A black surface sends back nothing, as
-    /// shading it gives. A hit the grid does not cover goes on to the full point.
+    /// (a rounding apart) and Embree's distance, but for the texture: one texel of the
+    /// footprint's level (`Texture::sample_cell`) where the full point blends four. A black
+    /// surface sends back nothing, as shading it gives. A hit the grid does not cover goes on
+    /// to the full point.
     ///
     /// Measured (6 Dec, `bench/ray_rate.py`'s render, one thread, alternating runs): Sibenik
     /// (textured) renders in 0.963x the time (4 pairs), the conference room (untextured)
@@ -155,7 +157,10 @@ impl Integrator<'_> {
     /// 4x4 relMSE over six seeds 1.194e-3 against 1.198e-3; the conference room's two views,
     /// errors within 0.3 % at every peers setting. The triangle's own normal for the shading one
     /// saved another 0.5 %; an albedo averaged over the triangle instead of the texture's
-    /// footprint saved 6 % more but raised the aisle view's 4x4 error 33 %.
+    /// footprint saved 6 % more but raised the aisle view's 4x4 error 33 %. The one texel (with
+    /// the footprint's level found from the float's bits) took 0.968x the time (4 pairs) for
+    /// errors within their noise (Sibenik, six seeds at the peers bench's fastest setting: nave
+    /// relMSE 0.99x, 4x4 0.96x; aisle 0.97x and 0.95x).
     fn plain_reads(&self, rays: &mut [BatchRay], next: PathState) {
         // A record's rays do not count the emission they meet (direct lighting has it), which
         // is what lets a hit's light be its albedo times the grid's.
@@ -188,7 +193,7 @@ impl Integrator<'_> {
                     },
                     None => (None, 0.0),
                 };
-                let albedo = material.over(uv, width, &scene.textures).diffuse;
+                let albedo = material.cell_albedo(uv, width, &scene.textures);
                 grid.prefetch(hit.position, hit.normal);
                 Some((albedo, hit.position, hit.normal, hit.distance))
             })
