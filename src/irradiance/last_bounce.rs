@@ -56,9 +56,21 @@ pub struct CellKey(u64);
 /// large), each well-sampled cell's mean. A lookup reads the finest cell that has one: where
 /// the sites are dense (the surfaces near the camera) the cells are small, where they are
 /// sparse the light is averaged over more space rather than traced again.
+///
+/// Most lookups land in a finest cell some sample fell in, but one with too few samples for a
+/// mean of its own (on Sibenik at -ab 2, 37 % of lookups were answered a level up, 85 % of
+/// those from such a cell): each then paid a failed probe per level before the one that
+/// answered. So every finest cell a sample fell in holds its answer, resolved when the grid is
+/// built (`resolved`), and only a lookup in a cell no sample fell in tries the coarser levels
+/// in turn: the same answers, four lookups in five one probe.
 #[derive(Clone, Debug, Default)]
 pub struct LastBounceGrid {
     cell: f32,
+    /// Each finest cell some sample fell in, with the mean of the finest cell around it that
+    /// has one (if any has).
+    resolved: CellTable,
+    /// Each level's cells with a mean, the finest first (the finest is only counted: every one
+    /// of its cells is in `resolved`).
     levels: Vec<CellTable>,
     samples: u64,
 }
@@ -89,6 +101,8 @@ impl LastBounceGrid {
     pub fn from_samples(cell: f32, samples: impl IntoIterator<Item = GridSample>) -> LastBounceGrid {
         type Sums = HashMap<CellKey, (DVec3, DVec3, u32), BuildHasherDefault<KeyHasher>>;
         let mut sums: Vec<Sums> = (0..LEVELS).map(|_| Sums::default()).collect();
+        // Each finest cell's keys at the coarser levels, as the first sample in it gave them.
+        let mut ancestors: HashMap<CellKey, [CellKey; LEVELS], BuildHasherDefault<KeyHasher>> = HashMap::default();
         let mut count = 0;
         for sample in samples {
             let Received { direct, indirect } = sample.received;
@@ -96,6 +110,9 @@ impl LastBounceGrid {
                 continue;
             }
             let place = Place::of(cell, sample.position, sample.normal);
+            ancestors
+                .entry(place.key(0))
+                .or_insert_with(|| std::array::from_fn(|level| place.key(level)));
             for (level, sums) in sums.iter_mut().enumerate() {
                 let key = place.key(level);
                 let entry = sums.entry(key).or_insert((DVec3::ZERO, DVec3::ZERO, 0));
@@ -105,7 +122,7 @@ impl LastBounceGrid {
             }
             count += 1;
         }
-        let levels = sums
+        let levels: Vec<CellTable> = sums
             .into_iter()
             .map(|sums| {
                 sums.into_iter()
@@ -122,8 +139,16 @@ impl LastBounceGrid {
             })
             .map(|cells| CellTable::new(&cells))
             .collect();
+        let resolved: Vec<(CellKey, Received)> = ancestors
+            .iter()
+            .filter_map(|(&key, chain)| {
+                let received = levels.iter().zip(chain).find_map(|(table, &key)| table.get(key))?;
+                Some((key, received))
+            })
+            .collect();
         LastBounceGrid {
             cell,
+            resolved: CellTable::new(&resolved),
             levels,
             samples: count,
         }
@@ -138,19 +163,26 @@ impl LastBounceGrid {
     /// enough, if any.
     pub fn lookup(&self, p: Vec3, normal: Vec3) -> Option<Received> {
         let place = Place::of(self.cell, p, normal);
+        if let Some(received) = self.resolved.get(place.key(0)) {
+            return Some(received);
+        }
+        // A finest cell no sample fell in (or none around it has a mean): the coarser levels.
         self.levels
             .iter()
             .enumerate()
+            .skip(1)
             .find_map(|(level, means)| means.get(place.key(level)))
     }
 
-    /// Starts loading what `lookup(p, normal)` will read at the two finest levels (where most
-    /// lookups end), so a batch of hits can have the grid's cache misses under way together.
+    /// Starts loading what `lookup(p, normal)` will read first (the resolved finest cell) and
+    /// next (the level above), so a batch of hits can have the grid's cache misses under way
+    /// together.
     #[inline]
     pub fn prefetch(&self, p: Vec3, normal: Vec3) {
         let place = Place::of(self.cell, p, normal);
-        for (level, means) in self.levels.iter().enumerate().take(2) {
-            means.prefetch(place.key(level));
+        self.resolved.prefetch(place.key(0));
+        if let Some(above) = self.levels.get(1) {
+            above.prefetch(place.key(1));
         }
     }
 
@@ -261,6 +293,9 @@ impl CellTable {
 
     #[inline]
     fn get(&self, key: CellKey) -> Option<Received> {
+        if self.slots.is_empty() {
+            return None;
+        }
         let mut i = self.home(key);
         loop {
             let slot = &self.slots[i];
@@ -276,7 +311,10 @@ impl CellTable {
 
     #[inline]
     fn prefetch(&self, key: CellKey) {
-        crate::sys::prefetch::prefetch(&self.slots[self.home(key)]);
+        let Some(slot) = self.slots.get(self.home(key)) else {
+            return;
+        };
+        crate::sys::prefetch::prefetch(slot);
     }
 }
 
@@ -363,6 +401,60 @@ mod tests {
             Some(Vec3::splat(0.5))
         );
         assert_eq!(grid.cells(), LEVELS);
+    }
+
+    #[test]
+    fn the_resolved_finest_cells_answer_as_the_levels_searched_in_turn() {
+        // Samples clustered unevenly on the six sides of a few walls, so that cells of every
+        // level have a mean or lack one; lookups everywhere, in cells samples fell in and not.
+        let mut rng = crate::sampling::Rng::new(3, 1);
+        let normals = [Vec3::X, -Vec3::X, Vec3::Y, -Vec3::Y, Vec3::Z, -Vec3::Z];
+        let mut samples = Vec::new();
+        for cluster in 0..60 {
+            let centre = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 8.0;
+            let spread = [0.05, 0.5, 2.0][cluster % 3];
+            let normal = normals[cluster % 6];
+            for _ in 0..(1 + cluster % 20) {
+                let offset = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * spread;
+                samples.push(at(centre + offset, normal, rng.next_f32()));
+            }
+        }
+        let grid = LastBounceGrid::from_samples(0.25, samples.iter().copied());
+        let by_levels = |p: Vec3, n: Vec3| {
+            let place = Place::of(grid.cell, p, n);
+            (grid.levels.iter().enumerate()).find_map(|(level, means)| means.get(place.key(level)))
+        };
+        let mut answered = [0; 2];
+        for k in 0..20_000 {
+            let (p, n) = if k % 2 == 0 {
+                let s = &samples[k / 2 % samples.len()];
+                (
+                    s.position + Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 0.3,
+                    s.normal,
+                )
+            } else {
+                (
+                    Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 9.0,
+                    normals[k % 6],
+                )
+            };
+            let found = grid.lookup(p, n);
+            assert_eq!(found, by_levels(p, n), "{p} {n}");
+            answered[found.is_some() as usize] += 1;
+        }
+        assert!(answered[0] > 1000 && answered[1] > 1000, "{answered:?}");
+        // A cell some sample fell in answers in one probe, whichever level its answer is from.
+        let mut coarser = 0;
+        for sample in &samples {
+            let place = Place::of(grid.cell, sample.position, sample.normal);
+            let answer = by_levels(sample.position, sample.normal);
+            assert_eq!(grid.resolved.get(place.key(0)), answer);
+            coarser += (answer.is_some() && grid.levels[0].get(place.key(0)).is_none()) as usize;
+        }
+        assert!(
+            coarser > 50,
+            "only {coarser} samples' cells answered from a coarser level"
+        );
     }
 
     #[test]
