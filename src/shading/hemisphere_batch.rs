@@ -48,8 +48,9 @@ struct BatchRay {
     traced: bool,
     found: Option<embree::RayHit>,
     /// The light of a hit on a plain diffuse surface the grid answered for (`plain_reads`),
-    /// and the distance to it; the hit (`found`) is then taken, so no later pass reads it.
-    plain: Option<(Components, f32)>,
+    /// summed (`Components::total`), and the distance to it; the hit (`found`) is then taken,
+    /// so no later pass reads it.
+    plain: Option<(Vec3, f32)>,
 }
 
 impl Integrator<'_> {
@@ -77,7 +78,7 @@ impl Integrator<'_> {
             .zip(reads)
             .map(|((ray, surface), read)| {
                 let (light, distance) = match (ray.plain, surface) {
-                    (Some((c, distance)), _) => (c.total(), distance.max(floor)),
+                    (Some((light, distance)), _) => (light, distance.max(floor)),
                     (None, Some(found)) if ray.traced => {
                         let (hit, surface) = (&found.0, &found.1);
                         let grid = GridRead::Read(read);
@@ -215,7 +216,7 @@ impl Integrator<'_> {
                 continue;
             };
             ray.found = None;
-            ray.plain = Some((light, distance));
+            ray.plain = Some((light.total(), distance));
         }
     }
 
