@@ -97,6 +97,11 @@ fn uv_per_length(corners: [Vec3; 3], texcoords: [[f32; 2]; 3]) -> f32 {
     if ratio.is_finite() { ratio } else { 0.0 }
 }
 
+/// A triangle's unit `normal` turned to the side a ray along `dir` comes from.
+fn facing(normal: Vec3, dir: Vec3) -> Vec3 {
+    if normal.dot(dir) > 0.0 { -normal } else { normal }
+}
+
 /// The texture coordinates at barycentrics (u, v) of a triangle whose corners have `texcoords`.
 fn interpolated_uv([ta, tb, tc]: [[f32; 2]; 3], u: f32, v: f32) -> [f32; 2] {
     let w = 1.0 - u - v;
@@ -356,8 +361,7 @@ impl Tracer {
         let position = w * pa + u * pb + v * pc;
         let across = (pb - pa).cross(pc - pa);
         let geometric_normal = across.try_normalize().unwrap_or(-dir);
-        let toward_ray = if geometric_normal.dot(dir) > 0.0 { -1.0 } else { 1.0 };
-        let facing_normal = geometric_normal * toward_ray;
+        let facing_normal = facing(geometric_normal, dir);
         let normal = shading_normal(triangle.normals, u, v, facing_normal);
         let uv = triangle.texcoords.map(|texcoords| interpolated_uv(texcoords, u, v));
         let uv_per_length = triangle
@@ -387,12 +391,7 @@ impl Tracer {
         if hit.instance.is_some() {
             return None;
         }
-        let geometric = Vec3::from(hit.ng).try_normalize()?;
-        let facing_normal = if geometric.dot(dir) > 0.0 {
-            -geometric
-        } else {
-            geometric
-        };
+        let facing_normal = facing(Vec3::from(hit.ng).try_normalize()?, dir);
         let mesh = &scene.meshes[hit.geom_id as usize];
         let corners = mesh.indices[hit.prim_id as usize];
         let normals = mesh.normals.as_ref().map(|ns| corners.map(|i| ns[i as usize]));

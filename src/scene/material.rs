@@ -163,10 +163,15 @@ impl Material {
     /// reads it.
     pub fn cell_albedo(&self, uv: Option<[f32; 2]>, width: f32, textures: &[Texture]) -> Vec3 {
         let mut base = self.base_color;
-        if let (Some(t), Some(uv)) = (self.base_color_texture.and_then(|i| textures.get(i)), uv) {
+        if let (Some(t), Some(uv)) = (self.texture(textures), uv) {
             base *= t.sample_cell(uv, width).truncate();
         }
         self.at_base(base).diffuse
+    }
+
+    /// Its base-colour texture among the scene's `textures`, if it has one that loaded.
+    fn texture<'t>(&self, textures: &'t [Texture]) -> Option<&'t Texture> {
+        self.base_color_texture.and_then(|i| textures.get(i))
     }
 
     fn at_base(&self, base: Vec3) -> SurfacePoint {
@@ -198,7 +203,7 @@ impl Material {
     pub fn over(&self, uv: Option<[f32; 2]>, width: f32, textures: &[Texture]) -> SurfacePoint {
         let mut base = self.base_color;
         let mut alpha = self.base_alpha;
-        if let (Some(t), Some(uv)) = (self.base_color_texture.and_then(|i| textures.get(i)), uv) {
+        if let (Some(t), Some(uv)) = (self.texture(textures), uv) {
             let texel = t.sample_footprint(uv, width);
             base *= texel.truncate();
             alpha *= if self.alpha_mode == AlphaMode::Mask && width > 0.0 {

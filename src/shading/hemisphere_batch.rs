@@ -180,20 +180,15 @@ impl Integrator<'_> {
                 if !material.is_plain_diffuse() {
                     return None;
                 }
-                // Texture coordinates only where a texture reads them.
-                let (uv, width) = match material.base_color_texture {
-                    Some(_) => match self.tracer.plain_texcoords(scene, found) {
-                        Some((uv, uv_per_length)) => {
-                            let cosine = ray.direction.dot(hit.facing_normal);
-                            (
-                                Some(uv),
-                                footprint_width(next.spread, hit.distance, uv_per_length, cosine),
-                            )
-                        }
-                        None => (None, 0.0),
-                    },
-                    None => (None, 0.0),
-                };
+                // Texture coordinates only where a texture reads them (`plain_texcoords`).
+                let texcoords = self.tracer.plain_texcoords(scene, found);
+                let (uv, width) = texcoords.map_or((None, 0.0), |(uv, uv_per_length)| {
+                    let cosine = ray.direction.dot(hit.facing_normal);
+                    (
+                        Some(uv),
+                        footprint_width(next.spread, hit.distance, uv_per_length, cosine),
+                    )
+                });
                 let albedo = material.cell_albedo(uv, width, &scene.textures);
                 grid.prefetch(hit.position, hit.normal);
                 Some((albedo, hit.position, hit.normal, hit.distance))
