@@ -43,7 +43,6 @@ import io
 import json
 import math
 import os
-import re
 import subprocess
 import sys
 import time
@@ -421,7 +420,8 @@ def frontier(rows, metric, clock):
 
 def targets(name, rows, metric, clock, peer_names=("mitsuba", "cycles", "cycles+oidn"), horizon=30.0,
             ours_name="icrender", on_frontiers=False):
-    """Prints the target for one scene, error measure and clock against the best of
+    """Prints (and returns as (worst time, ratio there, first time at or above it or None))
+    the target for one scene, error measure and clock against the best of
     `peer_names`: icrender's curve below the best peer's at every time from icrender's fastest
     run to `horizon` seconds (aim: 2x below). At each time where icrender's curve and some
     peer's were both measured, the best peer's error over icrender's (log-log interpolated);
@@ -455,6 +455,7 @@ def targets(name, rows, metric, clock, peer_names=("mitsuba", "cycles", "cycles+
     log(f"{tag}: 'below the best peer at every time' ({span}): {verdict} ({aim}); worst at {t:.2f} s: {ours_name} "
         f"{e_ours:.2e}, best peer {e_peer:.2e} (peer error / ours {ratio:.2f})"
         + (f"; {ours_name} at or above it from {losses[0]:.2f} s" if losses else ""))
+    return t, ratio, (losses[0] if losses else None)
 
 
 def report_targets(name, rows):
@@ -494,17 +495,15 @@ def read_rows(path):
 def verdict_cell(name, rows, metric, peer_names, ours_name):
     """One cell of the README's tables: `targets`' verdict (CPU time over the cores), as
     "below at every time, at least Rx" or "above from T s, Rx at T s"."""
-    out = io.StringIO()
-    with contextlib.redirect_stdout(out):
-        targets(name, rows, metric, "core_seconds", peer_names, ours_name=ours_name)
-    match = re.search(r"worst at ([0-9.]+) s: .*\(peer error / ours ([0-9.]+)\)(; \S+ at or above it from ([0-9.]+) s)?",
-                      out.getvalue())
-    if not match:
+    # `targets` prints its line as well: not part of the tables.
+    with contextlib.redirect_stdout(io.StringIO()):
+        verdict = targets(name, rows, metric, "core_seconds", peer_names, ours_name=ours_name)
+    if verdict is None:
         return "not measured"
-    at, ratio, losing_from = float(match.group(1)), float(match.group(2)), match.group(4)
+    at, ratio, losing_from = verdict
     if ratio > 1:
         return f"below at every time, at least {ratio:.2f}x"
-    return f"above from {float(losing_from):.2f} s, {ratio:.2f}x at {at:.2f} s"
+    return f"above from {losing_from:.2f} s, {ratio:.2f}x at {at:.2f} s"
 
 
 def readme_tables(plots):
