@@ -200,28 +200,34 @@ fn a_references_statistics_list_each_thread_once() {
 }
 
 /// Every ray the render traces is in its statistics, the last bounce's grid's too: each of its
-/// sites (one a pixel at this size) starts with a camera ray, which a render tracing its last
-/// bounce as paths does not make; the rest of the two renders' eye rays are the same.
+/// sites (one a pixel at this size, two from -ad 256 on: `shading::last_bounce::sites_per_pixel`)
+/// starts with a camera ray, which a render tracing its last bounce as paths does not make; the
+/// rest of the two renders' eye rays are the same.
 #[test]
 fn the_last_bounce_grids_rays_are_counted() {
     let dir = tempfile::tempdir().unwrap();
     let scene = std::path::PathBuf::from(default_scene());
-    let primary = |deep: &str| {
-        let args = ["-x", "40", "-y", "30", "-ab", "2", "-ad", "16", "--ic-deep", deep];
-        let (_, stats) = render_to(dir.path(), &scene, deep, &args);
-        (
-            stats["rays"]["primary"].as_u64().unwrap(),
-            stats["last_bounce_samples"].as_u64().unwrap(),
-        )
-    };
-    let (with_grid, samples) = primary("grid");
-    let (with_paths, none) = primary("paths");
-    assert!(samples > 0 && none == 0, "grid samples {samples}, paths {none}");
-    assert_eq!(
-        with_grid,
-        with_paths + 40 * 30,
-        "primary rays: grid {with_grid}, paths {with_paths}"
-    );
+    for (divisions, sites) in [("16", 1), ("256", 2)] {
+        let primary = |deep: &str| {
+            let args = ["-x", "40", "-y", "30", "-ab", "2", "-ad", divisions, "--ic-deep", deep];
+            let (_, stats) = render_to(dir.path(), &scene, &format!("{deep}-{divisions}"), &args);
+            (
+                stats["rays"]["primary"].as_u64().unwrap(),
+                stats["last_bounce_samples"].as_u64().unwrap(),
+            )
+        };
+        let (with_grid, samples) = primary("grid");
+        let (with_paths, none) = primary("paths");
+        assert!(
+            samples > 0 && none == 0,
+            "-ad {divisions}: grid samples {samples}, paths {none}"
+        );
+        assert_eq!(
+            with_grid,
+            with_paths + sites * 40 * 30,
+            "-ad {divisions}: primary rays: grid {with_grid}, paths {with_paths}"
+        );
+    }
 }
 
 #[test]

@@ -15,10 +15,29 @@ use crate::sys::embree::Coherence;
 use crate::tracer::SurfaceHit;
 use glam::Vec3;
 
-/// Sites started per pixel, and samples of the last bounce's light taken at each. Measured
-/// on the conference room (-ab 2, 320x240): see `irradiance::last_bounce`.
-pub const SITES_PER_PIXEL: u32 = 1;
+/// Samples of the last bounce's light taken at each site. Measured on the conference room
+/// (-ab 2, 320x240): see `irradiance::last_bounce`.
 pub const SAMPLES_PER_SITE: u32 = 2;
+
+/// -ad from which every pixel starts two sites instead of one (`sites_per_pixel`).
+pub const TWO_SITES_FROM_DIVISIONS: u32 = 256;
+
+/// Sites started per pixel for records of `divisions` (-ad) hemisphere samples. A cell's mean
+/// is read by every record's ray that meets the cell, so its noise is shared by all of them
+/// where a record's own noise falls with its rays: at high -ad the grid's noise is what is
+/// left. Measured (6 Dec, the peers bench's references, four seeds, CPU time; Sibenik nave and
+/// aisle, conference room default and high corner) two sites a pixel against one: at
+/// `-aa 0.15 -ad 256 --spp 16` 4x4 relMSE 0.96x, 0.81x, 0.92x, 0.92x for 0.99-1.04x the time,
+/// at `-aa 0.1 -ad 512 --spp 16` 0.89x, 0.85x, 0.90x, 0.93x for 0.99-1.02x (fewer hits miss a
+/// cell with a mean and trace their path); four sites lowered the error a little more at 256
+/// and 512 but for 1.03-1.13x the time. Below: at -ad 128 (two seeds) 0.90x and 0.87x for
+/// 1.07x and 1.13x the time, at -ad 32 and 64 the aisle's error 1.2x for 1.08-1.2x the time
+/// (more finest cells reach `MIN_SAMPLES` and answer with a noisier mean than the coarser cell
+/// did). Two sites of one sample each (as many samples as one site of two) gained about a third
+/// as much: it is more samples, spread apart, that count.
+pub fn sites_per_pixel(divisions: u32) -> u32 {
+    if divisions >= TWO_SITES_FROM_DIVISIONS { 2 } else { 1 }
+}
 
 /// The direct light is sampled as a white diffuse surface would reflect it (irradiance over pi,
 /// as the indirect part): the hit that reads the mean applies its own albedo.
@@ -65,7 +84,7 @@ impl Integrator<'_> {
         };
         let pixel = y as u64 * camera.width as u64 + x as u64;
         let mut rng = Rng::new(0, SITE_STREAM + pixel);
-        for _ in 0..SITES_PER_PIXEL {
+        for _ in 0..sites_per_pixel(self.options.ambient_divisions) {
             let (origin, dir) = camera.ray(x as f32 + rng.next_f32(), y as f32 + rng.next_f32());
             // The site's own rays count as the render's: a camera ray, then a path's segments.
             counts.primary += 1;
