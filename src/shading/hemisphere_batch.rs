@@ -306,6 +306,74 @@ mod tests {
         Scene::of_parts(vec![white], meshes, Vec::new())
     }
 
+    /// Off the eye path a partly transparent surface passes its ray on by Russian roulette
+    /// (`Integrator::transmit`): each ray brings all the light behind or none, and their mean
+    /// is what the eye path's ray brings every time, jT times that light. A black pane of
+    /// opacity 0.7 in front of an emitter, a ray straight through both.
+    #[test]
+    fn the_roulette_at_a_partly_transparent_surface_keeps_the_mean() {
+        let quad = |z: f32, material: u32| WorldMesh {
+            positions: vec![[-1.0, -1.0, z], [1.0, -1.0, z], [1.0, 1.0, z], [-1.0, 1.0, z]],
+            normals: None,
+            texcoords: None,
+            indices: vec![[0, 2, 1], [0, 3, 2]],
+            material,
+            object: material,
+        };
+        let mut pane = Material::gltf_default_description();
+        pane.base_color = [0.0, 0.0, 0.0, 0.7];
+        pane.alpha_mode = crate::sys::scene_io::AlphaMode::Blend;
+        let mut lamp = Material::gltf_default_description();
+        lamp.base_color = [0.0, 0.0, 0.0, 1.0];
+        lamp.emissive = [2.0, 2.0, 2.0];
+        let materials = [pane, lamp]
+            .iter()
+            .map(|d| {
+                let mut m = Material::from_gltf(d, crate::scene::material::DEFAULT_SPECULAR_THRESHOLD);
+                m.make_lambertian();
+                m
+            })
+            .collect();
+        let scene = Scene::of_parts(materials, vec![quad(1.0, 0), quad(2.0, 1)], Vec::new());
+        let tracer = Tracer::new(&scene).unwrap();
+        let options = ShadingOptions::default();
+        let integrator = Integrator::new(&scene, &tracer, &options, None);
+        let mut totals = RayCounts::default();
+        let mut counts = Work::new(&mut totals);
+        let ray = |level: u32, rng: &mut Rng, counts: &mut Work<'_>| {
+            let state = PathState {
+                level,
+                count_emission: true,
+                ..PathState::eye(false)
+            };
+            let (light, _) = integrator.trace(Vec3::ZERO, Vec3::Z, state, Coherence::Incoherent, rng, counts);
+            light.total().x
+        };
+        let jt = 1.0 - 0.7;
+        let eye = ray(0, &mut Rng::new(1, 1), &mut counts);
+        assert!((eye - jt * 2.0).abs() < 1e-5, "the eye path's ray: {eye}");
+        let mut rng = Rng::new(1, 2);
+        let n = 20_000;
+        let rays: Vec<f32> = (0..n).map(|_| ray(1, &mut rng, &mut counts)).collect();
+        assert!(
+            rays.iter().all(|&l| l == 0.0 || (l - 2.0).abs() < 1e-5),
+            "all the light or none"
+        );
+        let mean = rays.iter().sum::<f32>() / n as f32;
+        // Three standard deviations of the mean of n such rays: 2 sqrt(jt (1 - jt) / n).
+        let tolerance = 3.0 * 2.0 * (jt * (1.0 - jt) / n as f32).sqrt();
+        assert!(
+            (mean - eye).abs() < tolerance,
+            "mean {mean} against {eye} (tolerance {tolerance})"
+        );
+        // Most rays stop at the pane: the roulette's point.
+        assert!(
+            counts.specular < n as u64 / 2,
+            "{} of {n} rays went on",
+            counts.specular
+        );
+    }
+
     /// A grid over every wall of the box, each cell sampled enough, its light varying with
     /// the position (so that reading another cell than the hit's would show).
     fn grid_over_the_walls(cell: f32) -> LastBounceGrid {
@@ -412,10 +480,15 @@ mod tests {
             let cells: Vec<_> = (0..n).flat_map(|i| (0..n).map(move |j| (i, j))).collect();
             let mut batch_rng = Rng::new(7, 11);
             let batch = integrator.grid_level_samples(hit, frame, n, &cells, next, &mut batch_rng, &mut counts);
+            // The batch draws every cell's direction first, then what each hit's shading draws
+            // (the roulette at a partly transparent wall), cell by cell: so does the reference.
             let mut alone_rng = Rng::new(7, 11);
+            let directions: Vec<Vec3> = cells
+                .iter()
+                .map(|&cell| cell_direction(frame, n, cell, (alone_rng.next_f32(), alone_rng.next_f32())))
+                .collect();
             let floor = tracer.epsilon_at(hit.position);
-            for (&cell, got) in cells.iter().zip(&batch) {
-                let direction = cell_direction(frame, n, cell, (alone_rng.next_f32(), alone_rng.next_f32()));
+            for ((&cell, got), &direction) in cells.iter().zip(&batch).zip(&directions) {
                 let origin = tracer.spawn_point(hit, direction);
                 let (light, distance) = integrator.trace(
                     origin,
