@@ -256,7 +256,7 @@ fn last_bounce_grid(pass: Pass<'_, '_>, stats: &mut [ThreadStats]) -> LastBounce
             }
             let mut row = Vec::new();
             for x in (0..camera.width).step_by(stride as usize) {
-                integrator.last_bounce_samples(camera, (x, y), &mut row, &mut work);
+                integrator.last_bounce_samples(camera, (x, y), pass.settings.seed, &mut row, &mut work);
             }
             rows.lock().unwrap_or_else(|e| e.into_inner()).push((y, row));
         }

@@ -71,11 +71,14 @@ impl Integrator<'_> {
         grid.lookup(hit.position, hit.normal)
     }
 
-    /// The grid's samples from the sites of pixel (x, y), appended to `out`.
+    /// The grid's samples from the sites of pixel (x, y), appended to `out`, from the render's
+    /// `seed`: renders of different seeds are independent in their grids too (with one grid for
+    /// every seed, its noise was shared by all of them, and averaging seeds did not average it).
     pub fn last_bounce_samples(
         &self,
         camera: &Camera,
         (x, y): (u32, u32),
+        seed: u64,
         out: &mut Vec<GridSample>,
         counts: &mut Work<'_>,
     ) {
@@ -83,7 +86,7 @@ impl Integrator<'_> {
             return;
         };
         let pixel = y as u64 * camera.width as u64 + x as u64;
-        let mut rng = Rng::new(0, SITE_STREAM + pixel);
+        let mut rng = Rng::new(seed, SITE_STREAM + pixel);
         for _ in 0..sites_per_pixel(self.options.ambient_divisions) {
             let (origin, dir) = camera.ray(x as f32 + rng.next_f32(), y as f32 + rng.next_f32());
             // The site's own rays count as the render's: a camera ray, then a path's segments.
