@@ -138,25 +138,38 @@ fn every_deep_bounce_method_gives_the_grey_furnace_exactly() {
 /// the indirect layer read 0.303 against 0.375 (19 % low; hits in cells sampled too little
 /// are traced as paths and keep theirs). Away from the eye path the direct light is sampled
 /// by area, and in a closed emitting box that estimate is heavy-tailed (a point near an edge
-/// sees the next wall's emitter at 1/d^2): at these sample counts every method reads 2-3 %
-/// low, brute force as well, so the bound is 5 % against the closed form and 3 % against
-/// brute force.
+/// sees the next wall's emitter at 1/d^2): a render reads low but for the one whose samples
+/// catch the tail, and then high (the grid at -ad 512, two sites a pixel, by seed: 0.93-1.14 of
+/// the closed form, mean 1.00). So each method is the mean of four seeds' renders (brute force
+/// as well), within 5 % of the closed form and 3 % of brute force. (A single seed passed
+/// while the grid took the same samples whatever the seed; with each seed its own grid, seed
+/// 1's read 7 % low.)
 #[test]
 fn every_deep_bounce_method_gives_the_emitting_furnace() {
+    const SEEDS: u32 = 4;
     let dir = tempfile::tempdir().unwrap();
     let (rho, e) = (0.5f64, 1.0f64);
     let scene = emitting_furnace(dir.path(), rho, e);
     let expected = (rho.powi(2) + rho.powi(3)) * e;
     let view = "-x 32 -y 32 -ab 2 -vp 0.5 0.5 0.5 -vd 0.3 -0.2 -1 -vh 80 -vv 80";
     let indirect = |name: &str, options: &str| {
-        let args: Vec<&str> = view.split_whitespace().chain(options.split_whitespace()).collect();
-        let (image, stats) = render_to(dir.path(), &scene, name, &args);
-        (mean(&rgb(&image, "indirect").concat()), stats)
+        let mut sum = 0.0;
+        for seed in 1..=SEEDS {
+            let options = format!("{options} --seed {seed}");
+            let args: Vec<&str> = view.split_whitespace().chain(options.split_whitespace()).collect();
+            let (image, stats) = render_to(dir.path(), &scene, name, &args);
+            assert!(
+                options.contains("-aa 0 ") || stats["records_computed"].as_u64().unwrap() > 0,
+                "{name}: no records"
+            );
+            sum += mean(&rgb(&image, "indirect").concat());
+        }
+        sum / SEEDS as f64
     };
-    let (brute_force, _) = indirect("brute-force", "-aa 0 -ad 64");
+    let brute_force = indirect("brute-force", "-aa 0 -ad 64");
     for deep in ["paths", "records", "grid"] {
-        let (got, stats) = indirect(deep, &format!("-aa 0.2 -ad 512 --ic-deep {deep}"));
-        assert!(stats["records_computed"].as_u64().unwrap() > 0, "{deep}: no records");
+        let got = indirect(deep, &format!("-aa 0.2 -ad 512 --ic-deep {deep}"));
+        println!("--ic-deep {deep}: {got} (closed form {expected}, brute force {brute_force})");
         assert!(
             (got - expected).abs() / expected < 0.05 && (got - brute_force).abs() / brute_force < 0.03,
             "--ic-deep {deep}: indirect {got}, closed form {expected}, brute force {brute_force}"
