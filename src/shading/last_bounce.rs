@@ -32,9 +32,12 @@ pub const TWO_SITES_FROM_DIVISIONS: u32 = 256;
 /// cell with a mean and trace their path); four sites lowered the error a little more at 256
 /// and 512 but for 1.03-1.13x the time. Below: at -ad 128 (two seeds) 0.90x and 0.87x for
 /// 1.07x and 1.13x the time, at -ad 32 and 64 the aisle's error 1.2x for 1.08-1.2x the time
-/// (more finest cells reach `MIN_SAMPLES` and answer with a noisier mean than the coarser cell
-/// did). Two sites of one sample each (as many samples as one site of two) gained about a third
-/// as much: it is more samples, spread apart, that count.
+/// (probably: more finest cells reach `MIN_SAMPLES` and answer with a noisier mean than the
+/// coarser cell did). Two sites of one sample each (as many samples as one site of two) gained
+/// about a third as much: it is more samples, spread apart, that count. Those runs shared one
+/// grid across seeds (it did not follow the seed then); again with each seed its own grid, at
+/// `-aa 0.1 -ad 512 --spp 16`, four seeds: 0.80x (aisle), 0.92x (conference room), 0.89x
+/// (nave) for 0.95-0.98x the time.
 pub fn sites_per_pixel(divisions: u32) -> u32 {
     if divisions >= TWO_SITES_FROM_DIVISIONS { 2 } else { 1 }
 }
