@@ -69,10 +69,79 @@ pub struct LastBounceGrid {
     /// Each finest cell some sample fell in, with the mean of the finest cell around it that
     /// has one (if any has).
     resolved: CellTable,
-    /// Each level's cells with a mean, the finest first (the finest is only counted: every one
-    /// of its cells is in `resolved`).
-    levels: Vec<CellTable>,
+    /// The coarser levels' cells with a mean, level 1 first (the finest level's are all in
+    /// `resolved`).
+    coarser: Vec<CellTable>,
+    /// How many finest cells have a mean of their own.
+    finest_cells: usize,
     samples: u64,
+}
+
+/// Each level's cells with a mean (the finest first), each finest cell a sample fell in with
+/// its keys at every level (as the first sample in it gave them), and the samples counted.
+struct LevelMeans {
+    levels: Vec<CellTable>,
+    ancestors: HashMap<CellKey, [CellKey; LEVELS], BuildHasherDefault<KeyHasher>>,
+    samples: u64,
+}
+
+impl LevelMeans {
+    /// The means of `samples` in cells of side `cell` and its coarser levels, summed in the
+    /// order given; cells with fewer than `MIN_SAMPLES` are left out, and non-finite samples.
+    fn of(cell: f32, samples: impl IntoIterator<Item = GridSample>) -> LevelMeans {
+        type Sums = HashMap<CellKey, (DVec3, DVec3, u32), BuildHasherDefault<KeyHasher>>;
+        let mut sums: Vec<Sums> = (0..LEVELS).map(|_| Sums::default()).collect();
+        let mut ancestors: HashMap<CellKey, [CellKey; LEVELS], BuildHasherDefault<KeyHasher>> = HashMap::default();
+        let mut count = 0;
+        for sample in samples {
+            let Received { direct, indirect } = sample.received;
+            if !direct.is_finite() || !indirect.is_finite() {
+                continue;
+            }
+            let place = Place::of(cell, sample.position, sample.normal);
+            ancestors
+                .entry(place.key(0))
+                .or_insert_with(|| std::array::from_fn(|level| place.key(level)));
+            for (level, sums) in sums.iter_mut().enumerate() {
+                let key = place.key(level);
+                let entry = sums.entry(key).or_insert((DVec3::ZERO, DVec3::ZERO, 0));
+                entry.0 += direct.as_dvec3();
+                entry.1 += indirect.as_dvec3();
+                entry.2 += 1;
+            }
+            count += 1;
+        }
+        let levels = sums
+            .into_iter()
+            .map(|sums| {
+                sums.into_iter()
+                    .filter(|(_, (_, _, n))| *n >= MIN_SAMPLES)
+                    .map(|(key, (direct, indirect, n))| {
+                        let mean = |sum: DVec3| (sum / n as f64).as_vec3();
+                        let received = Received {
+                            direct: mean(direct),
+                            indirect: mean(indirect),
+                        };
+                        (key, received)
+                    })
+                    .collect::<Vec<_>>()
+            })
+            .map(|cells| CellTable::new(&cells))
+            .collect();
+        LevelMeans {
+            levels,
+            ancestors,
+            samples: count,
+        }
+    }
+
+    /// The means of the finest level around (p, normal) that has one: the levels searched in
+    /// turn.
+    #[cfg(test)]
+    fn search(&self, cell: f32, p: Vec3, normal: Vec3) -> Option<Received> {
+        let place = Place::of(cell, p, normal);
+        (self.levels.iter().enumerate()).find_map(|(level, means)| means.get(place.key(level)))
+    }
 }
 
 /// A cell's means (irradiance over pi): the direct and the indirect light its samples
@@ -99,46 +168,11 @@ impl LastBounceGrid {
     /// The grid with finest cells of side `cell` from `samples`, summed in the order given;
     /// cells with fewer than `MIN_SAMPLES` are left out. Non-finite samples are dropped.
     pub fn from_samples(cell: f32, samples: impl IntoIterator<Item = GridSample>) -> LastBounceGrid {
-        type Sums = HashMap<CellKey, (DVec3, DVec3, u32), BuildHasherDefault<KeyHasher>>;
-        let mut sums: Vec<Sums> = (0..LEVELS).map(|_| Sums::default()).collect();
-        // Each finest cell's keys at the coarser levels, as the first sample in it gave them.
-        let mut ancestors: HashMap<CellKey, [CellKey; LEVELS], BuildHasherDefault<KeyHasher>> = HashMap::default();
-        let mut count = 0;
-        for sample in samples {
-            let Received { direct, indirect } = sample.received;
-            if !direct.is_finite() || !indirect.is_finite() {
-                continue;
-            }
-            let place = Place::of(cell, sample.position, sample.normal);
-            ancestors
-                .entry(place.key(0))
-                .or_insert_with(|| std::array::from_fn(|level| place.key(level)));
-            for (level, sums) in sums.iter_mut().enumerate() {
-                let key = place.key(level);
-                let entry = sums.entry(key).or_insert((DVec3::ZERO, DVec3::ZERO, 0));
-                entry.0 += direct.as_dvec3();
-                entry.1 += indirect.as_dvec3();
-                entry.2 += 1;
-            }
-            count += 1;
-        }
-        let levels: Vec<CellTable> = sums
-            .into_iter()
-            .map(|sums| {
-                sums.into_iter()
-                    .filter(|(_, (_, _, n))| *n >= MIN_SAMPLES)
-                    .map(|(key, (direct, indirect, n))| {
-                        let mean = |sum: DVec3| (sum / n as f64).as_vec3();
-                        let received = Received {
-                            direct: mean(direct),
-                            indirect: mean(indirect),
-                        };
-                        (key, received)
-                    })
-                    .collect::<Vec<_>>()
-            })
-            .map(|cells| CellTable::new(&cells))
-            .collect();
+        let LevelMeans {
+            mut levels,
+            ancestors,
+            samples,
+        } = LevelMeans::of(cell, samples);
         let resolved: Vec<(CellKey, Received)> = ancestors
             .iter()
             .filter_map(|(&key, chain)| {
@@ -146,11 +180,13 @@ impl LastBounceGrid {
                 Some((key, received))
             })
             .collect();
+        let finest = levels.remove(0);
         LastBounceGrid {
             cell,
             resolved: CellTable::new(&resolved),
-            levels,
-            samples: count,
+            coarser: levels,
+            finest_cells: finest.len,
+            samples,
         }
     }
 
@@ -167,10 +203,8 @@ impl LastBounceGrid {
             return Some(received);
         }
         // A finest cell no sample fell in (or none around it has a mean): the coarser levels.
-        self.levels
-            .iter()
-            .enumerate()
-            .skip(1)
+        (1..)
+            .zip(&self.coarser)
             .find_map(|(level, means)| means.get(place.key(level)))
     }
 
@@ -181,14 +215,14 @@ impl LastBounceGrid {
     pub fn prefetch(&self, p: Vec3, normal: Vec3) {
         let place = Place::of(self.cell, p, normal);
         self.resolved.prefetch(place.key(0));
-        if let Some(above) = self.levels.get(1) {
+        if let Some(above) = self.coarser.first() {
             above.prefetch(place.key(1));
         }
     }
 
     /// Cells with a mean, at every level.
     pub fn cells(&self) -> usize {
-        self.levels.iter().map(|l| l.len).sum()
+        self.finest_cells + self.coarser.iter().map(|l| l.len).sum::<usize>()
     }
 
     /// Samples the grid was built from.
@@ -420,10 +454,8 @@ mod tests {
             }
         }
         let grid = LastBounceGrid::from_samples(0.25, samples.iter().copied());
-        let by_levels = |p: Vec3, n: Vec3| {
-            let place = Place::of(grid.cell, p, n);
-            (grid.levels.iter().enumerate()).find_map(|(level, means)| means.get(place.key(level)))
-        };
+        let means = LevelMeans::of(0.25, samples.iter().copied());
+        let by_levels = |p: Vec3, n: Vec3| means.search(0.25, p, n);
         let mut answered = [0; 2];
         for k in 0..20_000 {
             let (p, n) = if k % 2 == 0 {
@@ -449,7 +481,7 @@ mod tests {
             let place = Place::of(grid.cell, sample.position, sample.normal);
             let answer = by_levels(sample.position, sample.normal);
             assert_eq!(grid.resolved.get(place.key(0)), answer);
-            coarser += (answer.is_some() && grid.levels[0].get(place.key(0)).is_none()) as usize;
+            coarser += (answer.is_some() && means.levels[0].get(place.key(0)).is_none()) as usize;
         }
         assert!(
             coarser > 50,

@@ -20,7 +20,7 @@ use glam::Vec3;
 pub const SAMPLES_PER_SITE: u32 = 2;
 
 /// -ad from which every pixel starts two sites instead of one (`sites_per_pixel`).
-pub const TWO_SITES_FROM_DIVISIONS: u32 = 256;
+const TWO_SITES_FROM_DIVISIONS: u32 = 256;
 
 /// Sites started per pixel for records of `divisions` (-ad) hemisphere samples. A cell's mean
 /// is read by every record's ray that meets the cell, so its noise is shared by all of them
