@@ -220,19 +220,50 @@ impl EmitterSet {
     /// few rays all land below has no share to measure and reads black. On the Cornell box the
     /// tall box's front face, whose plane cuts the lamp, read 12 % dark at 4 rays a point and
     /// 38 % at one that way.
+    ///
+    /// One pick walks the tree alone: a `sampler`'s chooser, which keeps the nodes' weighing for
+    /// the picks after it, costs more to set up than it saves a point that takes a single one (a
+    /// record's hemisphere rays' hits at -ab 1, one shadow ray each).
     pub fn sample(&self, point: Vec3, normal: Vec3, u1: f32, u2: f32, u3: f32) -> Option<EmitterPoint> {
-        self.sampler(point, normal)?.sample(u1, u2, u3)
+        if !self.has_power() {
+            return None;
+        }
+        let (index, probability) = self.tree.pick(Receiver { point, normal }, u1 as f64)?;
+        self.point_on(index, probability, point, normal, u2, u3)
     }
 
     /// A sampler for several of `sample`'s points at one shading point, its picks sharing the
     /// light tree's weighing (`LightTree::chooser`). None where the set has no power to sample.
     pub fn sampler(&self, point: Vec3, normal: Vec3) -> Option<EmitterSampler<'_>> {
-        if self.triangles.is_empty() || self.total_power.is_nan() || self.total_power <= 0.0 {
-            return None;
-        }
-        Some(EmitterSampler {
+        self.has_power().then(|| EmitterSampler {
             set: self,
             chooser: self.tree.chooser(Receiver { point, normal }),
+        })
+    }
+
+    fn has_power(&self) -> bool {
+        !self.triangles.is_empty() && !self.total_power.is_nan() && self.total_power > 0.0
+    }
+
+    /// A uniform point with `u`, `v` on the part of triangle `index` (picked with `probability`)
+    /// above the tangent plane of `point` with unit normal `normal`.
+    fn point_on(
+        &self,
+        index: usize,
+        probability: f64,
+        point: Vec3,
+        normal: Vec3,
+        u: f32,
+        v: f32,
+    ) -> Option<EmitterPoint> {
+        let t = &self.triangles[index];
+        let (position, area) = t.sample_above(point, normal, u, v)?;
+        let pdf_area = (probability / area as f64) as f32;
+        (pdf_area.is_finite() && pdf_area > 0.0).then_some(EmitterPoint {
+            position,
+            normal: t.normal,
+            radiance: t.radiance,
+            pdf_area,
         })
     }
 }
@@ -249,15 +280,7 @@ impl EmitterSampler<'_> {
     pub fn sample(&mut self, u1: f32, u2: f32, u3: f32) -> Option<EmitterPoint> {
         let Receiver { point, normal } = self.chooser.receiver();
         let (index, probability) = self.chooser.pick(u1 as f64)?;
-        let t = &self.set.triangles[index];
-        let (position, area) = t.sample_above(point, normal, u2, u3)?;
-        let pdf_area = (probability / area as f64) as f32;
-        (pdf_area.is_finite() && pdf_area > 0.0).then_some(EmitterPoint {
-            position,
-            normal: t.normal,
-            radiance: t.radiance,
-            pdf_area,
-        })
+        self.set.point_on(index, probability, point, normal, u2, u3)
     }
 }
 
@@ -355,6 +378,43 @@ mod tests {
         let picked =
             (0..3).find(|&i| (p.pdf_area as f64 * set.triangles[i].area as f64 - set.pick_probability(i)).abs() < 1e-5);
         assert!(picked.is_some(), "pdf_area {} matches no triangle", p.pdf_area);
+    }
+
+    /// A lone pick (`EmitterSet::sample`, no chooser) gives the point a sampler's pick gives
+    /// for the same numbers: the same emitter, point and density, so a point's light does not
+    /// depend on how many shadow rays it takes.
+    #[test]
+    fn a_lone_pick_is_the_samplers_pick() {
+        let triangles: Vec<EmitterTriangle> = (0..11)
+            .map(|i| {
+                let mut t = tri(0.3 + 0.1 * (i % 3) as f32, 1.0 + i as f32);
+                t.p0 = Vec3::new(i as f32 * 0.7 - 3.0, (i % 4) as f32 * 0.5, 2.0);
+                t.normal = -Vec3::Z;
+                t
+            })
+            .collect();
+        let set = EmitterSet::new(triangles);
+        let mut rng = crate::sampling::Rng::new(5, 1);
+        for _ in 0..500 {
+            let point = Vec3::new(rng.next_f32() * 6.0 - 3.0, rng.next_f32() * 2.0, rng.next_f32());
+            let normal = Vec3::new(rng.next_f32() - 0.5, rng.next_f32() - 0.5, 1.0).normalize();
+            let u = (rng.next_f32(), rng.next_f32(), rng.next_f32());
+            let lone = set.sample(point, normal, u.0, u.1, u.2);
+            let shared = set.sampler(point, normal).and_then(|mut s| s.sample(u.0, u.1, u.2));
+            match (lone, shared) {
+                (Some(a), Some(b)) => {
+                    assert_eq!(a.position, b.position);
+                    assert_eq!(a.pdf_area, b.pdf_area);
+                    assert_eq!(a.radiance, b.radiance);
+                }
+                (None, None) => {}
+                (a, b) => panic!(
+                    "lone pick {:?}, sampler's {:?}",
+                    a.map(|p| p.position),
+                    b.map(|p| p.position)
+                ),
+            }
+        }
     }
 
     /// A wall at the origin whose plane cuts a ceiling emitter: facing +x it sees one corner of

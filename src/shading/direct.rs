@@ -299,12 +299,20 @@ pub fn direct_light(
             ..RaySpread::default()
         };
         let per_ray = diffuse_brdf / emitter_samples as f32;
-        let mut sampler = scene.emitters.sampler(hit.position, hit.normal);
+        // A lone ray's pick walks the light tree alone (`EmitterSet::sample`).
+        let mut sampler = (emitter_samples > 1)
+            .then(|| scene.emitters.sampler(hit.position, hit.normal))
+            .flatten();
         let strata = strata.reduced();
         let mut pending = PendingShadows::default();
         for k in 0..emitter_samples {
             let (u1, u2, u3) = strata.uniforms(k, rng);
-            let Some(light) = sampler.as_mut().and_then(|s| s.sample(u1, u2, u3)) else {
+            let light = match sampler.as_mut() {
+                Some(sampler) => sampler.sample(u1, u2, u3),
+                None if emitter_samples == 1 => scene.emitters.sample(hit.position, hit.normal, u1, u2, u3),
+                None => None,
+            };
+            let Some(light) = light else {
                 continue;
             };
             let offset = light.position - hit.position;
