@@ -241,6 +241,7 @@ impl EmitterSet {
         })
     }
 
+    /// Whether there is anything to sample: emitters with a finite, positive total power.
     fn has_power(&self) -> bool {
         !self.triangles.is_empty() && !self.total_power.is_nan() && self.total_power > 0.0
     }
@@ -381,8 +382,8 @@ mod tests {
     }
 
     /// A lone pick (`EmitterSet::sample`, no chooser) gives the point a sampler's pick gives
-    /// for the same numbers: the same emitter, point and density, so a point's light does not
-    /// depend on how many shadow rays it takes.
+    /// for the same numbers: the same emitter, point and density, so a point that takes one
+    /// shadow ray gets what a sampler gave it (the images did not change).
     #[test]
     fn a_lone_pick_is_the_samplers_pick() {
         let triangles: Vec<EmitterTriangle> = (0..11)
