@@ -255,12 +255,13 @@ fn the_ceiling_above_a_hanging_plate_is_not_lit_by_the_open_ceilings_records() {
 /// surfaces receive, direct and indirect) instead of a light pick, a shadow ray and one more
 /// traced path each. On the ceiling room, looking up at the ceiling (lit by the floor and
 /// walls, which the lamp lights): the grid's image keeps brute force's indirect light within
-/// 2 % over eight seeds (measured mean -0.25 %, tracing the last bounce +0.6 %), and each record
-/// costs about a third of the rays (measured 386 hemisphere and shadow rays a record against
-/// 1,101, within 1 % from seed to seed). Each seed samples its own grid (at -ad 256 two sites a
-/// pixel): with one grid for every seed, as before, the eight seeds shared its noise, and the
-/// mean read -0.8 % with one site a pixel and +2.6 % with two, one grid's luck each. The grid's own samples are a cost per image (53,235
-/// rays here, counted apart as `last_bounce_rays`), and the totals depend on how many records
+/// 2 % over eight seeds (measured mean -0.25 %, tracing the last bounce +0.6 %), and each
+/// record costs about a third of the rays (measured 386 hemisphere and shadow rays a record
+/// against 1,101, within 1 % from seed to seed). Each seed samples its own grid (at -ad 256 two
+/// sites a pixel): with one grid for every seed, as before, the eight seeds shared its noise,
+/// and the mean read -0.8 % with one site a pixel and +2.6 % with two, one grid's luck each.
+/// The grid's own samples are a cost per image (53,235 rays here, counted apart as
+/// `last_bounce_rays`), and the totals depend on how many records
 /// a seed's prepass makes: at 96x96 the traced paths make 15-129 a seed (mean 74 over 20
 /// seeds), the grid 9-26 (mean 14: its smoother values make larger records), and the grid's
 /// total of hemisphere and shadow rays is 0.68x the paths' over those 20 seeds; eight seeds'
