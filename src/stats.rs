@@ -155,6 +155,13 @@ pub struct RankReport {
     /// way when the reports are added up.
     #[serde(default)]
     pub heartbeats: u64,
+    /// The prepass on this rank: seconds in all, and of those the seconds in its pool's
+    /// collectives (handing its share over and waiting for the other ranks': the rounds'
+    /// barriers).
+    #[serde(default)]
+    pub prepass_s: f64,
+    #[serde(default)]
+    pub prepass_pool_s: f64,
 }
 
 #[derive(Clone, Debug, Default, Serialize)]
@@ -185,6 +192,9 @@ pub struct RenderStats {
     pub last_bounce_samples: u64,
     /// The rays the grid's samples traced (part of `rays`).
     pub last_bounce_rays: RayStats,
+    /// Each prepass round as this process (rank 0 under mpirun) saw it.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub prepass_round_log: Vec<crate::prepass::RoundLog>,
     /// Records pixels had to make after the prepass, each for its own use (a gap it left).
     pub gap_records: u64,
     /// Pixels an edge crosses, which took `--edge-samples` samples instead of `--spp`.
@@ -272,6 +282,7 @@ impl RenderStats {
         self.last_bounce_cells = prepass.last_bounce_cells;
         self.last_bounce_samples = prepass.last_bounce_samples;
         self.last_bounce_rays = RayStats::from(&prepass.last_bounce_rays);
+        self.prepass_round_log = prepass.round_log.clone();
     }
 
     pub fn add_threads(&mut self, threads: &[ThreadStats]) {

@@ -157,7 +157,7 @@ pub const LEVELS: usize = 4;
 
 /// One sample of the light a surface at the last bounce's level receives: where it was taken,
 /// the side the surface faces there, and the value (direct and indirect irradiance over pi).
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct GridSample {
     pub position: Vec3,
     pub normal: Vec3,

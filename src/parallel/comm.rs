@@ -246,6 +246,23 @@ impl<'c> Comm<'c> {
         }
     }
 
+    /// The ranks for which `member` holds, as a communicator of their own (ranked among
+    /// themselves in their world order); None on the others. A collective: every rank calls it.
+    pub fn split(&self, member: bool) -> Option<Comm<'c>> {
+        use mpi::topology::Color;
+        let color = if member {
+            Color::with_value(0)
+        } else {
+            Color::undefined()
+        };
+        let sub = self.world.split_by_color(color)?;
+        Some(Comm {
+            world: sub,
+            counters: self.counters,
+            max_pause: self.max_pause,
+        })
+    }
+
     /// Every rank's host (MPI processor) name, by rank. A collective: every rank calls it.
     pub fn host_names(&self) -> Hosts {
         const LEN: usize = 64;
@@ -284,6 +301,86 @@ impl<'c> Comm<'c> {
             let mut pending = Some(self.world.immediate_all_gather_into(scope, mine, all));
             self.poll_with_pauses(None, || completed(&mut pending));
         });
+    }
+
+    /// Every rank's `mine`, by rank: a collective every rank calls with its own bytes (any
+    /// length, empty included). The lengths go round first (MPI_Iallgather), then the bytes
+    /// (MPI_Iallgatherv), so no rank relays another's through its own code: each rank's traffic
+    /// grows with what all of them hold together, not with the ranks times that. Both are
+    /// polled with pauses like every wait here (the time counts as idle). About once a second
+    /// `watch` is called, which may end the job (a rank that can no longer come); it cannot
+    /// give up the wait otherwise, since MPI owns the buffers of a collective in flight.
+    /// Err (on every rank alike, from the lengths all of them see): the parts add up to more
+    /// than one collective can carry (MPI's 32-bit counts).
+    pub fn all_gather_bytes(&self, mine: &[u8], mut watch: impl FnMut()) -> Result<Vec<Vec<u8>>, String> {
+        use mpi::collective::CommunicatorCollectives;
+        use mpi::datatype::PartitionMut;
+        let start = Instant::now();
+        let mut wait = |pending: &mut dyn FnMut() -> Option<()>| {
+            while self
+                .poll_with_pauses(Some(Duration::from_secs(1)), &mut *pending)
+                .is_none()
+            {
+                watch();
+            }
+        };
+        let own = [mine.len() as u64];
+        let mut lengths = vec![0u64; self.size() as usize];
+        mpi::request::scope(|scope| {
+            let mut pending = Some(self.world.immediate_all_gather_into(scope, &own[..], &mut lengths[..]));
+            wait(&mut || completed(&mut pending));
+        });
+        let total = lengths.iter().sum::<u64>();
+        if total > mpi::Count::MAX as u64 {
+            return Err(format!(
+                "{total} bytes to gather in one collective, more than MPI's limit of {}",
+                mpi::Count::MAX
+            ));
+        }
+        let counts: Vec<mpi::Count> = lengths.iter().map(|&n| n as mpi::Count).collect();
+        let displs: Vec<mpi::Count> = (counts.iter())
+            .scan(0, |at: &mut mpi::Count, &n| {
+                let here = *at;
+                *at += n;
+                Some(here)
+            })
+            .collect();
+        let mut all = vec![0u8; total as usize];
+        {
+            let mut partition = PartitionMut::new(&mut all[..], counts, &displs[..]);
+            mpi::request::scope(|scope| {
+                let mut pending = Some(
+                    self.world
+                        .immediate_all_gather_varcount_into(scope, mine, &mut partition),
+                );
+                wait(&mut || completed(&mut pending));
+            });
+        }
+        self.counters
+            .idle_ns
+            .fetch_add(start.elapsed().as_nanos() as u64, Ordering::Relaxed);
+        // What this rank gave and took, counted as if it had sent its part to each other rank
+        // and been sent each of theirs: the library relays parts by its own algorithm (a ring,
+        // recursive doubling), which moves parts through ranks, but every algorithm delivers
+        // each rank the others' parts, so over all ranks what is counted sent is what is
+        // counted received, and is what the wire carries.
+        let others = lengths.len() as u64 - 1;
+        self.counters.messages_sent.fetch_add(others, Ordering::Relaxed);
+        self.counters
+            .bytes_sent
+            .fetch_add(mine.len() as u64 * others, Ordering::Relaxed);
+        self.counters.messages_received.fetch_add(others, Ordering::Relaxed);
+        self.counters
+            .bytes_received
+            .fetch_add(total - mine.len() as u64, Ordering::Relaxed);
+        let mut at = 0;
+        Ok((lengths.iter())
+            .map(|&n| {
+                let part = all[at..at + n as usize].to_vec();
+                at += n as usize;
+                part
+            })
+            .collect())
     }
 
     /// Ends the whole job (every rank) with an error code.

@@ -220,6 +220,8 @@ fn control(
         records_received: core.relay.received,
         records_rejected: core.relay.rejected,
         wall_s: start.elapsed().as_secs_f64(),
+        prepass_s: setup.prepass.as_ref().map_or(0.0, |p| p.seconds),
+        prepass_pool_s: setup.prepass.as_ref().map_or(0.0, |p| p.pool_s),
         ..super::traffic_report(0, "mc", &[comm.counters], comm.counters.idle_s())
     }];
     ranks.extend(core.reports.into_iter().skip(1).flatten());

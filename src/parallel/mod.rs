@@ -238,6 +238,8 @@ impl Setup<'_> {
             t_notamb_s: reports.iter().map(|t| t.t_notamb_s).sum(),
             rays: crate::stats::RayStats::sum(reports.iter().map(|t| &t.rays)),
             wall_s: self.start.elapsed().as_secs_f64(),
+            prepass_s: self.prepass.as_ref().map_or(0.0, |p| p.seconds),
+            prepass_pool_s: self.prepass.as_ref().map_or(0.0, |p| p.pool_s),
             ..traffic_report(comm.rank(), role, &[comm.counters, helper, self.traffic_before], idle_s)
         }
     }

@@ -1,97 +1,151 @@
-//! The cache prepass under mpirun (see `crate::prepass`): the workers share each round's sites
-//! (worker k of W takes sites k, k + W, ...) and send their records to the master, which hands
-//! every worker all of them in site order. Every rank, the master included, inserts the same
-//! records in the same order, so all caches hold the record set one process would have made,
-//! and the image is the same for any number of ranks and any mode.
+//! The cache prepass under mpirun (see `crate::prepass`): the ranks pool their work through
+//! MPI's collectives, never through the master. Worker k of W takes items k, k + W, ... of every
+//! list (the last bounce's rows, the pixel maps' rows, each round's sites), and an allgather
+//! hands every rank every worker's results; the master takes part with nothing of its own and
+//! keeps the records (for the cache file and the report), nothing else. Every rank inserts the
+//! same records in the same order, so all caches hold the record set one process would have
+//! made, and the image is the same for any number of ranks and any mode.
+//!
+//! A collective cannot notice a rank that never comes. The master therefore looks at the
+//! heartbeats (`liveness`) about once a second while it waits, and ends the job naming the rank
+//! and host that fell silent; a worker's own pulse ends it when the master is gone.
 
-use super::comm::{Comm, Hosts, kind};
-use super::protocol::{Kind, Message, ProtocolError, Records};
+use super::comm::{Comm, Hosts};
+use super::protocol::{Message, ProtocolError, Records};
+use crate::irradiance::IrradianceCache;
 use crate::job::Job;
-use crate::prepass::{PrepassOutcome, RoundRecords, Share, run_shared};
+use crate::prepass::{GridRows, PixelRows, Pool, PrepassOutcome, RoundRecords, Share, run_shared};
 use crate::shading::Integrator;
 use std::time::Duration;
 
-/// Runs this rank's part of the prepass. Err: a rank fell silent for `timeout`, or sent
-/// records that cannot be trusted (the job cannot go on: ranks would hold different caches).
-pub fn run(comm: &Comm<'_>, job: &Job, timeout: Duration, hosts: &Hosts) -> Result<PrepassOutcome, String> {
+/// The ranks of one job as the prepass's pool.
+struct Collective<'a, 'c> {
+    /// Every rank.
+    world: &'a Comm<'c>,
+    /// The workers alone (None on the master), for what only rendering ranks need: the grid.
+    workers: Option<Comm<'c>>,
+    share: Share,
+    hosts: &'a Hosts,
+    /// How long a rank may be silent before it counts as lost.
+    limit: Duration,
+    /// The master's cache, kept (its file flushed) when the job ends for a lost rank.
+    cache: &'a IrradianceCache,
+}
+
+impl Collective<'_, '_> {
+    /// Every rank's `message`, decoded, by rank: of the world, or of the workers alone when
+    /// `workers` (this rank must be one).
+    fn gather(&self, workers: bool, message: Message) -> Result<Vec<Message>, String> {
+        let (comm, first) = match &self.workers {
+            Some(comm) if workers => (comm, 1),
+            _ => (self.world, 0),
+        };
+        let kind = message.kind();
+        let parts = comm.all_gather_bytes(&message.encode(), || self.watch())?;
+        (parts.iter().enumerate())
+            .map(|(part, bytes)| {
+                Message::decode(kind.tag(), bytes).map_err(|ProtocolError(why)| {
+                    let rank = first + part as i32;
+                    format!(
+                        "prepass: rank {rank} on {} sent a bad message: {why}",
+                        self.hosts.of(rank)
+                    )
+                })
+            })
+            .collect()
+    }
+
+    /// Called while a collective waits: the master ends the job if a rank has gone silent
+    /// (it can never come to the collective, which would wait for ever).
+    fn watch(&self) {
+        if self.world.rank() != 0 {
+            return;
+        }
+        if let Some(lost) = super::liveness::lost(self.world.size(), self.limit, |_| true) {
+            let (who, host, seconds) = (lost.rank, self.hosts.of(lost.rank), lost.seconds);
+            let line = format!(
+                "prepass: rank {who} on {host} has been silent for {seconds:.0} s (lost, or stalled); the cache \
+                 file keeps every record of the rounds before"
+            );
+            super::end_job(self.world, Some(self.cache), &line)
+        }
+    }
+}
+
+impl Pool for Collective<'_, '_> {
+    type Error = String;
+
+    fn share(&self) -> Share {
+        self.share
+    }
+
+    fn round(&mut self, mine: RoundRecords) -> Result<RoundRecords, String> {
+        let parts = self.gather(false, Message::PrepassRound(mine))?;
+        Ok(parts
+            .into_iter()
+            .flat_map(|m| match m {
+                Message::PrepassRound(records) => records,
+                _ => unreachable!("decoded by its kind"),
+            })
+            .collect())
+    }
+
+    fn grid_rows(&mut self, mine: GridRows) -> Result<GridRows, String> {
+        debug_assert!(self.workers.is_some(), "only workers build the grid");
+        let parts = self.gather(true, Message::PrepassGrid(mine))?;
+        Ok(parts
+            .into_iter()
+            .flat_map(|m| match m {
+                Message::PrepassGrid(rows) => rows,
+                _ => unreachable!("decoded by its kind"),
+            })
+            .collect())
+    }
+
+    fn pixel_rows(&mut self, mine: PixelRows) -> Result<PixelRows, String> {
+        let parts = self.gather(false, Message::PrepassPixels(mine))?;
+        Ok(parts
+            .into_iter()
+            .flat_map(|m| match m {
+                Message::PrepassPixels(rows) => rows,
+                _ => unreachable!("decoded by its kind"),
+            })
+            .collect())
+    }
+}
+
+/// Runs this rank's part of the prepass. Err: a rank sent what cannot be trusted (the job cannot
+/// go on: ranks would hold different caches); every rank reads the same bytes and so fails alike.
+/// A rank that falls silent ends the job from the master (see `Collective::watch`).
+pub fn run(comm: &Comm<'_>, job: &Job, limit: Duration, hosts: &Hosts) -> Result<PrepassOutcome, String> {
     let (rank, size) = (comm.rank(), comm.size());
     let Some(cache) = job.cache.as_ref() else {
         return Ok(PrepassOutcome::default());
     };
     let integrator = Integrator::new(&job.scene, &job.tracer, &job.shading, Some(cache));
-    let bad = |other: Result<Message, ProtocolError>| other.err().map_or_else(|| "not a round".into(), |e| e.0);
-    if rank == 0 {
-        // Workers start from the master's records (its cache file), as the master does. Every
-        // send waits at most --timeout (see `MasterCore::send`), or the master would hang on a
-        // gone rank while the others time out waiting for it, and nobody would name the lost one.
-        let send = |worker: i32, message: &Message| {
-            comm.send_within(worker, message, timeout, || -> std::convert::Infallible {
-                let (host, seconds) = (hosts.of(worker), timeout.as_secs_f64());
-                let line = format!(
-                    "prepass: rank {worker} on {host} took no round from the master for {seconds:.0} s: its host or \
-                     link is gone, or it hangs; the cache file keeps every record of the rounds before"
-                );
-                super::end_job(comm, Some(cache), &line)
-            })
-        };
-        let start = Message::PrepassStart(Records::from(cache.records()));
-        (1..size).for_each(|worker| send(worker, &start));
-        let mut gather = |_: RoundRecords| -> Result<RoundRecords, String> {
-            let mut round = Vec::new();
-            for worker in 1..size {
-                let message = comm.receive_live(&[kind(Some(worker), Kind::PrepassRound)], timeout, |_| true);
-                match message.map(|m| m.message) {
-                    Ok(Ok(Message::PrepassRound(records))) => round.extend(records),
-                    Ok(other) => {
-                        let (host, why) = (hosts.of(worker), bad(other));
-                        return Err(format!("prepass: rank {worker} on {host} sent a bad round: {why}"));
-                    }
-                    Err(lost) => {
-                        let (who, host, seconds) = (lost.rank, hosts.of(lost.rank), lost.seconds);
-                        return Err(format!(
-                            "prepass: rank {who} on {host} has been silent for {seconds:.0} s (lost, or stalled); the \
-                             cache file keeps every record of the rounds before"
-                        ));
-                    }
-                }
-            }
-            // Every rank puts the round in site order itself (see `run_shared`).
-            let message = Message::PrepassRound(round);
-            (1..size).for_each(|worker| send(worker, &message));
-            let Message::PrepassRound(round) = message else {
-                unreachable!("built above")
-            };
-            Ok(round)
-        };
-        return run_shared(&integrator, &job.camera, &job.settings, Share::Nothing, &mut gather);
+    let share = match rank {
+        0 => Share::Nothing,
+        _ => Share::Slice {
+            index: (rank - 1) as usize,
+            count: (size - 1) as usize,
+        },
+    };
+    let mut pool = Collective {
+        world: comm,
+        workers: comm.split(rank != 0),
+        share,
+        hosts,
+        limit,
+        cache,
+    };
+    // Every rank starts from the master's records (its cache file): a gather in which only the
+    // master has any.
+    let start = Records::from(if rank == 0 { cache.records() } else { Vec::new() });
+    let parts = pool.gather(false, Message::PrepassStart(start))?;
+    if rank != 0
+        && let Some(Message::PrepassStart(start)) = parts.into_iter().next()
+    {
+        start.records.into_iter().for_each(|r| cache.insert_shared(r));
     }
-    // A worker outwaits the master: the master needs up to --timeout to notice a silent rank
-    // and up to another to give up sending to one, and only the master can say which rank was
-    // lost. A master that is itself gone is noticed sooner by this rank's pulse (`liveness`).
-    let patience = 2 * timeout;
-    let start = comm.receive(&[kind(Some(0), Kind::PrepassStart)], Some(patience));
-    let Some(Ok(Message::PrepassStart(start))) = start.map(|m| m.message) else {
-        return Err(format!("rank {rank}: prepass: no start from the master"));
-    };
-    start.records.into_iter().for_each(|r| cache.insert_shared(r));
-    let mut exchange = |mine: RoundRecords| -> Result<RoundRecords, String> {
-        comm.send(0, &Message::PrepassRound(mine));
-        let round = [kind(Some(0), Kind::PrepassRound)];
-        match comm.receive(&round, Some(patience)).map(|m| m.message) {
-            Some(Ok(Message::PrepassRound(round))) => Ok(round),
-            Some(other) => Err(format!(
-                "rank {rank}: prepass: bad round from the master: {}",
-                bad(other)
-            )),
-            None => {
-                let (host, master, seconds) = (hosts.of(rank), hosts.of(0), patience.as_secs());
-                Err(format!(
-                    "rank {rank} on {host}: prepass: nothing from the master (rank 0 on {master}) for {seconds} s"
-                ))
-            }
-        }
-    };
-    let (index, count) = ((rank - 1) as usize, (size - 1) as usize);
-    let share = Share::Slice { index, count };
-    run_shared(&integrator, &job.camera, &job.settings, share, &mut exchange)
+    run_shared(&integrator, &job.camera, &job.settings, &mut pool)
 }

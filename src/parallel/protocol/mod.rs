@@ -12,7 +12,9 @@ use crate::image::components::Components;
 use crate::image::data::{DATA_VALUES, PixelData};
 use crate::image::framebuffer::{Layer, PixelValue};
 use crate::irradiance::codec::{self, RECORD_BYTES};
+use crate::irradiance::last_bounce::{GridSample, Received};
 use crate::irradiance::record::Record;
+use crate::prepass::{GridRows, PixelRows};
 use crate::shading::request::{AmbientRequest, RequestResult};
 use crate::stats::RankReport;
 use glam::Vec3;
@@ -21,7 +23,10 @@ use std::sync::OnceLock;
 use wire::{Put, Reader};
 
 /// The first byte of every message; a rank of another build is refused, not misread.
-pub const PROTOCOL_VERSION: u8 = 4;
+pub const PROTOCOL_VERSION: u8 = 5;
+
+/// A last bounce's grid sample on the wire: four vectors (position, normal, direct, indirect).
+const GRID_SAMPLE_BYTES: usize = 4 * 12;
 
 /// Replies to one rendering thread carry the thread in their tag: base + thread.
 const WORK_BASE: Tag = 1000;
@@ -75,6 +80,8 @@ kinds! {
     ForwardOrder = 14, "forward order";
     Finish = 15, "finish";
     Results = 17, "results";
+    PrepassGrid = 18, "prepass grid rows";
+    PrepassPixels = 19, "prepass pixel rows";
     /// Tags WORK_BASE + thread.
     Work = WORK_BASE as isize, "work";
     /// Tags RECORDS_DOWN_BASE + thread.
@@ -146,12 +153,16 @@ pub enum Message {
     Heartbeat,
     /// MC -> worker at the start: the records of the cache file.
     InitialRecords(Records),
-    /// MC -> worker before the prepass: the records every rank starts the prepass from.
+    /// MC -> every rank before the prepass: the records every rank starts the prepass from.
     PrepassStart(Records),
-    /// Worker -> MC, the records of its share of a prepass round's sites; MC -> worker, the
-    /// round's records from every worker. Every rank must insert exactly the same records, so
-    /// one invalid record fails the whole message.
+    /// Every rank -> every rank (a collective): the records of its share of a prepass round's
+    /// sites. Every rank must insert exactly the same records, so one invalid record fails the
+    /// whole message.
     PrepassRound(Vec<(u32, Record)>),
+    /// Worker -> every worker (a collective): its rows of the last bounce's grid samples.
+    PrepassGrid(GridRows),
+    /// Every rank -> every rank (a collective): its rows of a prepass pixel map.
+    PrepassPixels(PixelRows),
     /// Worker -> MC: give me a tile, with the tile finished before, if any.
     WorkRequest {
         thread: u32,
@@ -222,6 +233,29 @@ impl Message {
                     codec::encode(record, &mut out);
                 }
             }
+            Message::PrepassGrid(rows) => {
+                out.put_u32(rows.len() as u32);
+                for (y, samples) in rows {
+                    out.put_u32(*y);
+                    out.put_u32(samples.len() as u32);
+                    for s in samples {
+                        [s.position, s.normal, s.received.direct, s.received.indirect]
+                            .into_iter()
+                            .for_each(|v| out.put_vec3(v));
+                    }
+                }
+            }
+            Message::PrepassPixels(rows) => {
+                out.put_u32(rows.len() as u32);
+                for (y, flags) in rows {
+                    out.put_u32(*y);
+                    out.put_u32(flags.len() as u32);
+                    // Eight flags a byte, lowest bit first: a 4K frame's map is 1 MB, not 8.
+                    for chunk in flags.chunks(8) {
+                        out.put_u8(chunk.iter().enumerate().fold(0, |b, (i, &f)| b | (f as u8) << i));
+                    }
+                }
+            }
             Message::WorkRequest { thread, finished } => {
                 out.put_u32(*thread);
                 out.put_u8(finished.is_some() as u8);
@@ -288,6 +322,39 @@ impl Message {
                     round.push((index, record));
                 }
                 Message::PrepassRound(round)
+            }
+            Kind::PrepassGrid => {
+                let count = r.count(8)?;
+                let mut rows = Vec::with_capacity(count);
+                for _ in 0..count {
+                    let (y, samples) = (r.u32()?, r.count(GRID_SAMPLE_BYTES)?);
+                    let mut row = Vec::with_capacity(samples);
+                    for _ in 0..samples {
+                        let (position, normal) = (r.vec3()?, r.vec3()?);
+                        let received = Received {
+                            direct: r.vec3()?,
+                            indirect: r.vec3()?,
+                        };
+                        row.push(GridSample {
+                            position,
+                            normal,
+                            received,
+                        });
+                    }
+                    rows.push((y, row));
+                }
+                Message::PrepassGrid(rows)
+            }
+            Kind::PrepassPixels => {
+                let count = r.count(8)?;
+                let mut rows = Vec::with_capacity(count);
+                for _ in 0..count {
+                    let (y, pixels) = (r.u32()?, r.u32()? as usize);
+                    let bytes = r.take(pixels.div_ceil(8))?;
+                    let flags = (0..pixels).map(|i| bytes[i / 8] >> (i % 8) & 1 == 1).collect();
+                    rows.push((y, flags));
+                }
+                Message::PrepassPixels(rows)
             }
             Kind::WorkRequest => {
                 let thread = r.u32()?;

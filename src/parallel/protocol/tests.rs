@@ -61,6 +61,17 @@ fn pixel_data() -> PixelData {
     sum.finish()
 }
 
+fn grid_sample(v: f32) -> crate::irradiance::last_bounce::GridSample {
+    crate::irradiance::last_bounce::GridSample {
+        position: Vec3::new(v, 2.0 * v, -v),
+        normal: Vec3::Y,
+        received: crate::irradiance::last_bounce::Received {
+            direct: Vec3::splat(v.abs()),
+            indirect: Vec3::new(0.25, 0.5, 0.125),
+        },
+    }
+}
+
 /// One message of every kind, with content in every field.
 fn every_message() -> Vec<Message> {
     let records = || Records::from(vec![record(1), record(2)]);
@@ -75,6 +86,14 @@ fn every_message() -> Vec<Message> {
         Message::InitialRecords(records()),
         Message::PrepassStart(Records::default()),
         Message::PrepassRound(vec![(3, record(0)), (9, record(4))]),
+        Message::PrepassGrid(vec![(0, vec![]), (4, vec![grid_sample(1.0), grid_sample(-2.5)])]),
+        // Rows of 0, 3, 8 and 11 flags: the bits pack into whole bytes, and the last one's rest.
+        Message::PrepassPixels(vec![
+            (2, vec![]),
+            (5, vec![true, false, true]),
+            (6, (0..8).map(|i| i % 3 == 0).collect()),
+            (9, (0..11).map(|i| i % 2 == 1).collect()),
+        ]),
         Message::WorkRequest {
             thread: 2,
             finished: None,

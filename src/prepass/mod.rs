@@ -20,12 +20,15 @@
 //! misses a neighbour, and every record's overshoot fitted once the set is complete; both
 //! depend on the record set alone.
 
+pub mod pool;
+#[cfg(test)]
+mod pooled_tests;
+
 use crate::image::region::Region;
 use crate::image::window::PixelWindow;
 use crate::irradiance::IrradianceCache;
 use crate::irradiance::index::FrozenIndex;
 use crate::irradiance::last_bounce::{self, LastBounceGrid};
-use crate::irradiance::record::Record;
 use crate::render::edges;
 use crate::render::pixel::{RenderSettings, ThreadClock, ThreadStats, eye_spread, pixel_offset};
 use crate::sampling::Rng;
@@ -33,7 +36,7 @@ use crate::scene::view::Camera;
 use crate::shading::{Integrator, RayCounts, Work};
 use crate::tiles::Tile;
 use crate::tracer::SurfaceHit;
-use std::convert::Infallible;
+pub use pool::{Alone, GridRows, PixelRows, Pool, RoundRecords, Share, Timed};
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
@@ -87,6 +90,22 @@ pub struct PrepassOutcome {
     /// pass takes them from here (`RenderSettings::edge_map`) instead of tracing the corners
     /// again.
     pub edges: Option<std::sync::Arc<Vec<bool>>>,
+    /// Each round as this process saw it, in order.
+    pub round_log: Vec<RoundLog>,
+    /// Seconds in the pool (every exchange, rounds and rows: see `pool::Timed`).
+    pub pool_s: f64,
+}
+
+/// One round of the prepass as one process saw it: the whole round's sites and records, and
+/// this process's seconds computing its share, in the pool (handing its records over and
+/// waiting for the others'), and in all (with putting the records in the cache).
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct RoundLog {
+    pub sites: u64,
+    pub records: u64,
+    pub compute_s: f64,
+    pub pool_s: f64,
+    pub seconds: f64,
 }
 
 impl PrepassOutcome {
@@ -237,23 +256,26 @@ fn on_threads(stats: &mut [ThreadStats], work: impl Fn(&mut RayCounts) + Sync) {
 }
 
 /// The last bounce's grid from sites over the whole image (the same grid for every region,
-/// rank and thread count: rows are gathered in order; under mpirun every rank builds it
-/// alike). Every pixel starts sites up to `last_bounce::MAX_SITE_PIXELS` pixels; a larger
-/// image takes every s-th pixel of every s-th row, so that a region task of a large frame does
-/// not trace the whole frame's sites again.
-fn last_bounce_grid(pass: Pass<'_, '_>, stats: &mut [ThreadStats]) -> LastBounceGrid {
+/// rank and thread count: each row's samples are computed alike wherever it is computed, and
+/// the rows join in order). Every pixel starts sites up to `last_bounce::MAX_SITE_PIXELS`
+/// pixels; a larger image takes every s-th pixel of every s-th row, so that a region task of a
+/// large frame does not trace the whole frame's sites again. The pool's processes share the
+/// rows.
+fn last_bounce_grid<P: Pool>(
+    pass: Pass<'_, '_>,
+    pool: &mut P,
+    stats: &mut [ThreadStats],
+) -> Result<LastBounceGrid, P::Error> {
     let Pass { integrator, camera, .. } = pass;
     let cell = integrator.scene.size() / last_bounce::CELLS_PER_SIZE;
     let stride = last_bounce::site_stride(camera.width, camera.height);
+    let mine = pool.share().indices(camera.height.div_ceil(stride) as usize);
     let next = AtomicUsize::new(0);
     let rows = Mutex::new(Vec::new());
     on_threads(stats, |counts| {
         let mut work = Work::new(counts);
-        loop {
-            let y = next.fetch_add(1, Ordering::Relaxed) as u32 * stride;
-            if y >= camera.height {
-                break;
-            }
+        while let Some(&k) = mine.get(next.fetch_add(1, Ordering::Relaxed)) {
+            let y = k * stride;
             let mut row = Vec::new();
             for x in (0..camera.width).step_by(stride as usize) {
                 integrator.last_bounce_samples(camera, (x, y), pass.settings.seed, &mut row, &mut work);
@@ -261,9 +283,23 @@ fn last_bounce_grid(pass: Pass<'_, '_>, stats: &mut [ThreadStats]) -> LastBounce
             rows.lock().unwrap_or_else(|e| e.into_inner()).push((y, row));
         }
     });
-    let mut rows = rows.into_inner().unwrap_or_else(|e| e.into_inner());
+    let mut rows = pool.grid_rows(rows.into_inner().unwrap_or_else(|e| e.into_inner()))?;
     rows.sort_unstable_by_key(|(y, _)| *y);
-    LastBounceGrid::from_samples(cell, rows.into_iter().flat_map(|(_, row)| row))
+    Ok(LastBounceGrid::from_samples(
+        cell,
+        rows.into_iter().flat_map(|(_, row)| row),
+    ))
+}
+
+/// A pixel map of the area rendered, row-major, from its rows (or strips of rows) as the
+/// pool's processes computed them.
+fn pixel_map(window: PixelWindow, rows: PixelRows) -> Vec<bool> {
+    let mut map = vec![false; window.pixels()];
+    for (y, flags) in rows {
+        let start = window.index(window.area.x0, y).expect("a row of the area");
+        map[start..start + flags.len()].copy_from_slice(&flags);
+    }
+    map
 }
 
 /// The pixels whose samples may need records the centres' did not make, once every centre
@@ -271,10 +307,15 @@ fn last_bounce_grid(pass: Pass<'_, '_>, stats: &mut [ThreadStats]) -> LastBounce
 /// covers yet (between centres, or seen in a mirror from farther apart), or reaches other
 /// planes than the centre's (a silhouette, a crease, a small object within the pixel). Inside
 /// a covered surface a pixel's samples land between its covered corners, where the records
-/// serve them. Every process computes it alike from the geometry and the cache it holds (five
-/// eye paths a pixel, a lookup at each corner).
+/// serve them. A row's answer follows from the geometry and the cache alone (five eye paths a
+/// pixel, a lookup at each corner), so the pool's processes share the rows.
 /// The answer holds the pixels of the area rendered (`RenderSettings::window`), row-major.
-fn pixels_needing_samples(pass: Pass<'_, '_>, snapshot: &FrozenIndex, stats: &mut [ThreadStats]) -> Vec<bool> {
+fn pixels_needing_samples<P: Pool>(
+    pass: Pass<'_, '_>,
+    snapshot: &FrozenIndex,
+    pool: &mut P,
+    stats: &mut [ThreadStats],
+) -> Result<Vec<bool>, P::Error> {
     let Pass {
         integrator,
         cache,
@@ -296,14 +337,12 @@ fn pixels_needing_samples(pass: Pass<'_, '_>, snapshot: &FrozenIndex, stats: &mu
             cache.covered_in(snapshot, h.position, h.normal, headroom, 0)
         })
     };
-    let rows = AtomicUsize::new(area.y0 as usize);
-    let needs = Mutex::new(vec![false; window.pixels()]);
+    let mine = pool.share().indices(area.height() as usize);
+    let next = AtomicUsize::new(0);
+    let rows = Mutex::new(Vec::new());
     on_threads(stats, |counts| {
-        loop {
-            let y = rows.fetch_add(1, Ordering::Relaxed) as u32;
-            if y >= area.y1 {
-                break;
-            }
+        while let Some(&k) = mine.get(next.fetch_add(1, Ordering::Relaxed)) {
+            let y = area.y0 + k;
             // Each corner's hits, and whether records cover them all.
             let corners = |y: u32, counts: &mut RayCounts| -> Vec<(Vec<SurfaceHit>, bool)> {
                 (area.x0..=area.x1)
@@ -326,11 +365,11 @@ fn pixels_needing_samples(pass: Pass<'_, '_>, snapshot: &FrozenIndex, stats: &mu
                     })
                 })
                 .collect();
-            let start = window.index(area.x0, y).expect("a row of the area");
-            needs.lock().unwrap_or_else(|e| e.into_inner())[start..start + row.len()].copy_from_slice(&row);
+            rows.lock().unwrap_or_else(|e| e.into_inner()).push((y, row));
         }
     });
-    needs.into_inner().unwrap_or_else(|e| e.into_inner())
+    let rows = pool.pixel_rows(rows.into_inner().unwrap_or_else(|e| e.into_inner()))?;
+    Ok(pixel_map(window, rows))
 }
 
 /// Rows of pixels an edge map's strip holds (a strip's pixels share their corner rays).
@@ -338,19 +377,17 @@ const EDGE_STRIP: u32 = 8;
 
 /// The pixels of the area rendered an edge crosses (`render::edges::edge_pixels`), row-major
 /// as `RenderSettings::window`'s: the same corner rays as the final pass's tiles, so the same
-/// answer for every pixel. Strips of rows on every thread.
-fn edge_map(pass: Pass<'_, '_>, stats: &mut [ThreadStats]) -> Vec<bool> {
+/// answer for every pixel. Strips of rows on every thread, shared by the pool's processes.
+fn edge_map<P: Pool>(pass: Pass<'_, '_>, pool: &mut P, stats: &mut [ThreadStats]) -> Result<Vec<bool>, P::Error> {
     let Pass { integrator, camera, .. } = pass;
     let window = pass.settings.window(camera);
     let area = window.area;
+    let mine = pool.share().indices(area.height().div_ceil(EDGE_STRIP) as usize);
     let next = AtomicUsize::new(0);
-    let edges = Mutex::new(vec![false; window.pixels()]);
+    let strips = Mutex::new(Vec::new());
     on_threads(stats, |counts| {
-        loop {
-            let y0 = area.y0 + next.fetch_add(1, Ordering::Relaxed) as u32 * EDGE_STRIP;
-            if y0 >= area.y1 {
-                break;
-            }
+        while let Some(&k) = mine.get(next.fetch_add(1, Ordering::Relaxed)) {
+            let y0 = area.y0 + k * EDGE_STRIP;
             let strip = Tile {
                 x0: area.x0,
                 y0,
@@ -358,11 +395,11 @@ fn edge_map(pass: Pass<'_, '_>, stats: &mut [ThreadStats]) -> Vec<bool> {
                 y1: (y0 + EDGE_STRIP).min(area.y1),
             };
             let found = edges::edge_pixels(integrator, camera, &strip, &mut Work::new(counts));
-            let start = window.index(area.x0, y0).expect("a row of the area");
-            edges.lock().unwrap_or_else(|e| e.into_inner())[start..start + found.len()].copy_from_slice(&found);
+            strips.lock().unwrap_or_else(|e| e.into_inner()).push((y0, found));
         }
     });
-    edges.into_inner().unwrap_or_else(|e| e.into_inner())
+    let strips = pool.pixel_rows(strips.into_inner().unwrap_or_else(|e| e.into_inner()))?;
+    Ok(pixel_map(window, strips))
 }
 
 /// The primary ray through a site: the pixel's centre, or exactly the ray its sample takes
@@ -381,31 +418,6 @@ fn site_ray(camera: &Camera, settings: &RenderSettings, site: Site) -> (glam::Ve
 
 /// Sites handed to a thread at a time.
 const CHUNK: usize = 16;
-
-/// Which of a round's sites a process computes (every process takes part in every round and
-/// ends it with the same records: see `run_shared`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Share {
-    /// Every site (one process).
-    All,
-    /// Sites `index`, `index + count`, `index + 2 count`, ... (one of `count` workers).
-    Slice { index: usize, count: usize },
-    /// None (an MPI master, which only gathers and hands out).
-    Nothing,
-}
-
-impl Share {
-    fn indices(self, sites: usize) -> Vec<u32> {
-        match self {
-            Share::All => (0..sites as u32).collect(),
-            Share::Slice { index, count } => (index..sites).step_by(count.max(1)).map(|i| i as u32).collect(),
-            Share::Nothing => Vec::new(),
-        }
-    }
-}
-
-/// A round's records, each with the index of the site it was made for, in site order.
-pub type RoundRecords = Vec<(u32, Record)>;
 
 /// What the work at every site needs.
 #[derive(Clone, Copy)]
@@ -493,32 +505,45 @@ pub fn run(
     settings: &RenderSettings,
     watch: &dyn Fn(usize, usize) -> bool,
 ) -> PrepassOutcome {
-    let Ok(outcome) = run_watched::<Infallible>(integrator, camera, settings, Share::All, &mut Ok, watch);
+    let Ok(outcome) = run_watched(integrator, camera, settings, &mut Alone, watch);
     outcome
 }
 
-/// Runs the prepass as one of several processes: each round this process computes its `share`
-/// of the sites, `exchange` turns its records into the round's records from every process (in
-/// site order), and all of them join the cache in that order, so every process ends each
-/// round with the same cache as one process alone would. An error of `exchange` ends it.
-pub fn run_shared<E>(
+/// Runs the prepass as one of several processes pooled by `pool`: each list's items (rows,
+/// sites) are computed by the process whose share holds them, the pool hands every process
+/// all of the results, and each round's records join the cache in site order, so every process
+/// ends each round with the same cache as one process alone would. An error of the pool ends it.
+pub fn run_shared<P: Pool>(
     integrator: &Integrator<'_>,
     camera: &Camera,
     settings: &RenderSettings,
-    share: Share,
-    exchange: &mut dyn FnMut(RoundRecords) -> Result<RoundRecords, E>,
-) -> Result<PrepassOutcome, E> {
-    run_watched(integrator, camera, settings, share, exchange, &|_, _| true)
+    pool: &mut P,
+) -> Result<PrepassOutcome, P::Error> {
+    run_watched(integrator, camera, settings, pool, &|_, _| true)
 }
 
-fn run_watched<E>(
+fn run_watched<P: Pool>(
     integrator: &Integrator<'_>,
     camera: &Camera,
     settings: &RenderSettings,
-    share: Share,
-    exchange: &mut dyn FnMut(RoundRecords) -> Result<RoundRecords, E>,
+    pool: &mut P,
     watch: &dyn Fn(usize, usize) -> bool,
-) -> Result<PrepassOutcome, E> {
+) -> Result<PrepassOutcome, P::Error> {
+    let mut timed = Timed::new(pool);
+    let outcome = prepass(integrator, camera, settings, &mut timed, watch);
+    outcome.map(|o| PrepassOutcome {
+        pool_s: timed.seconds,
+        ..o
+    })
+}
+
+fn prepass<P: Pool>(
+    integrator: &Integrator<'_>,
+    camera: &Camera,
+    settings: &RenderSettings,
+    pool: &mut P,
+    watch: &dyn Fn(usize, usize) -> bool,
+) -> Result<PrepassOutcome, P::Error> {
     let start = Instant::now();
     let mut outcome = PrepassOutcome {
         threads: vec![ThreadStats::default(); settings.threads.max(1)],
@@ -539,9 +564,10 @@ fn run_watched<E>(
     let grid_level = integrator
         .last_bounce_level()
         .filter(|_| integrator.options.last_bounce_grid);
-    if grid_level.is_some() && cache.last_bounce().is_none() {
+    // Only a process that renders reads the grid (a master keeping the records does not).
+    if grid_level.is_some() && cache.last_bounce().is_none() && pool.share().renders() {
         let mut sampling = vec![ThreadStats::default(); outcome.threads.len()];
-        let grid = last_bounce_grid(pass, &mut sampling);
+        let grid = last_bounce_grid(pass, pool, &mut sampling)?;
         for (thread, part) in outcome.threads.iter_mut().zip(&sampling) {
             thread.absorb(part);
             outcome.last_bounce_rays.add(&part.rays);
@@ -552,11 +578,19 @@ fn run_watched<E>(
     }
     // The rounds look records up in a lock-free copy of the cache, which grows with it.
     let mut snapshot = cache.snapshot();
-    let mut run = |sites: Vec<Site>, snapshot: &mut FrozenIndex, outcome: &mut PrepassOutcome| -> Result<(), E> {
-        let mine = share.indices(sites.len());
+    let run = |sites: Vec<Site>,
+               snapshot: &mut FrozenIndex,
+               outcome: &mut PrepassOutcome,
+               pool: &mut P|
+     -> Result<(), P::Error> {
+        let began = Instant::now();
+        let mine = pool.share().indices(sites.len());
         let made = run_round(pass, &sites, &mine, snapshot, &mut outcome.threads);
-        let mut made = exchange(made)?;
+        let computed = Instant::now();
+        let mut made = pool.round(made)?;
+        let pooled = computed.elapsed().as_secs_f64();
         made.sort_by_key(|(index, _)| *index);
+        let records = made.len();
         for (index, record) in made {
             let Some(&site) = sites.get(index as usize) else {
                 continue;
@@ -573,6 +607,13 @@ fn run_watched<E>(
         }
         outcome.sites += sites.len() as u64;
         outcome.rounds += 1;
+        outcome.round_log.push(RoundLog {
+            sites: sites.len() as u64,
+            records: records as u64,
+            compute_s: (computed - began).as_secs_f64(),
+            pool_s: pooled,
+            seconds: began.elapsed().as_secs_f64(),
+        });
         Ok(())
     };
     // Only the region's pixels (the whole image without --region) will be shaded.
@@ -589,7 +630,7 @@ fn run_watched<E>(
     let mut go_on = true;
     for (k, sites) in lattice.into_iter().enumerate() {
         let before = snapshot.len();
-        run(sites, &mut snapshot, &mut outcome)?;
+        run(sites, &mut snapshot, &mut outcome, pool)?;
         if k < coarse && snapshot.len() > before {
             cache.shrink_where_neighbours_disagree(&mut snapshot, |i| i >= found, |i| i >= before);
         }
@@ -601,10 +642,13 @@ fn run_watched<E>(
     // The pixels an edge crosses take more samples (`render::edges`), each a site: the final
     // pass finds the same pixels from the same rays.
     let spp = settings.spp.max(1);
-    let edges = (go_on && settings.edge_samples > spp).then(|| edge_map(pass, &mut outcome.threads));
+    let edges = match go_on && settings.edge_samples > spp {
+        true => Some(edge_map(pass, pool, &mut outcome.threads)?),
+        false => None,
+    };
     if go_on && (spp > 1 || settings.jitter || edges.is_some()) {
         let needs = if spp > 1 || settings.jitter {
-            pixels_needing_samples(pass, &snapshot, &mut outcome.threads)
+            pixels_needing_samples(pass, &snapshot, pool, &mut outcome.threads)?
         } else {
             vec![false; settings.window(camera).pixels()]
         };
@@ -616,7 +660,7 @@ fn run_watched<E>(
         let more = sample_rounds(settings.window(camera), &needs);
         total += more.len();
         for sites in more {
-            run(sites, &mut snapshot, &mut outcome)?;
+            run(sites, &mut snapshot, &mut outcome, pool)?;
             if !watch(outcome.rounds, total) {
                 break;
             }
