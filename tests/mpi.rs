@@ -735,13 +735,24 @@ fn component_layouts() {
     refused(4, &["--pa", "3"], "leaves no PR");
     refused(4, &["--pa", "0"], "no PA");
     refused(2, &[], "leaves no PR");
-    // It says what it chose.
-    let ok = mpirun(4, &base);
+    // It says what it chose: PAs where records are made as tiles render.
+    let mut args = base.to_vec();
+    args.extend_from_slice(&["--ic-build", "progressive"]);
+    let ok = mpirun(4, &args);
     assert!(ok.status.success(), "{}", stderr(&ok));
     assert!(
         stderr(&ok).contains("rank 0: master; PA: rank 1; PR: ranks 2, 3"),
         "{}",
         stderr(&ok)
+    );
+    // After the prepass (the default build) no pixel misses the cache: every worker renders,
+    // and it says why.
+    let ok = mpirun(4, &base);
+    assert!(ok.status.success(), "{}", stderr(&ok));
+    let err = stderr(&ok);
+    assert!(
+        err.contains("the prepass built every record") && err.contains("no PA; PR: ranks 1, 2, 3"),
+        "{err}"
     );
     // Nothing for PAs to do with -ab 0: every worker is a PR, and it says so.
     let mut args = base.to_vec();

@@ -74,6 +74,13 @@ impl Roles {
         })
     }
 
+    /// Every worker a PR (no PA): for a final pass after a prepass, which leaves no request.
+    pub fn every_worker_renders(self) -> Roles {
+        let mut prs = self.pas;
+        prs.extend(self.prs);
+        Roles { pas: Vec::new(), prs }
+    }
+
     /// The roles, each named before its ranks: "rank 0: master; PA: rank 1; PR: ranks 2, 3".
     pub fn describe(&self) -> String {
         let ranks = |what: &str, r: &[i32]| match r {
@@ -139,6 +146,14 @@ mod tests {
         assert!(Roles::choose(4, Some(0), true).is_err());
         assert!(Roles::choose(2, None, true).is_err());
         assert!(Roles::choose(1, None, true).is_err());
+        // After a prepass every worker renders.
+        assert_eq!(
+            Roles::choose(5, None, true).unwrap().every_worker_renders(),
+            Roles {
+                pas: vec![],
+                prs: vec![1, 2, 3, 4]
+            }
+        );
         // Nothing for PAs to do: every worker renders.
         assert_eq!(
             Roles::choose(4, None, false).unwrap(),
