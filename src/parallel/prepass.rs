@@ -90,6 +90,17 @@ impl Pool for Collective<'_, '_> {
             .collect())
     }
 
+    fn sites(&mut self, mine: Vec<u32>) -> Result<Vec<u32>, String> {
+        let parts = self.gather(false, Message::PrepassSites(mine))?;
+        Ok(parts
+            .into_iter()
+            .flat_map(|m| match m {
+                Message::PrepassSites(sites) => sites,
+                _ => unreachable!("decoded by its kind"),
+            })
+            .collect())
+    }
+
     fn grid_rows(&mut self, mine: GridRows) -> Result<GridRows, String> {
         debug_assert!(self.workers.is_some(), "only workers build the grid");
         let parts = self.gather(true, Message::PrepassGrid(mine))?;

@@ -429,12 +429,14 @@ struct Pass<'a, 'b> {
 }
 
 /// Runs one round's `mine` sites on one thread per entry of `stats`, looking records up in
-/// `snapshot` (the cache as the round began).
+/// `snapshot` (the cache as the round began). `counted`: the sites' lookups were counted
+/// already (by `find_misses`).
 fn run_round(
     pass: Pass<'_, '_>,
     sites: &[Site],
     mine: &[u32],
     snapshot: &FrozenIndex,
+    counted: bool,
     stats: &mut [ThreadStats],
 ) -> RoundRecords {
     let next = AtomicUsize::new(0);
@@ -447,7 +449,11 @@ fn run_round(
                 break;
             }
             for &index in &mine[first..(first + CHUNK).min(mine.len())] {
-                site_records(pass, snapshot, (index, sites[index as usize]), counts, &mut records);
+                let visit = Visit::Make {
+                    records: &mut records,
+                    count_lookups: !counted,
+                };
+                site_visit(pass, snapshot, (index, sites[index as usize]), counts, visit);
             }
         }
         made.lock().unwrap_or_else(|e| e.into_inner()).extend(records);
@@ -457,15 +463,59 @@ fn run_round(
     made
 }
 
-/// Adds the records a site needs (none when no diffuse surface on its eye path lacks one) to
-/// `records`, in the order the path reaches them.
-fn site_records(
+/// Of a round's `mine` sites, those whose eye path reaches a point no record in `snapshot`
+/// covers: the sites that will make records (`run_round` then makes them), in site order.
+fn find_misses(
+    pass: Pass<'_, '_>,
+    sites: &[Site],
+    mine: &[u32],
+    snapshot: &FrozenIndex,
+    stats: &mut [ThreadStats],
+) -> Vec<u32> {
+    let next = AtomicUsize::new(0);
+    let found = Mutex::new(Vec::new());
+    on_threads(stats, |counts| {
+        let mut misses = Vec::new();
+        loop {
+            let first = next.fetch_add(CHUNK, Ordering::Relaxed);
+            if first >= mine.len() {
+                break;
+            }
+            for &index in &mine[first..(first + CHUNK).min(mine.len())] {
+                if site_visit(pass, snapshot, (index, sites[index as usize]), counts, Visit::Find) {
+                    misses.push(index);
+                }
+            }
+        }
+        found.lock().unwrap_or_else(|e| e.into_inner()).extend(misses);
+    });
+    let mut found = found.into_inner().unwrap_or_else(|e| e.into_inner());
+    found.sort_unstable();
+    found
+}
+
+/// What a site's visit does with the points on its eye path that no record covers.
+enum Visit<'r> {
+    /// Only finds whether there is one (counting the lookups up to it).
+    Find,
+    /// Makes their records (`count_lookups`: false where `Find` counted them already).
+    Make {
+        records: &'r mut RoundRecords,
+        count_lookups: bool,
+    },
+}
+
+/// Visits a site: follows its eye path to the diffuse points it reaches and looks each up;
+/// answers whether any lacks a record, and with `Visit::Make` adds the records they need to
+/// `records`, in the order the path reaches them. The site's random stream is its own, so a
+/// site's records are the same whichever process visits it, and however often.
+fn site_visit(
     pass: Pass<'_, '_>,
     snapshot: &FrozenIndex,
     (index, site): (u32, Site),
     counts: &mut RayCounts,
-    records: &mut RoundRecords,
-) {
+    mut visit: Visit<'_>,
+) -> bool {
     let Pass {
         integrator,
         cache,
@@ -484,15 +534,30 @@ fn site_records(
     let spread = eye_spread(camera, settings, dir, site.sample.map_or(1, |s| s.count));
     let mut work = Work::new(counts);
     work.sample.pixel = pixel as u32;
+    let count = !matches!(
+        visit,
+        Visit::Make {
+            count_lookups: false,
+            ..
+        }
+    );
+    let mut missed = false;
     for hit in integrator.record_sites(origin, dir, spread, &mut rng, &mut work) {
-        work.lookups += 1;
+        work.lookups += count as u64;
         let headroom = integrator.headroom(cache, &hit, &mut work);
         if cache.covered_in(snapshot, hit.position, hit.normal, headroom, 0) {
-            work.hits += 1;
+            work.hits += count as u64;
             continue;
         }
-        records.push((index, integrator.eye_record(cache, &hit, &mut rng, &mut work)));
+        missed = true;
+        match &mut visit {
+            Visit::Find => return true,
+            Visit::Make { records, .. } => {
+                records.push((index, integrator.eye_record(cache, &hit, &mut rng, &mut work)))
+            }
+        }
     }
+    missed
 }
 
 /// Runs the whole prepass in this process into `integrator`'s cache (nothing to do without one).
@@ -584,11 +649,32 @@ fn prepass<P: Pool>(
                pool: &mut P|
      -> Result<(), P::Error> {
         let began = Instant::now();
+        let mut pooled = 0.0;
         let mine = pool.share().indices(sites.len());
-        let made = run_round(pass, &sites, &mine, snapshot, &mut outcome.threads);
+        // Processes sharing a round first find which of their sites lack records, and then
+        // share those sites out evenly: a round's time is its slowest process's, and the
+        // records are nearly all of it (a site's lookup is about 1.5 us, a record at -ab 2
+        // about 0.8 ms: conference room), so the records, not the sites, must be spread.
+        let made = if pool.share() == Share::All {
+            run_round(pass, &sites, &mine, snapshot, false, &mut outcome.threads)
+        } else {
+            let misses = find_misses(pass, &sites, &mine, snapshot, &mut outcome.threads);
+            let pooling = Instant::now();
+            let mut all = pool.sites(misses)?;
+            pooled += pooling.elapsed().as_secs_f64();
+            all.sort_unstable();
+            let share: Vec<u32> = pool
+                .share()
+                .indices(all.len())
+                .into_iter()
+                .map(|k| all[k as usize])
+                .collect();
+            run_round(pass, &sites, &share, snapshot, true, &mut outcome.threads)
+        };
         let computed = Instant::now();
+        let compute_s = (computed - began).as_secs_f64() - pooled;
         let mut made = pool.round(made)?;
-        let pooled = computed.elapsed().as_secs_f64();
+        pooled += computed.elapsed().as_secs_f64();
         made.sort_by_key(|(index, _)| *index);
         let records = made.len();
         for (index, record) in made {
@@ -610,7 +696,7 @@ fn prepass<P: Pool>(
         outcome.round_log.push(RoundLog {
             sites: sites.len() as u64,
             records: records as u64,
-            compute_s: (computed - began).as_secs_f64(),
+            compute_s,
             pool_s: pooled,
             seconds: began.elapsed().as_secs_f64(),
         });

@@ -56,6 +56,8 @@ pub trait Pool {
     fn share(&self) -> Share;
     /// A round's records.
     fn round(&mut self, mine: RoundRecords) -> Result<RoundRecords, Self::Error>;
+    /// Indices of a round's sites (those of its share that lack records).
+    fn sites(&mut self, mine: Vec<u32>) -> Result<Vec<u32>, Self::Error>;
     /// The last bounce's rows (only processes that render build the grid, and only they call).
     fn grid_rows(&mut self, mine: GridRows) -> Result<GridRows, Self::Error>;
     /// Rows of a pixel map.
@@ -73,6 +75,10 @@ impl Pool for Alone {
     }
 
     fn round(&mut self, mine: RoundRecords) -> Result<RoundRecords, Infallible> {
+        Ok(mine)
+    }
+
+    fn sites(&mut self, mine: Vec<u32>) -> Result<Vec<u32>, Infallible> {
         Ok(mine)
     }
 
@@ -114,6 +120,10 @@ impl<P: Pool> Pool for Timed<'_, P> {
 
     fn round(&mut self, mine: RoundRecords) -> Result<RoundRecords, P::Error> {
         self.time(|p| p.round(mine))
+    }
+
+    fn sites(&mut self, mine: Vec<u32>) -> Result<Vec<u32>, P::Error> {
+        self.time(|p| p.sites(mine))
     }
 
     fn grid_rows(&mut self, mine: GridRows) -> Result<GridRows, P::Error> {

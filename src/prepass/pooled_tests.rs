@@ -45,6 +45,7 @@ struct InMemory {
     slot: usize,
     share: Share,
     rounds: Arc<Gather<RoundRecords>>,
+    sites: Arc<Gather<Vec<u32>>>,
     rows: Arc<Gather<PixelRows>>,
     grid: Arc<Gather<GridRows>>,
 }
@@ -58,6 +59,10 @@ impl Pool for InMemory {
 
     fn round(&mut self, mine: RoundRecords) -> Result<RoundRecords, Infallible> {
         Ok(self.rounds.all(self.slot, mine).concat())
+    }
+
+    fn sites(&mut self, mine: Vec<u32>) -> Result<Vec<u32>, Infallible> {
+        Ok(self.sites.all(self.slot, mine).concat())
     }
 
     fn grid_rows(&mut self, mine: GridRows) -> Result<GridRows, Infallible> {
@@ -107,10 +112,11 @@ fn made(job: &Job, outcome: PrepassOutcome) -> Made {
 fn pooled(workers: usize, extra: &[&str]) -> Vec<Made> {
     let parties = workers + 1;
     let (rounds, rows, grid) = (Gather::new(parties), Gather::new(parties), Gather::new(workers));
+    let sites = Gather::new(parties);
     std::thread::scope(|scope| {
         let processes: Vec<_> = (0..parties)
             .map(|slot| {
-                let (rounds, rows, grid) = (rounds.clone(), rows.clone(), grid.clone());
+                let (rounds, rows, grid, sites) = (rounds.clone(), rows.clone(), grid.clone(), sites.clone());
                 scope.spawn(move || {
                     let job = job(extra);
                     let share = match slot {
@@ -124,6 +130,7 @@ fn pooled(workers: usize, extra: &[&str]) -> Vec<Made> {
                         slot,
                         share,
                         rounds,
+                        sites,
                         rows,
                         grid,
                     };

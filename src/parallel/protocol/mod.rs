@@ -82,6 +82,7 @@ kinds! {
     Results = 17, "results";
     PrepassGrid = 18, "prepass grid rows";
     PrepassPixels = 19, "prepass pixel rows";
+    PrepassSites = 20, "prepass sites";
     /// Tags WORK_BASE + thread.
     Work = WORK_BASE as isize, "work";
     /// Tags RECORDS_DOWN_BASE + thread.
@@ -163,6 +164,9 @@ pub enum Message {
     PrepassGrid(GridRows),
     /// Every rank -> every rank (a collective): its rows of a prepass pixel map.
     PrepassPixels(PixelRows),
+    /// Every rank -> every rank (a collective): the sites of its share of a prepass round
+    /// that lack records (indices into the round's sites).
+    PrepassSites(Vec<u32>),
     /// Worker -> MC: give me a tile, with the tile finished before, if any.
     WorkRequest {
         thread: u32,
@@ -244,6 +248,10 @@ impl Message {
                             .for_each(|v| out.put_vec3(v));
                     }
                 }
+            }
+            Message::PrepassSites(sites) => {
+                out.put_u32(sites.len() as u32);
+                sites.iter().for_each(|&s| out.put_u32(s));
             }
             Message::PrepassPixels(rows) => {
                 out.put_u32(rows.len() as u32);
@@ -344,6 +352,10 @@ impl Message {
                     rows.push((y, row));
                 }
                 Message::PrepassGrid(rows)
+            }
+            Kind::PrepassSites => {
+                let count = r.count(4)?;
+                Message::PrepassSites((0..count).map(|_| r.u32()).collect::<Result<_, _>>()?)
             }
             Kind::PrepassPixels => {
                 let count = r.count(8)?;

@@ -86,6 +86,7 @@ fn every_message() -> Vec<Message> {
         Message::InitialRecords(records()),
         Message::PrepassStart(Records::default()),
         Message::PrepassRound(vec![(3, record(0)), (9, record(4))]),
+        Message::PrepassSites(vec![4, 0, 17, u32::MAX]),
         Message::PrepassGrid(vec![(0, vec![]), (4, vec![grid_sample(1.0), grid_sample(-2.5)])]),
         // Rows of 0, 3, 8 and 11 flags: the bits pack into whole bytes, and the last one's rest.
         Message::PrepassPixels(vec![
