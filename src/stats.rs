@@ -162,6 +162,14 @@ pub struct RankReport {
     pub prepass_s: f64,
     #[serde(default)]
     pub prepass_pool_s: f64,
+    /// The last bounce's grid as this rank built it (the same cells and samples on every
+    /// worker) and the rays of the rows it sampled (the workers share the rows).
+    #[serde(default)]
+    pub last_bounce_cells: u64,
+    #[serde(default)]
+    pub last_bounce_samples: u64,
+    #[serde(default)]
+    pub last_bounce_rays: RayStats,
 }
 
 #[derive(Clone, Debug, Default, Serialize)]
@@ -283,6 +291,13 @@ impl RenderStats {
         self.last_bounce_samples = prepass.last_bounce_samples;
         self.last_bounce_rays = RayStats::from(&prepass.last_bounce_rays);
         self.prepass_round_log = prepass.round_log.clone();
+        // Under mpirun the master builds no grid (it renders nothing): the workers say what
+        // theirs holds, and each sampled its share of the rows.
+        if prepass.last_bounce_samples == 0 && self.per_rank.iter().any(|r| r.last_bounce_samples > 0) {
+            self.last_bounce_cells = self.per_rank.iter().map(|r| r.last_bounce_cells).max().unwrap_or(0);
+            self.last_bounce_samples = self.per_rank.iter().map(|r| r.last_bounce_samples).max().unwrap_or(0);
+            self.last_bounce_rays = RayStats::sum(self.per_rank.iter().map(|r| &r.last_bounce_rays));
+        }
     }
 
     pub fn add_threads(&mut self, threads: &[ThreadStats]) {

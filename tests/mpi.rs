@@ -227,6 +227,7 @@ fn the_prepass_gives_every_mode_the_serial_image() {
     let edge_pixels = u(&serial.stats, "edge_pixels");
     assert!(records > 20);
     assert!(edge_pixels > 0);
+    assert!(u(&serial.stats, "last_bounce_samples") > 0, "-ab 2 builds the grid");
     // A few samples reach a surface the prepass did not cover (measured: 4 here).
     assert!(gaps * 20 < records, "{gaps} gaps for {records} records");
     // 1 to 4 workers in every mode (component mode needs 2 workers: a PA and a PR).
@@ -253,6 +254,14 @@ fn the_prepass_gives_every_mode_the_serial_image() {
         // Every record is made once, by one worker; afterwards only the same gaps' records.
         assert_eq!(u(s, "gap_records"), gaps, "{name}");
         assert_eq!(u(s, "edge_pixels"), edge_pixels, "{name}");
+        // The last bounce's grid, its rows shared by the workers, is the one process's.
+        for key in ["last_bounce_cells", "last_bounce_samples"] {
+            assert_eq!(u(s, key), u(&serial.stats, key), "{name}: {key}");
+        }
+        assert_eq!(
+            s["last_bounce_rays"]["total"], serial.stats["last_bounce_rays"]["total"],
+            "{name}: the grid's rays"
+        );
         assert_eq!(u(s, "records_computed"), records + gaps, "{name}");
         // The prepass's messages are in the ranks' books, and the books balance.
         let ranks = s["per_rank"].as_array().unwrap();

@@ -240,6 +240,12 @@ impl Setup<'_> {
             wall_s: self.start.elapsed().as_secs_f64(),
             prepass_s: self.prepass.as_ref().map_or(0.0, |p| p.seconds),
             prepass_pool_s: self.prepass.as_ref().map_or(0.0, |p| p.pool_s),
+            last_bounce_cells: self.prepass.as_ref().map_or(0, |p| p.last_bounce_cells),
+            last_bounce_samples: self.prepass.as_ref().map_or(0, |p| p.last_bounce_samples),
+            last_bounce_rays: self
+                .prepass
+                .as_ref()
+                .map_or_else(Default::default, |p| crate::stats::RayStats::from(&p.last_bounce_rays)),
             ..traffic_report(comm.rank(), role, &[comm.counters, helper, self.traffic_before], idle_s)
         }
     }

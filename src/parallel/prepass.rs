@@ -113,6 +113,13 @@ impl Pool for Collective<'_, '_> {
             .collect())
     }
 
+    fn bytes_received(&self) -> u64 {
+        self.world
+            .counters
+            .bytes_received
+            .load(std::sync::atomic::Ordering::Relaxed)
+    }
+
     fn pixel_rows(&mut self, mine: PixelRows) -> Result<PixelRows, String> {
         let parts = self.gather(false, Message::PrepassPixels(mine))?;
         Ok(parts

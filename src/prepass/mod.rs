@@ -98,7 +98,8 @@ pub struct PrepassOutcome {
 
 /// One round of the prepass as one process saw it: the whole round's sites and records, and
 /// this process's seconds computing its share, in the pool (handing its records over and
-/// waiting for the others'), and in all (with putting the records in the cache).
+/// waiting for the others'), and in all (with putting the records in the cache), and the bytes
+/// it took in from the other processes.
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct RoundLog {
     pub sites: u64,
@@ -106,6 +107,8 @@ pub struct RoundLog {
     pub compute_s: f64,
     pub pool_s: f64,
     pub seconds: f64,
+    #[serde(default)]
+    pub bytes: u64,
 }
 
 impl PrepassOutcome {
@@ -649,6 +652,7 @@ fn prepass<P: Pool>(
                pool: &mut P|
      -> Result<(), P::Error> {
         let began = Instant::now();
+        let bytes_before = pool.bytes_received();
         let mut pooled = 0.0;
         let mine = pool.share().indices(sites.len());
         // Processes sharing a round first find which of their sites lack records, and then
@@ -698,6 +702,7 @@ fn prepass<P: Pool>(
             records: records as u64,
             compute_s,
             pool_s: pooled,
+            bytes: pool.bytes_received() - bytes_before,
             seconds: began.elapsed().as_secs_f64(),
         });
         Ok(())

@@ -62,6 +62,10 @@ pub trait Pool {
     fn grid_rows(&mut self, mine: GridRows) -> Result<GridRows, Self::Error>;
     /// Rows of a pixel map.
     fn pixel_rows(&mut self, mine: PixelRows) -> Result<PixelRows, Self::Error>;
+    /// Bytes this process has taken in from the others so far (for the rounds' log).
+    fn bytes_received(&self) -> u64 {
+        0
+    }
 }
 
 /// One process: every item is its own, nothing to pool.
@@ -132,6 +136,10 @@ impl<P: Pool> Pool for Timed<'_, P> {
 
     fn pixel_rows(&mut self, mine: PixelRows) -> Result<PixelRows, P::Error> {
         self.time(|p| p.pixel_rows(mine))
+    }
+
+    fn bytes_received(&self) -> u64 {
+        self.pool.bytes_received()
     }
 }
 
