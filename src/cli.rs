@@ -60,6 +60,10 @@ pub enum Command {
     /// parts made with other settings, overlapping parts and holes are refused.
     #[command(override_usage = "icrender merge OUT.exr PART.exr... [--overwrite]")]
     Merge(MergeArgs),
+    /// Print docs/options.md, the options reference, from this definition (for maintainers:
+    /// `cargo run --release -- help-reference > docs/options.md`).
+    #[command(name = "help-reference", hide = true)]
+    HelpReference,
 }
 
 #[derive(Args, Debug)]

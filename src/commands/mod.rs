@@ -5,6 +5,7 @@ pub mod cache;
 pub mod compare;
 pub mod export;
 pub mod frames;
+pub mod help_reference;
 pub mod info;
 pub mod merge;
 pub mod reference;
