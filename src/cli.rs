@@ -53,7 +53,7 @@ pub enum Command {
     Export(ExportArgs),
     /// Run only the irradiance cache prepass for the image the same render options (or a
     /// --region) would make, and write its records to the -af file (no image): the shared
-    /// cache of a farm's region or frame tasks (see README, "Render farms").
+    /// cache of a farm's region or frame tasks (see docs/farms.md).
     #[command(override_usage = "icrender cache <SCENE> -af FILE [RENDER OPTIONS]")]
     Cache(Box<RenderArgs>),
     /// Assemble parts rendered with --region into the whole image: every layer and the header;
@@ -339,19 +339,19 @@ pub struct RenderArgs {
     #[arg(long = "denoise")]
     pub denoise: bool,
     /// The denoiser's quality: fast, balanced or high (OIDN's trade of time against error).
-    /// `fast` by default: in the peers bench its curve lies lowest (README, "Denoising").
+    /// `fast` by default: in the peers bench its curve lies lowest (docs/layers.md, "Denoising").
     #[arg(long = "denoise-quality", value_enum, default_value_t = DenoiseQualityArg::Fast, requires = "denoise")]
     pub denoise_quality: DenoiseQualityArg,
     /// Prefilter the albedo and normal guides before they guide the filter (OIDN's way for
     /// noisy guides; icrender's come from the camera samples' first hits, free of Monte Carlo
-    /// noise, and prefiltering them was worse, see README "Denoising").
+    /// noise, and prefiltering them was worse, see docs/layers.md, "Denoising").
     #[arg(long = "denoise-prefilter", requires = "denoise")]
     pub denoise_prefilter: bool,
     /// No progress bar and no summary.
     #[arg(short = 'q', long = "quiet")]
     pub quiet: bool,
     /// How progress is shown: `bar` on a terminal's stderr, or `json`, one line per step on
-    /// stdout for a farm manager (one-process renders; see README, "Render farms").
+    /// stdout for a farm manager (one-process renders; see docs/farms.md).
     #[arg(long = "progress", value_enum, default_value_t = ProgressArg::Bar)]
     pub progress: ProgressArg,
     #[command(flatten)]

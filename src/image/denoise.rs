@@ -8,7 +8,7 @@
 //! - `specular`: glossy reflection and transmission sample their lobes: Monte Carlo noise;
 //! - `indirect`: the cache's records are Monte Carlo estimates of their hemispheres, and with
 //!   `-aa 0` every pixel samples its own; interpolated records leave smooth, low-frequency
-//!   errors, which are not the per-pixel noise the denoiser was trained to remove (README);
+//!   errors, which are not the per-pixel noise the denoiser was trained to remove (docs/layers.md);
 //! - not `emission`: the emitters seen straight from the eye are exact but for the
 //!   antialiasing of their edges, which a denoiser could only blur.
 //!
