@@ -255,10 +255,7 @@ pub struct RenderArgs {
     /// Samples per pixel in the pixels an edge crosses (their four corners do not all see one
     /// surface: a silhouette, a crease, where objects or materials meet), used when above
     /// --spp. One ray per pixel corner finds them; a box filter's error is largest there.
-    /// 0: every pixel takes --spp. The default 4: at the other defaults it lowered relMSE
-    /// 1.7x, 1.9x and 1.6x (Cornell box, conference room, Sibenik) for 1.36x, 1.70x and 1.69x
-    /// the time, ahead of more samples in every pixel at equal time on the first two (1.27x,
-    /// 1.28x) and about even on Sibenik (0.95x): bench/edges.py, docs/EDGES.md.
+    /// 0: every pixel takes --spp. What it buys at each setting: docs/EDGES.md (bench/edges.py).
     #[arg(long = "edge-samples", default_value_t = 4, allow_negative_numbers = true)]
     pub edge_samples: u32,
     /// Before a tile's pixels, make the cache records that the first surfaces on a grid of
