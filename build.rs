@@ -153,6 +153,18 @@ fn openimageio_flags() -> (Vec<String>, Vec<String>) {
     (includes, libs)
 }
 
+/// The glTF loader's translation units, one concern each (see cpp/scene_io_internal.h).
+const SCENE_IO_FILES: [&str; 8] = [
+    "cpp/scene_io.cpp",
+    "cpp/scene_io_validate.cpp",
+    "cpp/scene_io_mesh.cpp",
+    "cpp/scene_io_materials.cpp",
+    "cpp/scene_io_nodes.cpp",
+    "cpp/scene_io_cameras.cpp",
+    "cpp/scene_io_lights.cpp",
+    "cpp/scene_io_animation.cpp",
+];
+
 fn compile_cpp(out: &Path) {
     let mut build = cc::Build::new();
     build
@@ -160,7 +172,7 @@ fn compile_cpp(out: &Path) {
         .std("c++17")
         .include("ffi")
         .include("/usr/include/stb")
-        .file("cpp/scene_io.cpp")
+        .files(SCENE_IO_FILES)
         .flag_if_supported("-Wno-unused-parameter")
         .flag_if_supported("-Wno-missing-field-initializers")
         .opt_level(2);

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""The README's picture of the denoiser: raw and denoised side by side, with their errors.
+"""docs/layers.md's picture of the denoiser: raw and denoised side by side, with their errors.
 
 Renders the shared Cornell box as bench/peers.py does (256x256, -ab 1, --lambertian) at its
 fastest setting with --denoise, and writes docs/denoise.png: the raw composite and the layer

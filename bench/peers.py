@@ -478,8 +478,8 @@ def report_targets(name, rows):
             targets(name, rows, metric, clock, ("icrender",), ours_name="icrender+oidn", on_frontiers=True)
 
 
-# The README's names of the views, in its tables' order (`--readme-tables`).
-README_VIEWS = [("cornell", "default", "Cornell box, -ab 1"), ("cornell", "corner", "Cornell box, inside corner"),
+# The names of the views in docs/benchmarks.md's tables, in their order (`--tables`).
+TABLE_VIEWS = [("cornell", "default", "Cornell box, -ab 1"), ("cornell", "corner", "Cornell box, inside corner"),
                 ("conference", "default", "conference room, -ab 2"),
                 ("conference", "corner", "conference room, high corner"),
                 ("sibenik", "default", "Sibenik, -ab 2"), ("sibenik", "aisle", "Sibenik, aisle")]
@@ -493,7 +493,7 @@ def read_rows(path):
 
 
 def verdict_cell(name, rows, metric, peer_names, ours_name):
-    """One cell of the README's tables: `targets`' verdict (CPU time over the cores), as
+    """One cell of docs/benchmarks.md's tables: `targets`' verdict (CPU time over the cores), as
     "below at every time, at least Rx" or "above from T s, Rx at T s"."""
     # `targets` prints its line as well: not part of the tables.
     with contextlib.redirect_stdout(io.StringIO()):
@@ -506,14 +506,33 @@ def verdict_cell(name, rows, metric, peer_names, ours_name):
     return f"above from {losing_from:.2f} s, {ratio:.2f}x at {at:.2f} s"
 
 
-def readme_tables(plots):
-    """The README's two tables of verdicts (issue 18's against the peers, issue 21's of the
+# The page that holds the two tables, between these markers (the rest of the page is prose).
+TABLES_PAGE = os.path.join(common.ROOT, "docs", "benchmarks.md")
+TABLES_BEGIN = "<!-- peers-tables:begin -->"
+TABLES_END = "<!-- peers-tables:end -->"
+
+
+def write_tables(page, tables):
+    """Replaces what lies between the markers of `page` with `tables`; a page without both
+    markers is an error, so the tables never land where no one reads them."""
+    with open(page) as f:
+        text = f.read()
+    begin, end = text.find(TABLES_BEGIN), text.find(TABLES_END)
+    if begin < 0 or end < begin:
+        sys.exit(f"{page}: no {TABLES_BEGIN} ... {TABLES_END} block to write the tables into")
+    text = text[:begin + len(TABLES_BEGIN)] + "\n" + tables + "\n" + text[end:]
+    with open(page, "w") as f:
+        f.write(text)
+
+
+def tables_markdown(plots):
+    """docs/benchmarks.md's two tables of verdicts (issue 18's against the peers, issue 21's of the
     denoised curve), from the CSVs in `plots`, as Markdown."""
     first = ["| scene, view | relMSE vs raw path tracers | relMSE vs every peer | 4x4 relMSE vs raw | "
              "4x4 relMSE vs every peer |", "|---|---|---|---|---|"]
     second = ["| scene, view | relMSE vs icrender raw | relMSE vs Cycles + OIDN | 4x4 relMSE vs icrender raw | "
               "4x4 relMSE vs Cycles + OIDN |", "|---|---|---|---|---|"]
-    for name, view, title in README_VIEWS:
+    for name, view, title in TABLE_VIEWS:
         rows = read_rows(os.path.join(plots, f"peers-{label(name, view)}.csv"))
         against_peers = [verdict_cell(label(name, view), rows, metric, peers, "icrender")
                          for metric in ("relmse", "relmse_4x4")
@@ -574,8 +593,9 @@ def main():
                              "not timed, so they can be made ahead, on a busy machine")
     parser.add_argument("--report-only", action="store_true",
                         help="re-read docs/peers/peers-SCENE.csv, print the targets and redraw the plot")
-    parser.add_argument("--readme-tables", action="store_true",
-                        help="print the README's two tables of verdicts from docs/peers/*.csv (all six views) and stop")
+    parser.add_argument("--tables", action="store_true",
+                        help="write the two tables of verdicts from docs/peers/*.csv (all six views) into "
+                             "docs/benchmarks.md, print them, and stop")
     parser.add_argument("--no-denoise", action="store_true", help="no icrender+oidn curve (icrender --denoise)")
     parser.add_argument("--denoise-quality", default="fast", choices=("fast", "balanced", "high"),
                         help="icrender --denoise-quality for the icrender+oidn curve")
@@ -587,8 +607,10 @@ def main():
     args = parser.parse_args()
     jobs = [(name, view) for name in args.scenes.split(",") for view in SCENES[name]["views"]
             if args.views == "all" or view in args.views.split(",")]
-    if args.readme_tables:
-        print(readme_tables(args.plots))
+    if args.tables:
+        tables = tables_markdown(args.plots)
+        write_tables(TABLES_PAGE, tables)
+        print(tables)
         return
     if args.report_only:
         for name, view in jobs:

@@ -1,5 +1,5 @@
 /*
- * C ABI between the C++ glTF loader (cpp/scene_io.cpp, tinygltf) and the Rust renderer.
+ * C ABI between the C++ glTF loader (cpp/scene_io*.cpp, tinygltf) and the Rust renderer.
  *
  * The loader only adapts: it parses the file, validates every accessor against the buffers it
  * reads, decodes textures, walks the node graph and hands back flat arrays. Meshes stay in their

@@ -7,7 +7,7 @@
 # compiled with CXX (libFuzzer itself) is built unchanged.
 for arg in "$@"; do
     case "$arg" in
-        cpp/scene_io.cpp | cpp/image_io.cpp | */cpp/scene_io.cpp | */cpp/image_io.cpp)
+        cpp/scene_io*.cpp | cpp/image_io.cpp | */cpp/scene_io*.cpp | */cpp/image_io.cpp)
             exec clang++ "$@" -fsanitize=address,fuzzer-no-link \
                 -fsanitize=undefined -fsanitize-trap=undefined -fno-sanitize-recover=all \
                 -fno-omit-frame-pointer -g

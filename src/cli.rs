@@ -53,13 +53,17 @@ pub enum Command {
     Export(ExportArgs),
     /// Run only the irradiance cache prepass for the image the same render options (or a
     /// --region) would make, and write its records to the -af file (no image): the shared
-    /// cache of a farm's region or frame tasks (see README, "Render farms").
+    /// cache of a farm's region or frame tasks (see docs/farms.md).
     #[command(override_usage = "icrender cache <SCENE> -af FILE [RENDER OPTIONS]")]
     Cache(Box<RenderArgs>),
     /// Assemble parts rendered with --region into the whole image: every layer and the header;
     /// parts made with other settings, overlapping parts and holes are refused.
     #[command(override_usage = "icrender merge OUT.exr PART.exr... [--overwrite]")]
     Merge(MergeArgs),
+    /// Print docs/options.md, the options reference, from this definition (for maintainers:
+    /// `cargo run --release -- help-reference > docs/options.md`).
+    #[command(name = "help-reference", hide = true)]
+    HelpReference,
 }
 
 #[derive(Args, Debug)]
@@ -251,10 +255,7 @@ pub struct RenderArgs {
     /// Samples per pixel in the pixels an edge crosses (their four corners do not all see one
     /// surface: a silhouette, a crease, where objects or materials meet), used when above
     /// --spp. One ray per pixel corner finds them; a box filter's error is largest there.
-    /// 0: every pixel takes --spp. The default 4: at the other defaults it lowered relMSE
-    /// 1.7x, 1.9x and 1.6x (Cornell box, conference room, Sibenik) for 1.36x, 1.70x and 1.69x
-    /// the time, ahead of more samples in every pixel at equal time on the first two (1.27x,
-    /// 1.28x) and about even on Sibenik (0.95x): bench/edges.py, docs/EDGES.md.
+    /// 0: every pixel takes --spp. What it buys at each setting: docs/EDGES.md (bench/edges.py).
     #[arg(long = "edge-samples", default_value_t = 4, allow_negative_numbers = true)]
     pub edge_samples: u32,
     /// Before a tile's pixels, make the cache records that the first surfaces on a grid of
@@ -335,19 +336,19 @@ pub struct RenderArgs {
     #[arg(long = "denoise")]
     pub denoise: bool,
     /// The denoiser's quality: fast, balanced or high (OIDN's trade of time against error).
-    /// `fast` by default: in the peers bench its curve lies lowest (README, "Denoising").
+    /// `fast` by default: in the peers bench its curve lies lowest (docs/layers.md, "Denoising").
     #[arg(long = "denoise-quality", value_enum, default_value_t = DenoiseQualityArg::Fast, requires = "denoise")]
     pub denoise_quality: DenoiseQualityArg,
     /// Prefilter the albedo and normal guides before they guide the filter (OIDN's way for
     /// noisy guides; icrender's come from the camera samples' first hits, free of Monte Carlo
-    /// noise, and prefiltering them was worse, see README "Denoising").
+    /// noise, and prefiltering them was worse, see docs/layers.md, "Denoising").
     #[arg(long = "denoise-prefilter", requires = "denoise")]
     pub denoise_prefilter: bool,
     /// No progress bar and no summary.
     #[arg(short = 'q', long = "quiet")]
     pub quiet: bool,
     /// How progress is shown: `bar` on a terminal's stderr, or `json`, one line per step on
-    /// stdout for a farm manager (one-process renders; see README, "Render farms").
+    /// stdout for a farm manager (one-process renders; see docs/farms.md).
     #[arg(long = "progress", value_enum, default_value_t = ProgressArg::Bar)]
     pub progress: ProgressArg,
     #[command(flatten)]

@@ -58,5 +58,9 @@ fn run(cli: &cli::Cli) -> commands::CommandResult {
         cli::Command::Export(args) => commands::export::run(args),
         cli::Command::Cache(args) => commands::cache::run(args),
         cli::Command::Merge(args) => commands::merge::run(args),
+        cli::Command::HelpReference => {
+            print!("{}", commands::help_reference::markdown());
+            Ok(())
+        }
     }
 }

@@ -1,6 +1,6 @@
 //! The benches on a fresh machine: each checks the Python packages and programs it needs before
 //! it does any work, and stops with one line saying what is missing and the one command that
-//! installs them (bench/requirements.txt, which the README gives). Here a package is hidden
+//! installs them (bench/requirements.txt, which docs/benchmarks.md gives). Here a package is hidden
 //! from the script (as if not installed) and the script must stop at once, having built and
 //! rendered nothing.
 
@@ -96,9 +96,9 @@ fn requirements_pin_every_checked_package() {
             "{package} is not pinned in bench/requirements.txt"
         );
     }
-    let readme = std::fs::read_to_string(project_dir().join("README.md")).unwrap();
+    let page = std::fs::read_to_string(project_dir().join("docs/benchmarks.md")).unwrap();
     assert!(
-        readme.contains("pip install -r bench/requirements.txt"),
-        "the README does not give the command that installs the benches' dependencies"
+        page.contains("pip install -r bench/requirements.txt"),
+        "docs/benchmarks.md does not give the command that installs the benches' dependencies"
     );
 }

@@ -1,6 +1,6 @@
 //! The scene loader end to end: bytes -> a .gltf (or .glb, when the bytes start with the GLB
 //! magic) in a private folder -> `Scene::load`, which runs the C++ loader (tinygltf, stb_image,
-//! cpp/scene_io.cpp) and the Rust conversion behind it. The folder also holds a small buffer and
+//! cpp/scene_io*.cpp) and the Rust conversion behind it. The folder also holds a small buffer and
 //! a small PNG the fuzzer can refer to by name ("tri.bin", "tex.png"); copies of both sit in the
 //! parent folder, so that a reference escaping the folder would find a file to read.
 

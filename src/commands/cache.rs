@@ -1,7 +1,7 @@
 //! `icrender cache`: the irradiance cache prepass alone. It places every record the image
 //! the same options would render (or its --region) needs, appends them to the -af file and
 //! stops: no final pass, no image. A farm runs it once before its region or frame tasks,
-//! which then read the file with --af-read-only (README, "Render farms").
+//! which then read the file with --af-read-only (docs/farms.md).
 
 use super::{CommandError, CommandResult, Exit};
 use crate::cli::{CacheBuildArg, ModeArg, ProgressArg, RenderArgs};

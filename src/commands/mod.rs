@@ -5,6 +5,7 @@ pub mod cache;
 pub mod compare;
 pub mod export;
 pub mod frames;
+pub mod help_reference;
 pub mod info;
 pub mod merge;
 pub mod reference;
@@ -13,7 +14,7 @@ pub mod seams;
 pub mod view;
 
 /// How a command ended, as its exit status says it to a farm manager or a script: whether
-/// running the same task again can help (README, "Exit status").
+/// running the same task again can help (docs/farms.md, "Progress, exit status, stopping").
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Exit {
     /// The command line, the scene, a reference or a checkpoint is wrong: the same task fails

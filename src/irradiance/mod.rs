@@ -69,7 +69,7 @@ pub struct CacheSettings {
 /// records' own Monte Carlo noise, most of the cache's error at the peers bench's settings,
 /// averages further. The curvature is fitted over the wider reach, which holds the
 /// extrapolation's bias. Measured on the peers bench's settings against its references (4x4
-/// relMSE, 1.3 against 1; README, "Blending"): the Cornell box -13 % at the fastest setting,
+/// relMSE, 1.3 against 1; docs/cache.md, "Blending"): the Cornell box -13 % at the fastest setting,
 /// -11 % at -ad 384, -14 % at -ad 1024; Sibenik -13 % at the fastest, -2 % at the slowest
 /// (-ad 512); the conference room -5 % to -8 %; for 1.00-1.04x the time. 1.6 gained more at the
 /// fast settings and lost at the slowest (Sibenik +6 %, Cornell +17 %), where the records are

@@ -3,7 +3,7 @@
 //! and last key outside their range), and a node's world matrix at a time from the rest poses
 //! of its ancestors and the channels that drive them.
 //!
-//! The matrices are computed the way the loader (cpp/scene_io.cpp) computes the rest pose's, in
+//! The matrices are computed the way the loader (cpp/scene_io_nodes.cpp) computes the rest pose's, in
 //! the same order of operations, so that a node no channel drives gets exactly the world matrix
 //! the loader gave it, and a render of frames matches a still render of the same pose.
 //!

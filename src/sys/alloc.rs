@@ -5,7 +5,7 @@
 
 use std::alloc::{GlobalAlloc, Layout, System};
 
-/// The exit status of a process the system refused memory (README, "Exit status").
+/// The exit status of a process the system refused memory (docs/farms.md, "Progress, exit status, stopping").
 pub const OUT_OF_MEMORY_STATUS: u8 = 3;
 
 pub struct ReportingAllocator;

@@ -1,0 +1,328 @@
+//! What a render writes and where: the output names and their checks, the statistics of the
+//! job, and the writing of the layered EXR (its header from `header`), the preview and the
+//! statistics file.
+
+use super::header::{
+    data_attributes, denoise_attributes, guides_text, left_raw_text, options_line, part_settings, quality_name,
+};
+use super::{check_denoiser, denoise_quality};
+use crate::cli::RenderArgs;
+use crate::commands::CommandError;
+use crate::frames::FrameTag;
+use crate::image::denoise;
+use crate::image::framebuffer::{FrameBuffer, Layer};
+use crate::image::output;
+use crate::image::region::{REGION_ATTRIBUTE, SETTINGS_ATTRIBUTE};
+use crate::job::Job;
+use crate::scene::SceneNeeds;
+use crate::shading::ShadingOptions;
+use crate::stats::RenderStats;
+use crate::sys::image_io::Window;
+use std::path::{Path, PathBuf};
+
+/// The layers this scene can put light in; the others are not written.
+pub fn producible_layers(needs: SceneNeeds, shading: &ShadingOptions) -> Vec<Layer> {
+    let ambient_light = shading.ambient_bounces > 0 || shading.ambient_value.max_element() > 0.0;
+    Layer::ALL
+        .into_iter()
+        .filter(|layer| match layer {
+            Layer::Emission => needs.emission,
+            Layer::Direct => needs.direct,
+            Layer::Specular => needs.specular,
+            Layer::Indirect => needs.diffuse && ambient_light,
+        })
+        .collect()
+}
+
+/// The EXR name -o gives, or the default (for frames, a pattern: see `frames::NamePattern`).
+pub fn output_name(args: &RenderArgs) -> PathBuf {
+    args.output.clone().unwrap_or_else(|| default_output(&args.scene))
+}
+
+fn default_output(scene: &Path) -> PathBuf {
+    let stem = scene
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "render".into());
+    PathBuf::from(format!("{stem}.exr"))
+}
+
+/// The render is always a layered OpenEXR, and its preview takes the same name with .png: any
+/// other extension would either put the preview over the EXR (`-o out.png`) or write an EXR
+/// under a name that says it is something else (`-o out.jpg`), so only .exr is accepted.
+fn check_exr_name(exr: &Path) -> Result<(), CommandError> {
+    let extension = exr.extension().map(|e| e.to_string_lossy().to_ascii_lowercase());
+    if extension.as_deref() == Some("exr") {
+        return Ok(());
+    }
+    let suggestion = exr.with_extension("exr");
+    let why = match extension.as_deref() {
+        Some("png") => "the PNG preview is written beside the EXR under the .png name, so the EXR would be lost",
+        Some(_) => "the render is written as a layered OpenEXR whatever the name says",
+        None => "the render is a layered OpenEXR and its name must say so",
+    };
+    Err(CommandError::input(format!(
+        "-o {}: the output must end in .exr ({why}); give -o {} (the preview goes beside it as .png)",
+        exr.display(),
+        suggestion.display()
+    )))
+}
+
+/// A file this command is about to write: not a directory, not an existing file unless
+/// `overwrite`, and writable here (checked before any work, so nothing fails at the end).
+pub fn check_new_output(path: &Path, overwrite: bool) -> Result<(), CommandError> {
+    not_a_directory(path)?;
+    if path.exists() && !overwrite {
+        return Err(CommandError::input(format!(
+            "{}: already exists (give --overwrite to replace it)",
+            path.display()
+        )));
+    }
+    output::check_writable(path).map_err(|e| CommandError::input(format!("{}: {e}", path.display())))
+}
+
+/// A directory is never replaced, with or without --overwrite: said before anything else.
+fn not_a_directory(path: &Path) -> Result<(), CommandError> {
+    if path.is_dir() {
+        return Err(CommandError::input(format!(
+            "{}: is a directory; give a file name (e.g. {})",
+            path.display(),
+            path.join("render.exr").display()
+        )));
+    }
+    Ok(())
+}
+
+/// Two names for one file (the same path, or the same file through links).
+fn same_file(a: &Path, b: &Path) -> bool {
+    if a == b {
+        return true;
+    }
+    match (std::fs::canonicalize(a), std::fs::canonicalize(b)) {
+        (Ok(x), Ok(y)) => x == y,
+        _ => false,
+    }
+}
+
+/// The statistics every way of rendering reports about the job itself; the caller adds what
+/// its threads or ranks did.
+pub fn job_stats(args: &RenderArgs, job: &Job, mode: &'static str, ranks: usize, render_s: f64) -> RenderStats {
+    let cache = job.cache.as_ref();
+    RenderStats {
+        version: env!("CARGO_PKG_VERSION"),
+        scene: args.scene.display().to_string(),
+        mode,
+        ranks,
+        width: args.width,
+        height: args.height,
+        spp: args.spp,
+        threads: job.settings.threads,
+        overture: job.settings.overture,
+        cache_build: if job.settings.prepass { "prepass" } else { "progressive" },
+        triangles: job.scene.triangle_count(),
+        dropped_triangles: job.scene.dropped_triangles,
+        load_s: job.load_s,
+        build_s: job.build_s,
+        render_s,
+        layers: producible_layers(job.scene.needs(), &job.shading)
+            .iter()
+            .map(|l| l.name())
+            .collect(),
+        records_loaded: cache.map_or(0, |c| c.load_report.loaded as u64),
+        cache_records: cache.map_or(0, |c| c.len() as u64),
+        lock_contention: cache.map_or(0, |c| c.contention()),
+        peak_memory_bytes: crate::memory::peak_resident_bytes(),
+        ..Default::default()
+    }
+}
+
+/// Where the results go, checked writable before any work is done.
+pub struct Outputs {
+    pub exr: PathBuf,
+    pub png: Option<PathBuf>,
+    pub stats: Option<PathBuf>,
+    /// The frame of a sequence these are (--frames, --frame): said in the header, and part of
+    /// the settings parts of one image share (`icrender merge` refuses parts of other frames).
+    pub frame: Option<FrameTag>,
+}
+
+impl Outputs {
+    pub fn check(args: &RenderArgs) -> Result<Outputs, CommandError> {
+        if args.denoise {
+            check_denoiser(args)?;
+        }
+        Outputs::checked(args, output_name(args), args.stats.clone(), None)
+    }
+
+    /// The outputs of one frame of a sequence, or of a still image when `frame` is None: the
+    /// EXR at `exr` (a name ending in .exr), its preview beside it, the statistics at `stats`.
+    pub fn checked(
+        args: &RenderArgs,
+        exr: PathBuf,
+        stats: Option<PathBuf>,
+        frame: Option<FrameTag>,
+    ) -> Result<Outputs, CommandError> {
+        not_a_directory(&exr)?;
+        check_exr_name(&exr)?;
+        let png = (!args.no_preview).then(|| exr.with_extension("png"));
+        let outputs = Outputs { exr, png, stats, frame };
+        if let Some(stats) = &outputs.stats
+            && (same_file(stats, &outputs.exr) || outputs.png.as_deref().is_some_and(|png| same_file(stats, png)))
+        {
+            return Err(CommandError::input(format!(
+                "--stats {}: is also an image output of this render; give the statistics a name of their own (e.g. .json)",
+                stats.display()
+            )));
+        }
+        for path in std::iter::once(&outputs.exr)
+            .chain(outputs.png.iter())
+            .chain(outputs.stats.iter())
+        {
+            check_new_output(path, args.overwrite)?;
+        }
+        Ok(outputs)
+    }
+
+    /// Writes the EXR (with header), the preview and the statistics; with --denoise, denoises
+    /// first and writes the denoised layers too.
+    pub fn write(
+        &self,
+        args: &RenderArgs,
+        job: &Job,
+        frame: &FrameBuffer,
+        stats: &RenderStats,
+    ) -> Result<(), CommandError> {
+        let layers = producible_layers(job.scene.needs(), &job.shading);
+        // The frame holds the pixels rendered: a part (--region) its region's only, written as
+        // the data window inside the whole image's display window.
+        let region = job.settings.region;
+        let held = frame.window();
+        let window = Window {
+            x: held.area.x0,
+            y: held.area.y0,
+            full_width: held.full_width,
+            full_height: held.full_height,
+        };
+        let denoised = if args.denoise {
+            let quality = denoise_quality(args);
+            Some(
+                // Without the cache each pixel samples its own hemisphere: its indirect light
+                // is Monte Carlo noise too. (Read from the options: an MPI master holds no
+                // cache of its own whatever the mode.)
+                denoise::denoise_frame(
+                    frame,
+                    &layers,
+                    !crate::job::uses_cache(args, &job.scene),
+                    denoise::PixelSampling {
+                        samples: args.spp,
+                        shadow_rays: args.light_samples,
+                        edge_samples: args.edge_samples,
+                    },
+                    quality,
+                    args.threads,
+                    args.denoise_prefilter,
+                )
+                .map_err(CommandError::failed)?,
+            )
+        } else {
+            None
+        };
+        let mut stats = stats.clone();
+        if let Some(d) = &denoised {
+            stats.denoised_layers = d.names();
+            stats.denoise_s = Some(d.seconds);
+            stats.denoise_filtered_pixels = Some(d.filtered_pixels);
+        }
+        let stats_json = serde_json::to_string(&stats)?;
+        let attributes = vec![
+            (
+                "Software".to_string(),
+                format!("icrender {}", env!("CARGO_PKG_VERSION")),
+            ),
+            ("icrender/command".to_string(), super::rerun_command(args)),
+            ("icrender/scene".to_string(), args.scene.display().to_string()),
+            ("icrender/options".to_string(), options_line(args)),
+            ("icrender/view".to_string(), job.view.radiance_options(job.scene.origin)),
+            // OpenEXR's own attribute (a float: see cpp/image_io.cpp), for viewers and compositors.
+            ("PixelAspectRatio".to_string(), job.camera.pixel_aspect().to_string()),
+            ("icrender/mode".to_string(), stats.mode.to_string()),
+            ("icrender/ranks".to_string(), stats.ranks.to_string()),
+            ("icrender/render_time_s".to_string(), format!("{:.3}", stats.render_s)),
+            ("icrender/statistics".to_string(), stats_json),
+        ];
+        let aovs = args.aovs();
+        let mut attributes = attributes;
+        let settings = match &self.frame {
+            Some(f) => format!("{}; frame {} at {} s", part_settings(args), f.number, f.time),
+            None => part_settings(args),
+        };
+        attributes.push((SETTINGS_ATTRIBUTE.to_string(), settings));
+        if let Some(f) = &self.frame {
+            attributes.extend(f.attributes());
+        }
+        if let Some(r) = region {
+            attributes.push((REGION_ATTRIBUTE.to_string(), r.text()));
+        }
+        attributes.extend(data_attributes(&aovs, &job.scene));
+        if let Some(d) = &denoised {
+            attributes.extend(denoise_attributes(d, args));
+        }
+        let extra: Vec<(String, &[glam::Vec3])> = denoised.as_ref().map_or_else(Vec::new, |d| {
+            d.layers
+                .iter()
+                .map(|(l, plane)| (denoise::denoised_name(*l), plane.as_slice()))
+                .chain(std::iter::once((
+                    denoise::DENOISED_COMPOSITE.to_string(),
+                    d.composite.as_slice(),
+                )))
+                .collect()
+        });
+        let extra: Vec<(&str, &[glam::Vec3])> = extra.iter().map(|(n, p)| (n.as_str(), *p)).collect();
+        output::write_exr(
+            &self.exr,
+            frame,
+            window,
+            &layers,
+            &aovs,
+            &extra,
+            &attributes,
+            args.half,
+            args.ic_records,
+        )
+        .map_err(|e| CommandError::failed(format!("{}: {e}", self.exr.display())))?;
+        if let Some(png) = &self.png {
+            // The preview is for looking at: the denoised composite when there is one.
+            let composite = denoised
+                .as_ref()
+                .map_or_else(|| frame.composite(), |d| d.composite.clone());
+            output::write_preview(png, frame.width, frame.height, &composite)
+                .map_err(|e| CommandError::failed(format!("{}: {e}", png.display())))?;
+        }
+        if let Some(path) = &self.stats {
+            output::write_json(path, &stats).map_err(|e| CommandError::failed(format!("{}: {e}", path.display())))?;
+        }
+        if let Some(d) = &denoised
+            && !args.quiet
+        {
+            let what: Vec<&str> = d.filtered().iter().map(|l| l.name()).collect();
+            if what.is_empty() {
+                eprintln!(
+                    "icrender: --denoise ran no filter: no layer needed it{}; layer `denoised` holds the raw layers' sum ({:.3} s)",
+                    left_raw_text(d),
+                    d.seconds
+                );
+            } else {
+                eprintln!(
+                    "icrender: denoised {} (and their sum with the emission, layer `denoised`) in {:.3} s ({}, quality {}, {}){}",
+                    what.join(", "),
+                    d.seconds,
+                    d.denoiser,
+                    quality_name(args),
+                    guides_text(d),
+                    left_raw_text(d)
+                );
+            }
+        }
+        Ok(())
+    }
+}
