@@ -18,12 +18,12 @@
 //! The irradiance cache goes to `DIR/cache.icc` (unless `-af` names another file), so a resumed
 //! render also starts with every record the killed one had written.
 
+use crate::codec::pixels::{PIXEL_FLOATS, RESULT_BYTES, decode_pixels, encode_pixels, put_results, take_results};
+use crate::codec::wire::Reader;
 use crate::image::framebuffer::FrameBuffer;
 use crate::image::framebuffer::PixelValue;
 use crate::image::window::PixelWindow;
 use crate::irradiance::codec::checksum;
-use crate::parallel::protocol::wire::Reader;
-use crate::parallel::protocol::{PIXEL_FLOATS, RESULT_BYTES, decode_pixels, encode_pixels, put_results, take_results};
 pub use crate::shading::request::RequestResult;
 use crate::tiles::Tile;
 use std::fs::{File, OpenOptions};
@@ -323,7 +323,7 @@ impl Checkpoint {
         if let Err(e) = result {
             let mut failed = self.failed.lock().unwrap_or_else(|e| e.into_inner());
             if failed.is_none() {
-                crate::commands::warn(&format!(
+                crate::diagnostics::warn(&format!(
                     "{}: cannot journal finished work ({e}); the render goes on, but a restart would redo it",
                     self.path.display()
                 ));

@@ -6,7 +6,9 @@
 
 pub mod checkpoint;
 pub mod cli;
+pub mod codec;
 pub mod commands;
+pub mod diagnostics;
 pub mod export;
 pub mod frames;
 pub mod image;

@@ -80,13 +80,15 @@ impl<T: std::fmt::Display> From<T> for CommandError {
 
 pub type CommandResult = Result<(), CommandError>;
 
-/// Says why the command failed, on stderr, as the user sees every error.
-pub fn error(message: &str) {
-    eprintln!("icrender: error: {message}");
-}
+pub use crate::diagnostics::{error, warn};
 
-pub fn warn(message: &str) {
-    eprintln!("icrender: warning: {message}");
+impl From<crate::parallel::ParallelError> for CommandError {
+    fn from(e: crate::parallel::ParallelError) -> CommandError {
+        match e {
+            crate::parallel::ParallelError::Input(message) => CommandError::input(message),
+            crate::parallel::ParallelError::Failed(message) => CommandError::failed(message),
+        }
+    }
 }
 
 #[cfg(test)]

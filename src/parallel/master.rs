@@ -8,8 +8,9 @@ use super::comm::{Comm, Hosts};
 use super::liveness::Silence;
 use super::protocol::{FinishedTile, Message, ProtocolError, Records};
 use super::relay::RecordRelay;
+use super::{ParallelError, ParallelResult};
 use super::{Setup, end_job};
-use crate::commands::{CommandError, CommandResult, warn};
+use crate::diagnostics::warn;
 use crate::image::framebuffer::FrameBuffer;
 use crate::stats::{RankReport, RenderStats};
 use crate::tiles::{TileQueue, store_tile};
@@ -167,7 +168,7 @@ impl<'a, 'c> MasterCore<'a, 'c> {
 }
 
 /// The master's part: the one master with the mode's policy, then the image, statistics, table.
-pub fn run(comm: &Comm<'_>, setup: &Setup<'_>, sharing: &mut dyn Sharing, wall: Instant) -> CommandResult {
+pub fn run(comm: &Comm<'_>, setup: &Setup<'_>, sharing: &mut dyn Sharing, wall: Instant) -> ParallelResult {
     let (job_in, job) = (setup.job_in, &setup.job);
     let (mut frame, ranks, render_s) =
         control(comm, setup, sharing).unwrap_or_else(|e| end_job(comm, setup.cache(), &e));
@@ -187,7 +188,7 @@ pub fn run(comm: &Comm<'_>, setup: &Setup<'_>, sharing: &mut dyn Sharing, wall: 
         crate::render::add_prepass_records(&mut frame, prepass);
     }
     stats.wall_s = wall.elapsed().as_secs_f64();
-    job_in.host.write(job, &frame, &stats).map_err(CommandError::failed)?;
+    job_in.host.write(job, &frame, &stats).map_err(ParallelError::Failed)?;
     if !job_in.quiet {
         print_table(&stats);
     }

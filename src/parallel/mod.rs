@@ -5,6 +5,7 @@
 pub mod comm;
 pub mod component;
 pub mod counters;
+pub mod error;
 pub mod liveness;
 pub mod master;
 pub mod prepass;
@@ -14,7 +15,6 @@ pub mod relay;
 pub mod worker;
 
 use crate::checkpoint::{Checkpoint, Restored};
-use crate::commands::{CommandError, CommandResult};
 use crate::image::framebuffer::FrameBuffer;
 use crate::irradiance::IrradianceCache;
 use crate::job::Job;
@@ -25,6 +25,7 @@ use crate::stats::{RankReport, RenderStats, ThreadReport};
 use crate::tiles::{Tile, tiles};
 use comm::{Comm, Counters, Hosts};
 use component::Roles;
+pub use error::{ParallelError, ParallelResult};
 use mpi::Threading;
 use protocol::{Kind, Message, Records};
 use std::sync::atomic::AtomicU64;
@@ -293,23 +294,23 @@ fn check_layout(job: &ParallelJob<'_>, size: i32, tile_count: usize, threads: us
 /// Ends a job that every rank stops together: each rank says its `line` if it has one (for a
 /// verdict all ranks share, rank 0 alone), then all meet at a barrier before any exits: a rank
 /// exiting with an error first makes mpirun kill the job, rank 0 included, before its line is out.
-fn stop_together(comm: &Comm<'_>, line: Option<&str>) -> CommandError {
+fn stop_together(comm: &Comm<'_>, line: Option<&str>) -> ParallelError {
     if let Some(line) = line {
-        crate::commands::error(line);
+        crate::diagnostics::error(line);
     }
     comm.barrier();
-    CommandError::input(String::new())
+    ParallelError::Input(String::new())
 }
 
-pub fn run(job_in: &ParallelJob<'_>) -> CommandResult {
+pub fn run(job_in: &ParallelJob<'_>) -> ParallelResult {
     let wall = Instant::now();
     let host = job_in.host;
     // A rank never outlives its launcher (see sys::process).
     let session_dir = std::env::var("PMIX_SERVER_TMPDIR").or_else(|_| std::env::var("OMPI_FILE_LOCATION"));
     let launcher = session_dir.ok().as_deref().and_then(pid_in_session_dir);
-    crate::sys::process::die_with_parent(launcher).map_err(CommandError::input)?;
+    crate::sys::process::die_with_parent(launcher).map_err(ParallelError::Input)?;
     let Some((universe, granted)) = mpi::initialize_with_threading(Threading::Multiple) else {
-        return Err(CommandError::failed("MPI could not be initialised".into()));
+        return Err(ParallelError::Failed("MPI could not be initialised".into()));
     };
     let counters = Counters::default();
     let comm = Comm::new(&counters);
@@ -442,7 +443,7 @@ pub(crate) fn end_job(comm: &Comm<'_>, cache: Option<&IrradianceCache>, message:
     if let Some(cache) = cache {
         let _ = cache.finish();
     }
-    crate::commands::error(message);
+    crate::diagnostics::error(message);
     comm.abort(1)
 }
 

@@ -55,6 +55,18 @@ impl Collective<'_, '_> {
             .collect()
     }
 
+    /// Every rank's items of `message`'s kind, joined in rank order (`items` takes them out of
+    /// a decoded message, which is always of the kind sent: `Message::decode` reads it as that).
+    fn pooled<T>(
+        &self,
+        workers: bool,
+        message: Message,
+        items: impl Fn(Message) -> Option<Vec<T>>,
+    ) -> Result<Vec<T>, String> {
+        let parts = self.gather(workers, message)?;
+        Ok(parts.into_iter().filter_map(items).flatten().collect())
+    }
+
     /// Called while a collective waits: the master ends the job if a rank has gone silent
     /// (it can never come to the collective, which would wait for ever).
     fn watch(&self) {
@@ -80,37 +92,32 @@ impl Pool for Collective<'_, '_> {
     }
 
     fn round(&mut self, mine: RoundRecords) -> Result<RoundRecords, String> {
-        let parts = self.gather(false, Message::PrepassRound(mine))?;
-        Ok(parts
-            .into_iter()
-            .flat_map(|m| match m {
-                Message::PrepassRound(records) => records,
-                _ => unreachable!("decoded by its kind"),
-            })
-            .collect())
+        self.pooled(false, Message::PrepassRound(mine), |m| match m {
+            Message::PrepassRound(records) => Some(records),
+            _ => None,
+        })
     }
 
     fn sites(&mut self, mine: Vec<u32>) -> Result<Vec<u32>, String> {
-        let parts = self.gather(false, Message::PrepassSites(mine))?;
-        Ok(parts
-            .into_iter()
-            .flat_map(|m| match m {
-                Message::PrepassSites(sites) => sites,
-                _ => unreachable!("decoded by its kind"),
-            })
-            .collect())
+        self.pooled(false, Message::PrepassSites(mine), |m| match m {
+            Message::PrepassSites(sites) => Some(sites),
+            _ => None,
+        })
     }
 
     fn grid_rows(&mut self, mine: GridRows) -> Result<GridRows, String> {
         debug_assert!(self.workers.is_some(), "only workers build the grid");
-        let parts = self.gather(true, Message::PrepassGrid(mine))?;
-        Ok(parts
-            .into_iter()
-            .flat_map(|m| match m {
-                Message::PrepassGrid(rows) => rows,
-                _ => unreachable!("decoded by its kind"),
-            })
-            .collect())
+        self.pooled(true, Message::PrepassGrid(mine), |m| match m {
+            Message::PrepassGrid(rows) => Some(rows),
+            _ => None,
+        })
+    }
+
+    fn pixel_rows(&mut self, mine: PixelRows) -> Result<PixelRows, String> {
+        self.pooled(false, Message::PrepassPixels(mine), |m| match m {
+            Message::PrepassPixels(rows) => Some(rows),
+            _ => None,
+        })
     }
 
     fn bytes_received(&self) -> u64 {
@@ -118,17 +125,6 @@ impl Pool for Collective<'_, '_> {
             .counters
             .bytes_received
             .load(std::sync::atomic::Ordering::Relaxed)
-    }
-
-    fn pixel_rows(&mut self, mine: PixelRows) -> Result<PixelRows, String> {
-        let parts = self.gather(false, Message::PrepassPixels(mine))?;
-        Ok(parts
-            .into_iter()
-            .flat_map(|m| match m {
-                Message::PrepassPixels(rows) => rows,
-                _ => unreachable!("decoded by its kind"),
-            })
-            .collect())
     }
 }
 

@@ -31,7 +31,7 @@ impl Pulse {
                 }
                 while comm.try_receive(None, Some(Kind::Heartbeat.tag())).is_some() {}
                 if rank != 0 && silent_for(0) >= master_lost_after {
-                    crate::commands::error(&lost_master);
+                    crate::diagnostics::error(&lost_master);
                     crate::sys::process::exit_now(1);
                 }
                 std::thread::sleep(Duration::from_millis(100));

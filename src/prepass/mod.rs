@@ -442,26 +442,13 @@ fn run_round(
     counted: bool,
     stats: &mut [ThreadStats],
 ) -> RoundRecords {
-    let next = AtomicUsize::new(0);
-    let made = Mutex::new(Vec::new());
-    on_threads(stats, |counts| {
-        let mut records = Vec::new();
-        loop {
-            let first = next.fetch_add(CHUNK, Ordering::Relaxed);
-            if first >= mine.len() {
-                break;
-            }
-            for &index in &mine[first..(first + CHUNK).min(mine.len())] {
-                let visit = Visit::Make {
-                    records: &mut records,
-                    count_lookups: !counted,
-                };
-                site_visit(pass, snapshot, (index, sites[index as usize]), counts, visit);
-            }
-        }
-        made.lock().unwrap_or_else(|e| e.into_inner()).extend(records);
+    let mut made = on_sites(mine, stats, |index, counts, records: &mut RoundRecords| {
+        let visit = Visit::Make {
+            records,
+            count_lookups: !counted,
+        };
+        site_visit(pass, snapshot, (index, sites[index as usize]), counts, visit);
     });
-    let mut made = made.into_inner().unwrap_or_else(|e| e.into_inner());
     made.sort_by_key(|(index, _)| *index);
     made
 }
@@ -475,26 +462,39 @@ fn find_misses(
     snapshot: &FrozenIndex,
     stats: &mut [ThreadStats],
 ) -> Vec<u32> {
+    let mut found = on_sites(mine, stats, |index, counts, misses: &mut Vec<u32>| {
+        if site_visit(pass, snapshot, (index, sites[index as usize]), counts, Visit::Find) {
+            misses.push(index);
+        }
+    });
+    found.sort_unstable();
+    found
+}
+
+/// Runs `visit` on each of `mine` sites, `CHUNK` at a time, on one thread per entry of `stats`;
+/// each thread gathers what its visits add to a list of its own, and the lists join (in no
+/// particular order: the caller sorts).
+fn on_sites<T: Send>(
+    mine: &[u32],
+    stats: &mut [ThreadStats],
+    visit: impl Fn(u32, &mut RayCounts, &mut Vec<T>) + Sync,
+) -> Vec<T> {
     let next = AtomicUsize::new(0);
-    let found = Mutex::new(Vec::new());
+    let all = Mutex::new(Vec::new());
     on_threads(stats, |counts| {
-        let mut misses = Vec::new();
+        let mut own = Vec::new();
         loop {
             let first = next.fetch_add(CHUNK, Ordering::Relaxed);
             if first >= mine.len() {
                 break;
             }
             for &index in &mine[first..(first + CHUNK).min(mine.len())] {
-                if site_visit(pass, snapshot, (index, sites[index as usize]), counts, Visit::Find) {
-                    misses.push(index);
-                }
+                visit(index, counts, &mut own);
             }
         }
-        found.lock().unwrap_or_else(|e| e.into_inner()).extend(misses);
+        all.lock().unwrap_or_else(|e| e.into_inner()).extend(own);
     });
-    let mut found = found.into_inner().unwrap_or_else(|e| e.into_inner());
-    found.sort_unstable();
-    found
+    all.into_inner().unwrap_or_else(|e| e.into_inner())
 }
 
 /// What a site's visit does with the points on its eye path that no record covers.

@@ -229,6 +229,7 @@ fn run_parallel(args: &RenderArgs, mode: Mode) -> CommandResult {
         quiet: args.quiet,
         host: &host,
     })
+    .map_err(CommandError::from)
 }
 
 /// What a render stopped by `signal` says: nothing was written, and what a rerun resumes.

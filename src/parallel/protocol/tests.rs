@@ -1,4 +1,6 @@
 use super::*;
+use crate::image::components::Components;
+use crate::image::data::PixelData;
 use crate::irradiance::record::tests::flat_record;
 use crate::shading::request::AmbientRequest;
 use glam::Vec3;

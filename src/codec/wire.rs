@@ -2,7 +2,7 @@
 //! and a reader that refuses to read past the end (a truncated message is an error, never a
 //! shorter value) and, at the end, refuses bytes left over.
 
-use super::ProtocolError;
+use super::DecodeError;
 use glam::Vec3;
 
 /// Appends little-endian values.
@@ -39,11 +39,11 @@ impl<'a> Reader<'a> {
         Reader { bytes, at: 0, what }
     }
 
-    pub fn error(&self, problem: impl std::fmt::Display) -> ProtocolError {
-        ProtocolError(format!("{}: {problem}", self.what))
+    pub fn error(&self, problem: impl std::fmt::Display) -> DecodeError {
+        DecodeError(format!("{}: {problem}", self.what))
     }
 
-    pub fn take(&mut self, n: usize) -> Result<&'a [u8], ProtocolError> {
+    pub fn take(&mut self, n: usize) -> Result<&'a [u8], DecodeError> {
         let (len, at) = (self.bytes.len(), self.at);
         let Some(end) = at.checked_add(n).filter(|&end| end <= len) else {
             return Err(self.error(format_args!("ends after {len} bytes, {n} more needed at byte {at}")));
@@ -53,31 +53,31 @@ impl<'a> Reader<'a> {
         Ok(slice)
     }
 
-    fn array<const N: usize>(&mut self) -> Result<[u8; N], ProtocolError> {
+    fn array<const N: usize>(&mut self) -> Result<[u8; N], DecodeError> {
         Ok(self.take(N)?.try_into().expect("N bytes"))
     }
 
-    pub fn u8(&mut self) -> Result<u8, ProtocolError> {
+    pub fn u8(&mut self) -> Result<u8, DecodeError> {
         Ok(self.array::<1>()?[0])
     }
 
-    pub fn u32(&mut self) -> Result<u32, ProtocolError> {
+    pub fn u32(&mut self) -> Result<u32, DecodeError> {
         Ok(u32::from_le_bytes(self.array()?))
     }
 
-    pub fn u64(&mut self) -> Result<u64, ProtocolError> {
+    pub fn u64(&mut self) -> Result<u64, DecodeError> {
         Ok(u64::from_le_bytes(self.array()?))
     }
 
-    pub fn f32(&mut self) -> Result<f32, ProtocolError> {
+    pub fn f32(&mut self) -> Result<f32, DecodeError> {
         Ok(f32::from_le_bytes(self.array()?))
     }
 
-    pub fn vec3(&mut self) -> Result<Vec3, ProtocolError> {
+    pub fn vec3(&mut self) -> Result<Vec3, DecodeError> {
         Ok(Vec3::new(self.f32()?, self.f32()?, self.f32()?))
     }
 
-    pub fn flag(&mut self) -> Result<bool, ProtocolError> {
+    pub fn flag(&mut self) -> Result<bool, DecodeError> {
         match self.u8()? {
             0 => Ok(false),
             1 => Ok(true),
@@ -87,7 +87,7 @@ impl<'a> Reader<'a> {
 
     /// A count of items of `item_bytes` each that must fit in what is left (so a damaged
     /// count cannot make the reader allocate for items that are not there).
-    pub fn count(&mut self, item_bytes: usize) -> Result<usize, ProtocolError> {
+    pub fn count(&mut self, item_bytes: usize) -> Result<usize, DecodeError> {
         let count = self.u32()? as usize;
         let left = self.bytes.len() - self.at;
         if count.saturating_mul(item_bytes) > left {
@@ -102,7 +102,7 @@ impl<'a> Reader<'a> {
     }
 
     /// The message must have been read exactly.
-    pub fn finish(self) -> Result<(), ProtocolError> {
+    pub fn finish(self) -> Result<(), DecodeError> {
         match self.bytes.len() - self.at {
             0 => Ok(()),
             left => Err(self.error(format_args!("{left} bytes too many"))),
