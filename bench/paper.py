@@ -5,6 +5,8 @@ side, and a cluster-scale prediction, in one command:
     python3 bench/paper.py            # small default (about 26 minutes on 2 idle cores)
     python3 bench/paper.py --full     # the paper's image sizes and more ranks (hours)
     python3 bench/paper.py --quick    # a check that it runs end to end (a minute or two; not a result)
+    python3 bench/paper.py --records-sweep   # only the records sweep (issue 53): every mode at its
+                                             # defaults, progressive, 3-8 processes, 128-512 pixels
 
 For the Cornell box, the corridor and the conference room it
   1. renders (or reuses, from bench/out/paper/) a converged reference per scene and size;
