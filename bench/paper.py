@@ -5,6 +5,8 @@ side, and a cluster-scale prediction, in one command:
     python3 bench/paper.py            # small default (about 26 minutes on 2 idle cores)
     python3 bench/paper.py --full     # the paper's image sizes and more ranks (hours)
     python3 bench/paper.py --quick    # a check that it runs end to end (a minute or two; not a result)
+    python3 bench/paper.py --records-sweep   # only the records sweep (issue 53): every mode at its
+                                             # defaults, progressive, 3-8 processes, 128-512 pixels
 
 For the Cornell box, the corridor and the conference room it
   1. renders (or reuses, from bench/out/paper/) a converged reference per scene and size;
@@ -501,6 +503,105 @@ def pct(pred, real):
     return 100.0 * (pred - real) / real if real else float("nan")
 
 
+# -- the records sweep (issue 53, part 3) ------------------------------------------------------
+
+# Every mode at its defaults with the cache built as the tiles render (the paper's way), over
+# these process counts (master included; oversubscribed on this machine), square image sizes
+# and the three scenes: component mode should make the fewest records in every configuration.
+SWEEP_RANKS = (3, 4, 5, 8)
+SWEEP_SIZES = (128, 256, 512)
+SWEEP_REPEAT = 5
+# The setting the gap was found in (issue 53: -ab 1 -aa 0.2 on the Cornell box), for every scene.
+SWEEP_AA = 0.2
+
+
+def run_records(scene, mode, np, size, seed, ad, work, timeout):
+    """One mpirun of `mode` at its defaults (tiles, --sync, --send, --pa, edge samples) in
+    progressive mode: its records and CPU time."""
+    out, stats_path = os.path.join(work, f"sweep-{mode}-{np}.exr"), os.path.join(work, f"sweep-{mode}-{np}.json")
+    cmd = ["mpirun", "--oversubscribe", "-np", str(np), common.BINARY, "render", scene, "-o", out, "--mode", mode,
+           "-q", "--no-preview", "--overwrite", "--stats", stats_path, "-x", str(size), "-y", str(size), "-ab", "1",
+           "-aa", str(SWEEP_AA), "-ad", str(ad), "--ic-build", "progressive", "--seed", str(seed)]
+    result = subprocess.run(cmd, capture_output=True, text=True, env=MPI_ENV, timeout=timeout)
+    if result.returncode != 0:
+        lines = [l for l in result.stderr.splitlines() if l.strip()]
+        raise RuntimeError(lines[-1] if lines else f"exit code {result.returncode}")
+    with open(stats_path) as f:
+        s = json.load(f)
+    return {"mode": mode, "processes": np, "size": size, "seed": seed, "misses": s["records_computed"],
+            "aggregated_s": workers_cpu(s), "render_s": s["render_s"]}
+
+
+def records_sweep(args):
+    """Runs the sweep, round after round (every configuration once per round, each round with
+    its own seed, so that a drift of the machine spreads over all of them), prints a table of
+    component mode's records against the mode with the fewest among the others, with a
+    bootstrap interval over the seeds (`compare_component`), and writes records-sweep.csv and
+    records-sweep.md under --out. Says at the end whether component mode had the fewest (on
+    the medians) in every configuration, and where that was beyond noise."""
+    ranks = [int(r) for r in args.sweep_ranks.split(",")]
+    sizes = [int(v) for v in args.sweep_sizes.split(",")]
+    scenes = args.scenes.split(",")
+    os.makedirs(args.out, exist_ok=True)
+    say("building icrender")
+    common.build()
+    work = common.scratch()
+    started = time.perf_counter()
+    reps, rows = {}, []
+    for round_ in range(args.sweep_repeat):
+        seed = round_ + 1
+        for name in scenes:
+            for size in sizes:
+                for np in ranks:
+                    for mode in MODES:
+                        try:
+                            r = run_records(SCENES[name][0], mode, np, size, seed, args.ad, work, args.timeout)
+                        except (RuntimeError, subprocess.TimeoutExpired) as e:
+                            say(f"{name} {size} {mode} {np} processes, seed {seed}: FAILED: {e}")
+                            continue
+                        r["scene"] = name
+                        rows.append(r)
+                        reps.setdefault((name, size, np), {}).setdefault(mode, []).append(r)
+        say(f"records sweep: round {round_ + 1} of {args.sweep_repeat} done ({time.perf_counter() - started:.0f} s)")
+    write_csv(os.path.join(args.out, "records-sweep-runs.csv"), rows)
+    table, fewest_everywhere, beyond_everywhere = [], True, True
+    for (name, size, np), by_mode in reps.items():
+        c = compare_component(by_mode, seed=zlib.crc32(f"sweep {name} {size} {np}".encode()))
+        if not c:
+            fewest_everywhere = beyond_everywhere = False
+            continue
+        medians = {m: statistics.median(r["misses"] for r in rs) for m, rs in by_mode.items()}
+        fewest = all(medians["component"] < v for m, v in medians.items() if m != "component")
+        fewest_everywhere &= fewest
+        beyond_everywhere &= c["misses_verdict"] == "fewer"
+        table.append({"scene": name, "size": size, "processes": np, "repeats": c["component_repeats"],
+                      **{f"{m}_records": medians.get(m, float("nan")) for m in MODES},
+                      "fewest_other": c["fewest_mode"], "component_vs_fewest_pct": c["misses_pct"],
+                      "lo_pct": c["misses_lo"], "hi_pct": c["misses_hi"], "verdict": c["misses_verdict"],
+                      "component_fewest": fewest, "cpu_gain_pct": c["gain_median_pct"],
+                      "cpu_verdict": c["gain_median_verdict"]})
+    write_csv(os.path.join(args.out, "records-sweep.csv"), table)
+    head = ("| scene | size | processes | " + " | ".join(MODES) + " | component vs fewest other (95 % interval) "
+            "| fewest? | CPU, median vs second best |")
+    lines = [f"Records made (median of {args.sweep_repeat} seeds), every mode at its defaults, --ic-build "
+             f"progressive, -ab 1 -aa {SWEEP_AA} -ad {args.ad}:", "", head,
+             "|" + "---|" * (5 + len(MODES))]
+    for t in table:
+        counts = " | ".join(f"{t[m + '_records']:.0f}" for m in MODES)
+        lines.append(f"| {t['scene']} | {t['size']} | {t['processes']} | {counts} | "
+                     f"{t['component_vs_fewest_pct']:+.1f} % vs {t['fewest_other']} [{t['lo_pct']:+.1f}, "
+                     f"{t['hi_pct']:+.1f}]: {t['verdict']} | {'yes' if t['component_fewest'] else 'NO'} | "
+                     f"{t['cpu_gain_pct']:+.1f} %: {t['cpu_verdict']} |")
+    lines += ["", f"Component mode had the fewest records (medians) in every configuration: "
+              f"{'yes' if fewest_everywhere else 'NO'}; beyond noise in every one: "
+              f"{'yes' if beyond_everywhere else 'no'}. {len(rows)} runs, "
+              f"{(time.perf_counter() - started) / 60:.1f} min."]
+    text = "\n".join(lines)
+    print(text)
+    with open(os.path.join(args.out, "records-sweep.md"), "w") as f:
+        f.write(text + "\n")
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--full", action="store_true",
@@ -536,7 +637,18 @@ def main():
     parser.add_argument("--out", default=os.path.join(common.ROOT, "bench", "out", "paper"))
     parser.add_argument("--docs", default=DOCS, help="where RESULTS.md and results/ go")
     parser.add_argument("--timeout", type=int, default=900, help="seconds before one mpirun is given up")
+    parser.add_argument("--records-sweep", action="store_true",
+                        help="only the records sweep: every mode at its defaults in progressive mode over "
+                             "--sweep-ranks, --sweep-sizes and --scenes, with --sweep-repeat seeds each; whether "
+                             "component mode made the fewest records everywhere (records-sweep.md in --out)")
+    parser.add_argument("--sweep-ranks", default=",".join(map(str, SWEEP_RANKS)))
+    parser.add_argument("--sweep-sizes", default=",".join(map(str, SWEEP_SIZES)), help="square image sizes")
+    parser.add_argument("--sweep-repeat", type=int, default=SWEEP_REPEAT, help="seeds per configuration")
     args = parser.parse_args()
+    if args.records_sweep:
+        common.require("bench/paper.py", (), ["mpirun"])
+        records_sweep(args)
+        return
     if args.quick:
         quick_out = os.path.join(common.ROOT, "bench", "out", "paper-quick")
         args.out = args.out if args.out != parser.get_default("out") else quick_out

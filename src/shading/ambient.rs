@@ -56,6 +56,9 @@ impl Integrator<'_> {
             stream: (counts.sample.pixel as u64) << 32
                 | (counts.sample.index as u64) << 16
                 | (counts.deferred & 0xffff),
+            // Shared only at a primary hit (see `pixel_shared`).
+            centre_ray: counts.sample.centre_ray.filter(|_| state.specular_depth == 0),
+            distance: hit.distance,
         };
         counts.deferred += 1;
         sink.push(request);
@@ -67,7 +70,7 @@ impl Integrator<'_> {
     pub fn ambient_for_request(&self, request: &AmbientRequest, rng: &mut Rng, counts: &mut Work<'_>) -> Vec3 {
         let hit = SurfaceHit {
             position: request.position,
-            distance: 0.0,
+            distance: request.distance,
             geometric_normal: request.geometric_normal,
             normal: request.normal,
             facing_normal: request.facing_normal,

@@ -31,6 +31,14 @@ pub struct AmbientRequest {
     pub material: u32,
     /// Random stream for the computation, so results do not depend on who computes them.
     pub stream: u64,
+    /// The camera ray through the pixel's centre (origin, direction) where the pixel's samples
+    /// share the cache's irradiance (`PixelIrradiance`; a primary hit in a pixel of several
+    /// samples); None: the point is looked up alone. A PA that looked up each of an edge
+    /// pixel's samples at its own point made records where the serial render's samples share
+    /// the centre's value (one PA: 1,115 records against the serial render's 1,032).
+    pub centre_ray: Option<(Vec3, Vec3)>,
+    /// The camera ray's distance to the point (the pixel sharing's same-plane tolerance).
+    pub distance: f32,
 }
 
 /// Light computed for one request made elsewhere: added to `layer` at `pixel`.

@@ -30,6 +30,8 @@ pub fn compute_request(
     let mut rng = Rng::new(seed, request.stream);
     let mut work = Work::new(&mut stats.rays);
     work.sample.pixel = request.pixel;
+    // The pixel's samples share the cache's value at its centre, as in the serial render.
+    work.sample.centre_ray = request.centre_ray;
     let (pixel, layer) = (request.pixel, request.layer);
     let value = integrator.ambient_for_request(request, &mut rng, &mut work) * request.coefficient;
     results.push(RequestResult { pixel, layer, value });

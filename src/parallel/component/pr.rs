@@ -5,6 +5,7 @@
 //! requests forwarded from a loaded PA. Each finished tile goes to the master with
 //! the next tile's request, and what it computes for PAs as results.
 
+use super::order::RequestQueue;
 use super::{Roles, compute_request, send_results};
 use crate::parallel::comm::{Comm, Counters, Envelope, Marker, kind};
 use crate::parallel::protocol::{FinishedTile, Kind, Message, Records, Requests};
@@ -19,8 +20,23 @@ use std::sync::atomic::Ordering::Relaxed;
 use std::sync::mpsc::{Receiver, SyncSender, TrySendError, sync_channel};
 use std::time::{Duration, Instant};
 
-/// Request batches waiting for the courier thread; at this many the renderer waits too.
-const BATCHES_IN_FLIGHT: usize = 16;
+/// The fewest request batches the outbox holds for the courier thread (see `outbox_batches`).
+const MIN_BATCHES_IN_FLIGHT: usize = 16;
+/// The most: a bound on the slots a tiny --send would otherwise ask for.
+const MAX_BATCHES_IN_FLIGHT: usize = 1 << 16;
+
+/// How many batches of `send` requests the outbox holds: a PA queue's worth (--pa-queue), so
+/// that a PR computes requests itself (or, with --pr-waits, waits) only when a PA is that far
+/// behind, as --pa-queue says, and not whenever the courier pauses. With 16 batches (512
+/// requests) the courier's pauses between markers filled it: at 5 processes (2 PAs, Cornell
+/// box 128x128, -ab 1 -aa 0.2) the PRs computed 2,000-2,200 of their requests themselves and
+/// made 715 of 1,238 records, which nobody else had until the PR went idle; the PAs and the
+/// other PR made records beside them (centralised: 1,072).
+fn outbox_batches(pa_queue: u32, send: u32) -> usize {
+    (pa_queue as usize)
+        .div_ceil(send.max(1) as usize)
+        .clamp(MIN_BATCHES_IN_FLIGHT, MAX_BATCHES_IN_FLIGHT)
+}
 
 /// Hands request batches to the courier. Every request of a tile goes to one PA (`pa_of_tiles`),
 /// which then reuses its own records for the tile's neighbouring points; spreading a tile over
@@ -176,7 +192,7 @@ pub fn run(setup: &Setup<'_>, roles: &Roles) {
         intake: Intake::default(),
     };
     let clock = ThreadClock::start();
-    let (outbox, inbox) = sync_channel(BATCHES_IN_FLIGHT);
+    let (outbox, inbox) = sync_channel(outbox_batches(setup.job_in.pa_queue, setup.job_in.send));
     let mut sender = Sender {
         outbox: Some(outbox),
         pa_of_tile: pa_of_tiles(&setup.tiles, roles.pas.len())
@@ -300,8 +316,19 @@ impl Pr<'_, '_> {
             };
             match msg.message {
                 Ok(Message::Forwarded(decoded)) => {
-                    for request in decoded.requests.iter().filter(|r| r.pixel < pixels) {
-                        compute_request(&self.integrator, request, seed, &mut self.stats, &mut results);
+                    // The records made since this PR's last tile or sync first: the share is a
+                    // stretch next to what the PAs have been computing, and without their latest
+                    // records the helper made them again (the paper's helpers sync as often as
+                    // PAs, section 5.3).
+                    if let Some(cache) = setup.cache() {
+                        send_results(comm, &mut results);
+                        intake.sync(comm, 0, cache);
+                    }
+                    // Grid pixels first, as a PA computes its queue (see `order`).
+                    let mut share = RequestQueue::new(setup.job.camera.width, setup.job.settings.overture);
+                    share.extend(decoded.requests.iter().filter(|r| r.pixel < pixels).copied());
+                    while let Some(request) = share.pop() {
+                        compute_request(&self.integrator, &request, seed, &mut self.stats, &mut results);
                         // A helper shares its records as often as a PA does.
                         if let Some(cache) = setup.cache()
                             && cache.outbox_len() >= setup.sync
@@ -361,8 +388,20 @@ fn pa_of_tiles(tiles: &[crate::tiles::Tile], pas: usize) -> Vec<usize> {
 
 #[cfg(test)]
 mod tests {
-    use super::pa_of_tiles;
+    use super::{MAX_BATCHES_IN_FLIGHT, MIN_BATCHES_IN_FLIGHT, outbox_batches, pa_of_tiles};
     use crate::tiles::tiles;
+
+    #[test]
+    fn the_outbox_holds_a_pa_queue_of_requests_within_bounds() {
+        // The defaults: 65,536 requests in batches of 32.
+        assert_eq!(outbox_batches(65536, 32), 2048);
+        // A part batch still needs its slot.
+        assert_eq!(outbox_batches(1000, 32), 32);
+        // A short --pa-queue keeps the old floor; --send 0 counts as 1.
+        assert_eq!(outbox_batches(8, 32), MIN_BATCHES_IN_FLIGHT);
+        assert_eq!(outbox_batches(100, 0), 100);
+        assert_eq!(outbox_batches(u32::MAX, 1), MAX_BATCHES_IN_FLIGHT);
+    }
 
     #[test]
     fn tiles_go_to_their_pa_in_vertical_bands_else_rows_else_one_by_one() {

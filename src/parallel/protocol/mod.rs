@@ -451,7 +451,7 @@ fn take_records(r: &mut Reader<'_>) -> Result<Records, ProtocolError> {
     Ok(out)
 }
 
-pub const REQUEST_BYTES: usize = 100;
+pub const REQUEST_BYTES: usize = 132;
 
 /// L_a requests on the wire (PR -> PA, PA -> helper): a count, then fixed-size requests.
 fn put_requests(out: &mut Vec<u8>, requests: &[AmbientRequest]) {
@@ -474,6 +474,12 @@ fn put_requests(out: &mut Vec<u8>, requests: &[AmbientRequest]) {
         out.put_f32(r.weight);
         out.put_u32(r.material);
         out.put_u64(r.stream);
+        // A flag, then the ray (zeros without one), so every request has the same size.
+        out.put_u32(u32::from(r.centre_ray.is_some()));
+        let (origin, direction) = r.centre_ray.unwrap_or((Vec3::ZERO, Vec3::ZERO));
+        out.put_vec3(origin);
+        out.put_vec3(direction);
+        out.put_f32(r.distance);
     }
 }
 
@@ -507,8 +513,24 @@ fn take_requests(reader: &mut Reader<'_>) -> Result<Requests, ProtocolError> {
             weight: reader.f32()?,
             material: reader.u32()?,
             stream: reader.u64()?,
+            centre_ray: None,
+            distance: 0.0,
+        };
+        let (shared, origin, direction) = (reader.u32()?, reader.vec3()?, reader.vec3()?);
+        let r = AmbientRequest {
+            centre_ray: (shared == 1).then_some((origin, direction)),
+            distance: reader.f32()?,
+            ..r
+        };
+        let centre_valid = match (shared, r.centre_ray) {
+            (0, None) => true,
+            (1, Some((origin, direction))) => origin.is_finite() && unit(direction),
+            _ => false,
         };
         let valid = layer.is_some()
+            && centre_valid
+            && r.distance.is_finite()
+            && r.distance >= 0.0
             && r.position.is_finite()
             && unit(r.geometric_normal)
             && unit(r.normal)

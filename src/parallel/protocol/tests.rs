@@ -20,6 +20,8 @@ pub(crate) fn sample_request(pixel: u32) -> AmbientRequest {
         direction: Vec3::X,
         material: 7,
         stream: 0xdead_beef_0000_0001,
+        centre_ray: Some((Vec3::new(0.0, 1.0, 5.0), -Vec3::Z)),
+        distance: 4.5,
     }
 }
 
@@ -294,4 +296,36 @@ fn unhealthy_pixels_and_results_are_refused() {
     let mut bytes = results.encode();
     bytes[1 + 4 + 4] = 9; // no layer 9
     assert!(Message::decode(results.tag(), &bytes).is_err());
+}
+
+#[test]
+fn a_requests_centre_ray_travels_and_a_bad_one_is_refused() {
+    // With and without the pixel's centre ray: both arrive as sent.
+    let alone = AmbientRequest {
+        centre_ray: None,
+        ..sample_request(7)
+    };
+    let message = Message::Requests(Requests::from(vec![sample_request(5), alone]));
+    let bytes = message.encode();
+    assert_eq!(bytes.len(), 1 + 4 + 2 * REQUEST_BYTES);
+    match Message::decode(message.tag(), &bytes).unwrap() {
+        Message::Requests(r) => assert_eq!(r.requests, vec![sample_request(5), alone]),
+        other => panic!("{other:?}"),
+    }
+    // The first request's centre direction (after the 100 bytes of the rest, the flag and the
+    // origin) no longer unit length: refused, the second still taken.
+    let mut bytes = bytes;
+    let direction = 1 + 4 + 100 + 4 + 12;
+    bytes[direction..direction + 4].copy_from_slice(&3.0f32.to_le_bytes());
+    match Message::decode(message.tag(), &bytes).unwrap() {
+        Message::Requests(r) => assert_eq!((r.rejected, r.requests), (1, vec![alone])),
+        other => panic!("{other:?}"),
+    }
+    // A flag that is neither 0 nor 1 is refused too.
+    let mut bytes = message.encode();
+    bytes[1 + 4 + 100] = 2;
+    match Message::decode(message.tag(), &bytes).unwrap() {
+        Message::Requests(r) => assert_eq!(r.rejected, 1),
+        other => panic!("{other:?}"),
+    }
 }
