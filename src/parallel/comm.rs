@@ -32,6 +32,22 @@ const MASTER_MAX_PAUSE: Duration = Duration::from_micros(100);
 const LONG_WAIT: Duration = Duration::from_millis(20);
 const LONG_WAIT_PAUSE: Duration = Duration::from_millis(5);
 
+/// How often a wait polls.
+#[derive(Clone, Copy)]
+enum Pace {
+    /// A reply or a message: up to the rank's longest pause, and slower once the wait is long
+    /// (a rank with nothing to do).
+    Reply,
+    /// A collective in the prepass: a long wait there is a round whose slowest rank is still
+    /// computing, and every rank's part moves only while its rank polls (a large part goes by
+    /// rendezvous), so the rank that comes last to a round would otherwise wait up to
+    /// LONG_WAIT_PAUSE for each of the round's collectives to move.
+    Collective,
+}
+
+/// The longest pause of a wait in a collective.
+const COLLECTIVE_MAX_PAUSE: Duration = Duration::from_micros(200);
+
 /// Whether the request in `pending` has completed (it is then gone); a request still in flight
 /// stays there.
 fn completed<'a, D: ?Sized, S: Scope<'a>>(pending: &mut Option<Request<'a, D, S>>) -> Option<()> {
@@ -160,7 +176,12 @@ impl<'c> Comm<'c> {
     /// Polls until `poll` gives a value or `limit` (None: never) has passed, sleeping between
     /// polls with pauses that double up to this rank's longest: a waiting rank neither spins
     /// (Open MPI's blocking calls do) nor sleeps long past what it waits for.
-    fn poll_with_pauses<T>(&self, limit: Option<Duration>, mut poll: impl FnMut() -> Option<T>) -> Option<T> {
+    fn poll_with_pauses<T>(&self, limit: Option<Duration>, poll: impl FnMut() -> Option<T>) -> Option<T> {
+        self.poll_paced(limit, Pace::Reply, poll)
+    }
+
+    /// `poll_with_pauses` at the given pace.
+    fn poll_paced<T>(&self, limit: Option<Duration>, pace: Pace, mut poll: impl FnMut() -> Option<T>) -> Option<T> {
         let start = Instant::now();
         let mut pause = Duration::from_micros(5);
         loop {
@@ -171,10 +192,10 @@ impl<'c> Comm<'c> {
                 return None;
             }
             std::thread::sleep(pause);
-            let cap = if start.elapsed() >= LONG_WAIT {
-                LONG_WAIT_PAUSE
-            } else {
-                self.max_pause
+            let cap = match pace {
+                Pace::Collective => COLLECTIVE_MAX_PAUSE,
+                Pace::Reply if start.elapsed() >= LONG_WAIT => LONG_WAIT_PAUSE,
+                Pace::Reply => self.max_pause,
             };
             pause = (pause * 2).min(cap);
         }
@@ -318,7 +339,7 @@ impl<'c> Comm<'c> {
         let start = Instant::now();
         let mut wait = |pending: &mut dyn FnMut() -> Option<()>| {
             while self
-                .poll_with_pauses(Some(Duration::from_secs(1)), &mut *pending)
+                .poll_paced(Some(Duration::from_secs(1)), Pace::Collective, &mut *pending)
                 .is_none()
             {
                 watch();
