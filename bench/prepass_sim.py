@@ -334,6 +334,7 @@ class Result:
         self.parts = {}
         self.alone = {}
         self.final_bound = ""
+        self.bytes = 0
 
     @property
     def wall(self):
@@ -378,6 +379,9 @@ def simulate(profile, ranks, net, cores=None, mode="broadcast", change=()):
     grid_bytes = pr.grid_samples * GRID_SAMPLE_BYTES + pr.grid_rows * ROW_HEADER
     slowest_rows = math.ceil(pr.grid_rows / W) / max(pr.grid_rows, 1)
     part["grid"], alone["grid"] = spread(pr.grid_s, pr.grid_s * slowest_rows), pr.grid_s
+    # Bytes the ranks count sent (src/parallel/comm.rs all_gather_bytes: a rank's part once per
+    # other rank; each part opens with its item count, u32): to check the model's traffic.
+    res.bytes = (grid_bytes + 4 * W) * (W - 1) + LENGTH_BYTES * W * (W - 1)
     part["grid_comm"] = (net.allgather(W, LENGTH_BYTES, W * LENGTH_BYTES)
                          + net.allgather(W, grid_bytes * slowest_rows, grid_bytes)) if W > 1 else 0.0
     for k in ("compute", "imbalance", "shared_cores", "latency", "bytes", "wake", "round_serial"):
@@ -400,6 +404,7 @@ def simulate(profile, ranks, net, cores=None, mode="broadcast", change=()):
         early = share_below(R, W, top - LONG_WAIT / pr.record_s) * W if pr.record_s > 0 and W > 1 else 0.0
         pauses = [(2 * wake(compute, True), 1), (2 * wake(LONG_WAIT, False), early),
                   (2 * wake(0.0, False), max(W - early, 0.0))]
+        res.bytes += (R * RECORD_WIRE + 4 * P) * (P - 1) + LENGTH_BYTES * P * (P - 1)
         part["compute"] += work / W
         part["imbalance"] += max(slowest - work / W, 0.0)
         part["shared_cores"] += compute - max(slowest, work / W)
@@ -425,6 +430,9 @@ def simulate(profile, ranks, net, cores=None, mode="broadcast", change=()):
     part["maps"], alone["maps"] = spread(pr.edge_s, pr.edge_s * share), pr.edge_s
     part["maps_comm"] = (net.allgather(P, LENGTH_BYTES, P * LENGTH_BYTES)
                          + net.allgather(P, edge_bytes * share, edge_bytes)) if pr.edge_s else 0.0
+    if pr.edge_s:
+        res.bytes += (edge_bytes + 4 * P) * (P - 1) + LENGTH_BYTES * P * (P - 1)
+    res.bytes += pr.pixels * PIXEL_WIRE  # the final pass's tiles, to the master
     part["fit"], alone["fit"] = pr.fit_s * repeat, pr.fit_s
     if "fit_split" in change:
         # Each worker fits its share of the records and an allgather hands out the fits (a
@@ -535,12 +543,18 @@ def mpi_testbed(np, scene, size, options, mode, work):
     return read_run(stats_path, elapsed), None
 
 
-def local_link():
-    """Latency and bandwidth between two ranks on this machine (`icrender bench messages`)."""
-    result = subprocess.run(["mpirun", "--oversubscribe", "-np", "2", common.BINARY, "bench", "messages"],
-                            env=dict(os.environ, **MPI_ENV), capture_output=True, text=True, timeout=120, check=True)
-    cost = json.loads(result.stdout.strip().splitlines()[-1])
-    return cost["latency_s"], cost["bandwidth_bytes_per_s"]
+def local_link(times=3):
+    """Latency and bandwidth between two ranks on this machine (`icrender bench messages`), the
+    median of `times` measurements (a measurement taken while other jobs hold the cores can be
+    off by orders of magnitude)."""
+    costs = []
+    for _ in range(times):
+        result = subprocess.run(["mpirun", "--oversubscribe", "-np", "2", common.BINARY, "bench", "messages"],
+                                env=dict(os.environ, **MPI_ENV), capture_output=True, text=True, timeout=120,
+                                check=True)
+        cost = json.loads(result.stdout.strip().splitlines()[-1])
+        costs.append((cost["latency_s"], cost["bandwidth_bytes_per_s"]))
+    return statistics.median(c[0] for c in costs), statistics.median(c[1] for c in costs)
 
 
 def read_csv(path):
@@ -556,6 +570,9 @@ def pct(pred, real):
 
 STORE = os.path.join(DOCS, "scaling", "measured.json")
 LOCAL = {"scene": "conference", "path": CONFERENCE, "size": "640x360", "options": "-ab 2"}
+# A second, smaller scene on this machine: a Cornell box, few records, the grid a larger share.
+SMALL = {"scene": "cornell", "path": CORNELL, "size": "256x256", "options": "-ab 2"}
+CASES = {f"{c['scene']}-{c['size']}": c for c in (LOCAL, SMALL)}
 TESTBED = {"scene": "conference", "path": CONFERENCE, "size": "320x180", "options": "-ab 2"}
 TARGET = {"scene": "conference", "path": CONFERENCE, "size": "3840x2160", "options": "-ab 2"}
 ROUND_KEYS = ("sites", "records", "compute_s", "pool_s", "seconds")
@@ -596,23 +613,20 @@ def profile_of(store, case, cores=True):
                    e.get("mpi_extra_s"))
 
 
-def measure_local(store, work, repeats, counts, modes):
-    """mpirun on this machine: each count and mode `repeats` times, interleaved (a slow spell of
-    the machine then hits every configuration alike)."""
+def measure_local(store, work, repeats, plan):
+    """mpirun on this machine: `plan` is [(case, mode, ranks)], each run `repeats` times,
+    interleaved (a slow spell of the machine then hits every configuration alike)."""
     runs = store.setdefault("local", [])
     for rep in range(repeats):
-        for mode in modes:
-            for np in counts:
-                if mode == "component" and np < 3:
-                    continue  # a PA and a PR need two workers
-                run, error = mpi_local(np, LOCAL["path"], LOCAL["size"], LOCAL["options"], mode, work)
-                row = {"where": "local", "mode": mode, "ranks": np, "repeat": rep}
-                if run is None:
-                    print(f"local {mode} -np {np}: FAILED: {error}")
-                    continue
-                runs.append(dict(row, **run))
-                print(f"local {mode:<9} -np {np} #{rep}: wall {run['wall_s']:6.2f} s (prepass {run['prepass_s']:5.2f}, "
-                      f"final {run['render_s']:5.2f}, mpirun {run['mpirun_s']:5.2f})")
+        for case, mode, np in plan:
+            run, error = mpi_local(np, case["path"], case["size"], case["options"], mode, work)
+            name = f"{case['scene']}-{case['size']}"
+            if run is None:
+                print(f"local {name} {mode} -np {np}: FAILED: {error}")
+                continue
+            runs.append(dict({"where": "local", "case": name, "mode": mode, "ranks": np, "repeat": rep}, **run))
+            print(f"local {name} {mode:<9} -np {np} #{rep}: wall {run['wall_s']:6.2f} s (prepass {run['prepass_s']:5.2f}, "
+                  f"final {run['render_s']:5.2f}, mpirun {run['mpirun_s']:5.2f}, load average {run['load_average']})")
 
 
 def measure_testbed(store, work, repeats, links, cases):
@@ -624,9 +638,10 @@ def measure_testbed(store, work, repeats, links, cases):
     try:
         for link in links:
             cluster_bench.up(hosts, link)
-            measured = cluster_bench.measure_link(link)
+            measured = [m for m in (cluster_bench.measure_link(link) for _ in range(3)) if m]
             if measured:
-                costs[link] = [measured["latency_s"], measured["bandwidth_bytes_per_s"]]
+                costs[link] = [statistics.median(m["latency_s"] for m in measured),
+                               statistics.median(m["bandwidth_bytes_per_s"] for m in measured)]
             for rep in range(repeats):
                 for mode, np in cases:
                     run, error = mpi_testbed(np, TESTBED["path"], TESTBED["size"], TESTBED["options"], mode, work)
@@ -634,7 +649,8 @@ def measure_testbed(store, work, repeats, links, cases):
                         print(f"test bed {link} {mode} -np {np}: FAILED: {error}")
                         cluster_bench.up(hosts, link)
                         continue
-                    runs.append(dict({"where": link, "mode": mode, "ranks": np, "repeat": rep}, **run))
+                    runs.append(dict({"where": link, "case": f"{TESTBED['scene']}-{TESTBED['size']}", "mode": mode,
+                                      "ranks": np, "repeat": rep}, **run))
                     print(f"test bed {link:>8} {mode:<9} -np {np} #{rep}: wall {run['wall_s']:6.2f} s (prepass "
                           f"{run['prepass_s']:5.2f}, final {run['render_s']:5.2f}), {run['bytes'] / 1e6:.1f} MB")
     finally:
@@ -646,11 +662,16 @@ def validate(store, algorithm="linear"):
     rows = []
     local = Net(*store["links"]["local"], GAP["tcp"], algorithm)
     groups = {}
+    machine = profile_of(store, LOCAL)
     for r in store.get("local", []) + store.get("testbed", []):
-        groups.setdefault((r["where"], r["mode"], r["ranks"]), []).append(r)
-    for (where, mode, np), runs in sorted(groups.items(), key=lambda kv: (kv[0][0] != "local", kv[0])):
-        case = LOCAL if where == "local" else TESTBED
+        name = r.get("case") or (f"{LOCAL['scene']}-{LOCAL['size']}" if r["where"] == "local"
+                                 else f"{TESTBED['scene']}-{TESTBED['size']}")
+        groups.setdefault((r["where"], name, r["mode"], r["ranks"]), []).append(r)
+    for (where, name, mode, np), runs in sorted(groups.items(), key=lambda kv: (kv[0][0] != "local", kv[0])):
+        case = CASES.get(name, TESTBED)
         profile = profile_of(store, case)
+        # The machine's effective cores, as the local case's 1- and 2-thread runs measured them.
+        profile.cores = machine.cores
         net = local if where == "local" else Net(*store["links"][where], GAP["tcp"], algorithm)
         # Every rank of the test bed runs on this machine's cores too.
         res = simulate(profile, np, net, cores=profile.cores, mode=mode)
@@ -665,12 +686,17 @@ def validate(store, algorithm="linear"):
                      "prepass_err_pct": round(pct(sim_prepass, real_prepass), 1),
                      "real_final_s": round(real_final, 3), "sim_final_s": round(res.parts["final"], 3),
                      "final_err_pct": round(pct(res.parts["final"], real_final), 1),
-                     "spread_pct": round(100 * (max(r["wall_s"] for r in runs) - min(r["wall_s"] for r in runs)) / real, 1)})
+                     "spread_pct": round(100 * (max(r["wall_s"] for r in runs) - min(r["wall_s"] for r in runs)) / real, 1),
+                     "real_mb": round(statistics.median(r["bytes"] for r in runs) / 1e6, 2),
+                     "sim_mb": round(res.bytes / 1e6, 2),
+                     "bytes_err_pct": round(pct(res.bytes, statistics.median(r["bytes"] for r in runs)), 1),
+                     "load_average": round(statistics.median(r.get("load_average", float("nan")) for r in runs), 1)})
     for r in rows:
-        print(f"validation {r['where']:>8} {r['mode']:<9} -np {r['ranks']}: measured {r['real_wall_s']:6.2f} s "
+        print(f"validation {r['where']:>8} {r['scene']:>10} {r['size']:>7} {r['mode']:<9} -np {r['ranks']}: measured {r['real_wall_s']:6.2f} s "
               f"(median of {r['repeats']}, spread {r['spread_pct']:4.1f}%), simulated {r['sim_wall_s']:6.2f} s: "
               f"error {r['wall_err_pct']:+5.1f}% (prepass {r['prepass_err_pct']:+5.1f}%, final pass "
-              f"{r['final_err_pct']:+5.1f}%)")
+              f"{r['final_err_pct']:+5.1f}%); bytes {r['real_mb']:.1f} MB, simulated {r['sim_mb']:.1f} MB "
+              f"({r['bytes_err_pct']:+.1f}%)")
     if rows:
         errors = [abs(r["wall_err_pct"]) for r in rows]
         print(f"validation: mean |error| {statistics.mean(errors):.1f}%, worst {max(errors):.1f}% over {len(rows)} "
@@ -846,18 +872,21 @@ def write_docs(store, validation, check, target, prediction, ifs, log):
     for name, e in store["profiles"].items():
         pr = Profile(e["default"], e.get("noedge"), e.get("threads2"), e.get("fit_s"), e.get("mpi_extra_s"))
         lines.append(f"- `{name}` one process, one thread: {pr.summary()}.")
-    lines += ["", "Links (`icrender bench messages`, median of its round trips):", ""]
+    lines += ["", "Links (`icrender bench messages`: latency from the smallest message's half round trip, bandwidth "
+                  "from a stream; the median of 3 measurements):", ""]
     lines += [f"- {k}: latency {v[0] * 1e6:.1f} us, bandwidth {v[1] / 1e6:.0f} MB/s" for k, v in store["links"].items()]
     lines += ["", "## Validation", "",
               "Median wall time (`wall_s` of --stats) of each configuration against the simulation. `local`: this "
-              f"machine (2 cores, mpirun --oversubscribe), {LOCAL['scene']} {LOCAL['size']} {LOCAL['options']}; test "
+              f"machine (2 cores, mpirun --oversubscribe), {LOCAL['scene']} {LOCAL['size']} {LOCAL['options']} and "
+              f"{SMALL['scene']} {SMALL['size']} {SMALL['options']}; test "
               f"bed: network namespaces on the same 2 cores, links capped by tc, {TESTBED['scene']} "
               f"{TESTBED['size']} {TESTBED['options']}. broadcast: every worker renders the final pass; component: "
               "the default mode.", ""]
-    lines.append(table(validation, ["where", "mode", "ranks", "repeats", "real_wall_s", "sim_wall_s", "wall_err_pct",
-                                    "spread_pct", "prepass_err_pct", "final_err_pct"],
-                       ["where", "mode", "ranks", "runs", "measured s", "simulated s", "error %", "runs' spread %",
-                        "prepass error %", "final pass error %"]))
+    lines.append(table(validation, ["where", "scene", "size", "mode", "ranks", "repeats", "real_wall_s", "sim_wall_s", "wall_err_pct",
+                                    "spread_pct", "prepass_err_pct", "final_err_pct", "real_mb", "bytes_err_pct",
+                                    "load_average"],
+                       ["where", "scene", "size", "mode", "ranks", "runs", "measured s", "simulated s", "error %", "runs' spread %",
+                        "prepass error %", "final pass error %", "MB sent", "bytes error %", "load average"]))
     errors = [abs(r["wall_err_pct"]) for r in validation]
     if errors:
         lines += ["", f"Mean |error| {statistics.mean(errors):.1f}%, worst {max(errors):.1f}%; "
@@ -901,16 +930,31 @@ def write_docs(store, validation, check, target, prediction, ifs, log):
     print(f"wrote {os.path.join(DOCS, 'SCALING.md')} and {folder}/*.csv")
 
 
-def targets(prediction):
-    """The issue's targets at 256 ranks in the default mode, met or not, with the bound."""
+def targets(prediction, ifs):
+    """The issue's targets at 256 ranks in the default mode: met or not, what bounds the
+    efficiency (the loss shares and the parts' seconds against the ideal T1 / P), and what the
+    simulated changes would give."""
     out = []
     for network, goal in (("100gbit", 80.0), ("1gbit", 60.0)):
         r = next(r for r in prediction if r["network"] == network and r["algorithm"] == "linear"
                  and r["mode"] == "component" and r["ranks"] == 256)
         met = "met" if r["efficiency_pct"] >= goal else "missed"
         shares = sorted(((k[5:-4], v) for k, v in r.items() if k.startswith("loss_")), key=lambda kv: -kv[1])
-        out.append(f"- {network}, 256 ranks, default mode: {r['efficiency_pct']}% against {goal:.0f}%: {met}; "
-                   f"losses " + ", ".join(f"{k} {v}%" for k, v in shares) + f" (final pass bound by {r['final_bound']}).")
+        ideal = r["t1_s"] / 256
+        parts = sorted(((k[:-2], v) for k, v in r.items() if k.endswith("_s") and k not in ("t1_s", "wall_s")),
+                       key=lambda kv: -kv[1])
+        mine = [i for i in ifs if i["network"] == network and i["ranks"] == 256]
+        best = max(mine[1:-1], key=lambda i: i["efficiency_pct"])
+        every = mine[-1]
+        out.append(
+            f"- **{network}, 256 ranks, default mode: {r['efficiency_pct']}% against {goal:.0f}%: {met}** (build "
+            f"efficiency, without the load and setup, {r['build_efficiency_pct']}%). Wall {r['wall_s']} s against "
+            f"an ideal {ideal:.3f} s (one process's {r['t1_s']} s over 256). Largest parts: "
+            + ", ".join(f"{k} {v:.3f} s" for k, v in parts[:5])
+            + f". Loss shares: " + ", ".join(f"{k} {v}%" for k, v in shares if k != "compute")
+            + f"; the final pass is bound by its {r['final_bound']}. The largest single change simulated: "
+            f"{best['change']} ({best['efficiency_pct']}%); all of them together {every['efficiency_pct']}% "
+            f"({every['build_efficiency_pct']}% without the load and setup).")
     for line in out:
         print(line)
     return out
@@ -943,6 +987,7 @@ def main():
         store.setdefault("links", {})["local"] = list(local_link())
         if "profiles" not in skip:
             profile_runs(LOCAL, work, store, threads2=True)
+            profile_runs(SMALL, work, store)
             profile_runs(TESTBED, work, store)
         if args.target_stats:
             with open(args.target_stats) as f:
@@ -953,8 +998,10 @@ def main():
             print(f"target {TARGET['size']} one process: {time.monotonic() - t:.0f} s")
         if "local" not in skip:
             store["local"] = []
-            measure_local(store, work, args.repeats, [int(n) for n in args.local_ranks.split(",")],
-                          args.modes.split(","))
+            plan = [(LOCAL, mode, int(n)) for mode in args.modes.split(",") for n in args.local_ranks.split(",")
+                    if not (mode == "component" and int(n) < 3)]  # a PA and a PR need two workers
+            plan += [(SMALL, mode, n) for mode in args.modes.split(",") for n in (3, 5)]
+            measure_local(store, work, args.repeats, plan)
         if "testbed" not in skip:
             if os.geteuid() != 0:
                 print("prepass_sim: the test bed needs root (network namespaces); its runs are skipped")
@@ -975,7 +1022,7 @@ def main():
     ifs = what_if(target, target.one_process())
     for r in ifs:
         print(f"what if {r['network']:>7} {r['ranks']:4d} ranks: {r['efficiency_pct']:5.1f}%  {r['change']}")
-    log = targets(prediction)
+    log = targets(prediction, ifs)
     write_docs(store, validation, check, target, prediction, ifs, log)
 
 
