@@ -968,7 +968,7 @@ def main():
     parser.add_argument("--local-ranks", default="2,3,4,5")
     parser.add_argument("--modes", default="broadcast,component")
     parser.add_argument("--links", default="1gbit,100mbit", help="the test bed's link settings (tc rates)")
-    parser.add_argument("--testbed-runs", default="broadcast:3,component:5",
+    parser.add_argument("--testbed-runs", default="broadcast:3,broadcast:5,component:5",
                         help="mode:ranks pairs run on every link of the test bed")
     parser.add_argument("--target-stats", help="--stats of a one-process render at the target size (skips that run)")
     parser.add_argument("--skip", default="", help="comma-separated stages to skip: profiles,target,local,testbed")
@@ -984,24 +984,26 @@ def main():
         work = common.scratch()
         started = time.monotonic()
         store["measured_at"] = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
+
+        def keep():
+            """The store after every stage: a stage that fails or is stopped leaves the others'."""
+            os.makedirs(os.path.dirname(STORE), exist_ok=True)
+            with open(STORE, "w") as f:
+                json.dump(store, f, indent=1)
+
         store.setdefault("links", {})["local"] = list(local_link())
         if "profiles" not in skip:
             profile_runs(LOCAL, work, store, threads2=True)
             profile_runs(SMALL, work, store)
             profile_runs(TESTBED, work, store)
-        if args.target_stats:
-            with open(args.target_stats) as f:
-                store["target"] = slim(json.load(f))
-        elif "target" not in skip:
-            t = time.monotonic()
-            store["target"] = slim(one_process(TARGET["path"], TARGET["size"], TARGET["options"], 1, work))
-            print(f"target {TARGET['size']} one process: {time.monotonic() - t:.0f} s")
+            keep()
         if "local" not in skip:
             store["local"] = []
             plan = [(LOCAL, mode, int(n)) for mode in args.modes.split(",") for n in args.local_ranks.split(",")
                     if not (mode == "component" and int(n) < 3)]  # a PA and a PR need two workers
             plan += [(SMALL, mode, n) for mode in args.modes.split(",") for n in (3, 5)]
             measure_local(store, work, args.repeats, plan)
+            keep()
         if "testbed" not in skip:
             if os.geteuid() != 0:
                 print("prepass_sim: the test bed needs root (network namespaces); its runs are skipped")
@@ -1009,9 +1011,15 @@ def main():
                 store["testbed"] = []
                 cases = [(m, int(n)) for m, n in (p.split(":") for p in args.testbed_runs.split(","))]
                 measure_testbed(store, work, args.repeats, args.links.split(","), cases)
-        os.makedirs(os.path.dirname(STORE), exist_ok=True)
-        with open(STORE, "w") as f:
-            json.dump(store, f, indent=1)
+                keep()
+        if args.target_stats:
+            with open(args.target_stats) as f:
+                store["target"] = slim(json.load(f))
+        elif "target" not in skip:
+            t = time.monotonic()
+            store["target"] = slim(one_process(TARGET["path"], TARGET["size"], TARGET["options"], 1, work))
+            print(f"target {TARGET['size']} one process: {time.monotonic() - t:.0f} s")
+        keep()
         print(f"measured in {time.monotonic() - started:.0f} s; kept in {STORE}")
     validation = validate(store)
     check = scaling_check(store)
