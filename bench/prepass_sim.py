@@ -76,6 +76,10 @@ GRID_SAMPLE_BYTES = 48  # position, normal, direct and indirect light: four vec3
 ROW_HEADER = 8  # a row's y and its length (u32 each)
 PIXEL_WIRE = 4 * (13 + 13 + 4 * 6)  # PIXEL_FLOATS: 4 RGB layers, records, 13 data, 24 Cryptomatte
 HALF_PIXEL = 24  # the four RGB layers at half precision: what a what-if sends instead
+# Bytes a second the master decodes and stores a finished tile at (src/parallel/protocol
+# decode_pixels, src/tiles.rs store_tile): an assumption of about a memory copy's speed with
+# the decoding's work, not measured (at 4 workers here the master never bounds the final pass).
+MASTER_TILE_RATE = 1e9
 LENGTH_BYTES = 8  # each rank's part length in the first allgather (u64)
 EDGE_STRIP = 8  # src/prepass/mod.rs: rows of an edge map's strip
 MAX_SITE_PIXELS = 1 << 18  # src/irradiance/last_bounce.rs: the grid's sites at most
@@ -178,6 +182,13 @@ class Profile:
             two = (sum(r["compute_s"] for r in threads2["prepass_round_log"])
                    + threads2["render_s"] - threads2["prepass_s"])
             self.cores = max(1.0, min(2.0, one / two)) if two > 0 else 1.0
+
+    # A tile's cost of going through the master (encoding, the rendezvous of a large message
+    # polled with pauses, storing it) beyond its bytes on the link: from a calibration run.
+    tile_overhead_s = 0.0
+
+    def tiles(self):
+        return math.ceil(self.width / 32) * math.ceil(self.height / 32)
 
     def one_process(self):
         """The phases' seconds of this profile as one process, one thread (the model's own sum,
@@ -462,15 +473,18 @@ def final_pass(pr, W, net, cores, mode, change=()):
     tile_bytes = pr.pixels / tiles * (HALF_PIXEL if "half_tiles" in change else PIXEL_WIRE)
     # On shared cores the rendering ranks take turns with each other (the idle PAs sleep).
     speed = min(cores, n) / n if cores is not None and n > cores else 1.0
-    trip = 2 * net.lat + 2 * net.gap + tile_bytes / net.bw + MASTER_MAX_PAUSE / 2 + wake(per_tile / speed, False)
+    trip = (2 * net.lat + 2 * net.gap + tile_bytes / net.bw + MASTER_MAX_PAUSE / 2 + wake(per_tile / speed, False)
+            + pr.tile_overhead_s)
     workers = max(tiles / n, 1.0) * (per_tile / speed + trip) + 0.5 * per_tile / speed
-    master = tiles * (tile_bytes / net.bw + net.gap) + per_tile / speed + trip
+    # The master takes the tiles one at a time: each one's bytes on its link, and decoding and
+    # storing them at MASTER_TILE_RATE (the calibrated overhead is the worker's wait, in `trip`).
+    master = tiles * (tile_bytes / net.bw + net.gap + tile_bytes / MASTER_TILE_RATE) + per_tile / speed + trip
     if "direct_tiles" in change:
         # The workers write their tiles themselves (a parallel file system, MPI-IO): the
         # master's link carries the requests alone.
         master = tiles * (64 / net.bw + net.gap)
     if master > workers:
-        return master, "master's link"
+        return master, "master (its link, decoding)"
     return workers, "workers"
 
 
@@ -598,19 +612,32 @@ def profile_runs(case, work, store, threads2=False):
     entry["noedge"] = slim(one_process(case["path"], case["size"], case["options"], 1, work, ["--edge-samples", "1"]))
     if threads2:
         entry["threads2"] = slim(one_process(case["path"], case["size"], case["options"], 2, work))
-    run, error = mpi_local(2, case["path"], case["size"], case["options"], "broadcast", work)
-    if run is None:
-        raise RuntimeError(f"calibration run failed: {error}")
-    entry["fit_s"], entry["mpi_extra_s"] = run["master_own_s"], run["extra_s"]
     store.setdefault("profiles", {})[name] = entry
+    calibrate(case, work, store)
     print(f"profile {name}: one process {entry['default']['wall_s']:.2f} s (busy/cpu "
           f"{entry['default']['busy_over_cpu'] or 0:.2f}), fit {entry['fit_s']:.3f} s (the -np 2 master's own)")
 
 
+def calibrate(case, work, store):
+    """A run at -np 2 (broadcast: a master and one worker) for what one process cannot show: the
+    master's fit time, the setup beyond the phases, and a tile's cost of going through the
+    master (the final pass's time beyond one process's, per tile). Not one of the validated runs."""
+    entry = store["profiles"][f"{case['scene']}-{case['size']}"]
+    run, error = mpi_local(2, case["path"], case["size"], case["options"], "broadcast", work)
+    if run is None:
+        raise RuntimeError(f"calibration run failed: {error}")
+    entry["fit_s"], entry["mpi_extra_s"], entry["calibration_final_s"] = run["master_own_s"], run["extra_s"], run["render_s"]
+    print(f"calibration {case['scene']}-{case['size']} -np 2: fit {run['master_own_s']:.3f} s, setup {run['extra_s']:.3f} s, "
+          f"final pass {run['render_s']:.3f} s")
+
+
 def profile_of(store, case, cores=True):
     e = store["profiles"][f"{case['scene']}-{case['size']}"]
-    return Profile(e["default"], e.get("noedge"), e.get("threads2") if cores else None, e.get("fit_s"),
-                   e.get("mpi_extra_s"))
+    pr = Profile(e["default"], e.get("noedge"), e.get("threads2") if cores else None, e.get("fit_s"),
+                 e.get("mpi_extra_s"))
+    if e.get("calibration_final_s") is not None:
+        pr.tile_overhead_s = max(e["calibration_final_s"] - pr.final_s, 0.0) / pr.tiles()
+    return pr
 
 
 def measure_local(store, work, repeats, plan):
@@ -676,9 +703,11 @@ def validate(store, algorithm="linear"):
         # Every rank of the test bed runs on this machine's cores too.
         res = simulate(profile, np, net, cores=profile.cores, mode=mode)
         real = statistics.median(r["wall_s"] for r in runs)
-        real_prepass = statistics.median(r["prepass_s"] for r in runs)
+        # Rank 0's load and prepass together: its prepass starts with a collective that waits
+        # for the slowest rank's load, so the two apart are not comparable with the model's.
+        real_prepass = statistics.median(r["prepass_s"] + r["load_s"] for r in runs)
         real_final = statistics.median(r["render_s"] for r in runs)
-        sim_prepass = sum(v for k, v in res.parts.items() if k not in ("load", "setup", "final"))
+        sim_prepass = sum(v for k, v in res.parts.items() if k not in ("setup", "final"))
         rows.append({"where": where, "scene": case["scene"], "size": case["size"], "options": case["options"],
                      "mode": mode, "ranks": np, "repeats": len(runs), "real_wall_s": round(real, 3),
                      "sim_wall_s": round(res.wall, 3), "wall_err_pct": round(pct(res.wall, real), 1),
@@ -694,7 +723,7 @@ def validate(store, algorithm="linear"):
     for r in rows:
         print(f"validation {r['where']:>8} {r['scene']:>10} {r['size']:>7} {r['mode']:<9} -np {r['ranks']}: measured {r['real_wall_s']:6.2f} s "
               f"(median of {r['repeats']}, spread {r['spread_pct']:4.1f}%), simulated {r['sim_wall_s']:6.2f} s: "
-              f"error {r['wall_err_pct']:+5.1f}% (prepass {r['prepass_err_pct']:+5.1f}%, final pass "
+              f"error {r['wall_err_pct']:+5.1f}% (load and prepass {r['prepass_err_pct']:+5.1f}%, final pass "
               f"{r['final_err_pct']:+5.1f}%); bytes {r['real_mb']:.1f} MB, simulated {r['sim_mb']:.1f} MB "
               f"({r['bytes_err_pct']:+.1f}%)")
     if rows:
@@ -736,7 +765,9 @@ def target_profile(store):
     calibration run scaled by the records, the setup as the local case's."""
     base = profile_of(store, LOCAL, cores=False)
     records = store["target"]["prepass_records"]
-    return Profile(store["target"], fit_s=base.fit_s * records / max(base.records, 1), mpi_extra_s=base.mpi_extra_s)
+    out = Profile(store["target"], fit_s=base.fit_s * records / max(base.records, 1), mpi_extra_s=base.mpi_extra_s)
+    out.tile_overhead_s = base.tile_overhead_s
+    return out
 
 
 def predict(store, algorithms=("linear", "bruck")):
@@ -850,7 +881,10 @@ def write_docs(store, validation, check, target, prediction, ifs, log):
         "- **fit**: the record set's curvature fit, on every rank (the -np 2 calibration run's master time outside "
         "the rounds and the pool).",
         "- **final**: 32x32 tiles on demand, each a round trip through the master carrying the tile back (200 bytes "
-        "a pixel); bound by the rendering workers or by the master's link. In component mode (the default under "
+        "a pixel) plus a tile's overhead beyond one process (the -np 2 calibration run's final pass beyond the "
+        "one-process final pass, per tile: encoding, a large message's rendezvous polled with pauses); bound by "
+        "the rendering workers or by the master, which takes the tiles one at a time (their bytes on its link, "
+        "and decoding and storing them at an assumed 1 GB/s). In component mode (the default under "
         "mpirun) only the PRs render tiles: the PAs, W/2 of them, wait for requests that a complete record set "
         "no longer makes.",
         "",
@@ -886,7 +920,7 @@ def write_docs(store, validation, check, target, prediction, ifs, log):
                                     "spread_pct", "prepass_err_pct", "final_err_pct", "real_mb", "bytes_err_pct",
                                     "load_average"],
                        ["where", "scene", "size", "mode", "ranks", "runs", "measured s", "simulated s", "error %", "runs' spread %",
-                        "prepass error %", "final pass error %", "MB sent", "bytes error %", "load average"]))
+                        "load + prepass error %", "final pass error %", "MB sent", "bytes error %", "load average"]))
     errors = [abs(r["wall_err_pct"]) for r in validation]
     if errors:
         lines += ["", f"Mean |error| {statistics.mean(errors):.1f}%, worst {max(errors):.1f}%; "
@@ -972,6 +1006,7 @@ def main():
                         help="mode:ranks pairs run on every link of the test bed")
     parser.add_argument("--target-stats", help="--stats of a one-process render at the target size (skips that run)")
     parser.add_argument("--skip", default="", help="comma-separated stages to skip: profiles,target,local,testbed")
+    parser.add_argument("--only", default="", help="'calibration': the -np 2 calibration runs again (with --skip)")
     args = parser.parse_args()
     skip = set(filter(None, args.skip.split(",")))
     store = {}
@@ -996,6 +1031,10 @@ def main():
             profile_runs(LOCAL, work, store, threads2=True)
             profile_runs(SMALL, work, store)
             profile_runs(TESTBED, work, store)
+            keep()
+        if "calibration" in args.only:
+            for case in (LOCAL, SMALL, TESTBED):
+                calibrate(case, work, store)
             keep()
         if "local" not in skip:
             store["local"] = []
