@@ -998,6 +998,20 @@ def targets(prediction, ifs):
             + f"; the final pass is bound by its {r['final_bound']}. The largest single change simulated: "
             f"{best['change']} ({best['efficiency_pct']}%); all of them together {every['efficiency_pct']}% "
             f"({every['build_efficiency_pct']}% without the load and setup).")
+    # Work every rank repeats whatever the count bounds the efficiency on its own: with F such
+    # seconds per rank, efficiency <= 1 / (1 + P F / T1), so a goal E needs F <= T1 (1 - E) / (E P).
+    r = next(r for r in prediction if r["network"] == "100gbit" and r["algorithm"] == "linear"
+             and r["mode"] == "component" and r["ranks"] == 256)
+    fixed = r["load_s"] + r["setup_s"] + r["round_serial_s"] + r["fit_s"]
+    need = r["t1_s"] * 0.2 / (0.8 * 256)
+    out.append(f"- **The serial share alone**: every rank repeats {fixed:.2f} s whatever the rank count (scene "
+               f"load and BVH {r['load_s']:.2f} s, setup {r['setup_s']:.2f} s, inserting every record "
+               f"{r['round_serial_s']:.2f} s, the fit {r['fit_s']:.2f} s). With one process's {r['t1_s']} s of work, "
+               f"80% at 256 ranks needs at most {need:.3f} s of it, and {fixed:.2f} s caps the efficiency at "
+               f"{100 / (1 + 256 * fixed / r['t1_s']):.0f}% at 256 ranks on any network (80% up to "
+               f"{int(r['t1_s'] * 0.25 / fixed)} ranks). Lifting it needs the fit and the inserts split over the "
+               f"ranks (each rank inserting only the records near what it renders) and a faster load (a scene and "
+               f"BVH read prebuilt), or a frame with more work per rank (a 4K frame at -ab 2 is {r['t1_s']:.0f} s of one core).")
     for line in out:
         print(line)
     return out
