@@ -482,21 +482,9 @@ fn run_watched<P: Pool>(
     pool: &mut P,
     watch: &dyn Fn(usize, usize) -> bool,
 ) -> Result<PrepassOutcome, P::Error> {
+    // Every exchange is timed, for the report (under mpirun: the rounds' barriers).
     let mut timed = Timed::new(pool);
-    let outcome = prepass(integrator, camera, settings, &mut timed, watch);
-    outcome.map(|o| PrepassOutcome {
-        pool_s: timed.seconds,
-        ..o
-    })
-}
-
-fn prepass<P: Pool>(
-    integrator: &Integrator<'_>,
-    camera: &Camera,
-    settings: &RenderSettings,
-    pool: &mut P,
-    watch: &dyn Fn(usize, usize) -> bool,
-) -> Result<PrepassOutcome, P::Error> {
+    let pool = &mut timed;
     let start = Instant::now();
     let mut outcome = PrepassOutcome {
         threads: vec![ThreadStats::default(); settings.threads.max(1)],
@@ -534,7 +522,7 @@ fn prepass<P: Pool>(
     let run = |sites: Vec<Site>,
                snapshot: &mut FrozenIndex,
                outcome: &mut PrepassOutcome,
-               pool: &mut P|
+               pool: &mut Timed<'_, P>|
      -> Result<(), P::Error> {
         let began = Instant::now();
         let bytes_before = pool.bytes_received();
@@ -651,6 +639,7 @@ fn prepass<P: Pool>(
     }
     outcome.edges = edges.map(std::sync::Arc::new);
     outcome.seconds = start.elapsed().as_secs_f64();
+    outcome.pool_s = timed.seconds;
     Ok(outcome)
 }
 
