@@ -254,6 +254,10 @@ fn the_prepass_gives_every_mode_the_serial_image() {
         // Every record is made once, by one worker; afterwards only the same gaps' records.
         assert_eq!(u(s, "gap_records"), gaps, "{name}");
         assert_eq!(u(s, "edge_pixels"), edge_pixels, "{name}");
+        // Every lookup counted once, wherever its site was looked up.
+        for key in ["lookups", "hits"] {
+            assert_eq!(u(s, key), u(&serial.stats, key), "{name}: {key}");
+        }
         // The last bounce's grid, its rows shared by the workers, is the one process's.
         for key in ["last_bounce_cells", "last_bounce_samples"] {
             assert_eq!(u(s, key), u(&serial.stats, key), "{name}: {key}");

@@ -384,7 +384,7 @@ fn on_sites<T: Send>(
 
 /// What a site's visit does with the points on its eye path that no record covers.
 enum Visit<'r> {
-    /// Only finds whether there is one (counting the lookups up to it).
+    /// Only finds whether there is one (counting every lookup on the path).
     Find,
     /// Makes their records (`count_lookups`: false where `Find` counted them already).
     Make {
@@ -438,11 +438,9 @@ fn site_visit(
             continue;
         }
         missed = true;
-        match &mut visit {
-            Visit::Find => return true,
-            Visit::Make { records, .. } => {
-                records.push((index, integrator.eye_record(cache, &hit, &mut rng, &mut work)))
-            }
+        // `Find` looks on to the path's end, so that it counts every lookup the site makes.
+        if let Visit::Make { records, .. } = &mut visit {
+            records.push((index, integrator.eye_record(cache, &hit, &mut rng, &mut work)));
         }
     }
     missed
