@@ -125,18 +125,13 @@ fn shading_options(args: &RenderArgs) -> ShadingOptions {
     }
 }
 
-/// What a cache file must agree on to be reused: everything that changes a record's value,
-/// radius or meaning.
-pub fn cache_settings_line(args: &RenderArgs, scene: &Scene) -> String {
+/// The irradiance cache's options as Radiance writes them: `-ab N -aa A -ad N -as N -ar N -av R G
+/// B` (in the EXR header's options and in a cache file's settings, which must stay as files
+/// already hold them).
+pub fn ambient_options(args: &RenderArgs) -> String {
     let av = args.ambient_value.as_deref().unwrap_or(&[0.0, 0.0, 0.0]);
     format!(
-        "scene {} size {:.6e}; -ab {} -aa {} -ad {} -as {} -ar {} -av {} {} {}; -st {}; metric {:?}; lambertian {}{}{}",
-        scene
-            .path
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_default(),
-        scene.size(),
+        "-ab {} -aa {} -ad {} -as {} -ar {} -av {} {} {}",
         args.ambient_bounces,
         args.ambient_accuracy,
         args.ambient_divisions,
@@ -144,7 +139,22 @@ pub fn cache_settings_line(args: &RenderArgs, scene: &Scene) -> String {
         args.ambient_resolution,
         av[0],
         av[1],
-        av[2],
+        av[2]
+    )
+}
+
+/// What a cache file must agree on to be reused: everything that changes a record's value,
+/// radius or meaning.
+pub fn cache_settings_line(args: &RenderArgs, scene: &Scene) -> String {
+    format!(
+        "scene {} size {:.6e}; {}; -st {}; metric {:?}; lambertian {}{}{}",
+        scene
+            .path
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default(),
+        scene.size(),
+        ambient_options(args),
         args.specular_threshold,
         args.ic_metric,
         args.lambertian,

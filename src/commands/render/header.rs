@@ -10,20 +10,12 @@ use crate::scene::Scene;
 
 /// The options as a Radiance-style line for the EXR header (and for giving rpict the same).
 pub fn options_line(args: &RenderArgs) -> String {
-    let av = args.ambient_value.as_deref().unwrap_or(&[0.0, 0.0, 0.0]);
     format!(
-        "-x {} -y {} -ab {} -aa {} -ad {} -as {} -ar {} -av {} {} {} -st {} -lr {} -lw {} --ic-metric {} \
+        "-x {} -y {} {} -st {} -lr {} -lw {} --ic-metric {} \
          --light-samples {} --direct {} --spp {} --seed {} --ic-build {} --ic-deep {} --ic-blend {}{}{}{}{}",
         args.width,
         args.height,
-        args.ambient_bounces,
-        args.ambient_accuracy,
-        args.ambient_divisions,
-        args.ambient_supersamples,
-        args.ambient_resolution,
-        av[0],
-        av[1],
-        av[2],
+        crate::job::ambient_options(args),
         args.specular_threshold,
         args.max_specular_depth,
         args.min_weight,
