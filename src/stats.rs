@@ -162,6 +162,15 @@ pub struct RankReport {
     pub prepass_s: f64,
     #[serde(default)]
     pub prepass_pool_s: f64,
+    /// Component mode under a prepass: the pixels this worker traced ahead of the record set
+    /// (`parallel::ahead`), the tiles they began, and the seconds of its waits in the rounds'
+    /// collectives it filled so (part of `prepass_pool_s`; the rest was idle).
+    #[serde(default)]
+    pub ahead_pixels: u64,
+    #[serde(default)]
+    pub ahead_tiles: u64,
+    #[serde(default)]
+    pub ahead_s: f64,
     /// The last bounce's grid as this rank built it (the same cells and samples on every
     /// worker) and the rays of the rows it sampled (the workers share the rows).
     #[serde(default)]

@@ -295,6 +295,11 @@ fn the_prepass_gives_every_mode_the_serial_image() {
             // The PRs hold the complete cache (and make a gap's record themselves): nothing
             // is left to the PAs.
             assert_eq!(u(s, "requests_sent"), 0, "{name}");
+            // Waiting for each other's rounds, the workers traced tiles ahead of the record
+            // set (their indirect light looked up once it was complete): the image above is
+            // still the serial one, bit for bit.
+            let ahead: u64 = ranks.iter().map(|r| u(r, "ahead_pixels")).sum();
+            assert!(ahead > 0, "{name}: no pixel traced ahead");
         }
         // The master takes each record in once and hands none out: the workers exchange them
         // among themselves (a record is 132 bytes on the wire with its site).

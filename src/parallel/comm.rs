@@ -32,20 +32,10 @@ const MASTER_MAX_PAUSE: Duration = Duration::from_micros(100);
 const LONG_WAIT: Duration = Duration::from_millis(20);
 const LONG_WAIT_PAUSE: Duration = Duration::from_millis(5);
 
-/// How often a wait polls.
-#[derive(Clone, Copy)]
-enum Pace {
-    /// A reply or a message: up to the rank's longest pause, and slower once the wait is long
-    /// (a rank with nothing to do).
-    Reply,
-    /// A collective in the prepass: a long wait there is a round whose slowest rank is still
-    /// computing, and every rank's part moves only while its rank polls (a large part goes by
-    /// rendezvous), so the rank that comes last to a round would otherwise wait up to
-    /// LONG_WAIT_PAUSE for each of the round's collectives to move.
-    Collective,
-}
-
-/// The longest pause of a wait in a collective.
+/// The longest pause of a wait in a collective in the prepass: a long wait there is a round
+/// whose slowest rank is still computing, and every rank's part moves only while its rank polls
+/// (a large part goes by rendezvous), so the rank that comes last to a round would otherwise
+/// wait up to LONG_WAIT_PAUSE for each of the round's collectives to move.
 const COLLECTIVE_MAX_PAUSE: Duration = Duration::from_micros(200);
 
 /// Whether the request in `pending` has completed (it is then gone); a request still in flight
@@ -176,12 +166,7 @@ impl<'c> Comm<'c> {
     /// Polls until `poll` gives a value or `limit` (None: never) has passed, sleeping between
     /// polls with pauses that double up to this rank's longest: a waiting rank neither spins
     /// (Open MPI's blocking calls do) nor sleeps long past what it waits for.
-    fn poll_with_pauses<T>(&self, limit: Option<Duration>, poll: impl FnMut() -> Option<T>) -> Option<T> {
-        self.poll_paced(limit, Pace::Reply, poll)
-    }
-
-    /// `poll_with_pauses` at the given pace.
-    fn poll_paced<T>(&self, limit: Option<Duration>, pace: Pace, mut poll: impl FnMut() -> Option<T>) -> Option<T> {
+    fn poll_with_pauses<T>(&self, limit: Option<Duration>, mut poll: impl FnMut() -> Option<T>) -> Option<T> {
         let start = Instant::now();
         let mut pause = Duration::from_micros(5);
         loop {
@@ -192,10 +177,9 @@ impl<'c> Comm<'c> {
                 return None;
             }
             std::thread::sleep(pause);
-            let cap = match pace {
-                Pace::Collective => COLLECTIVE_MAX_PAUSE,
-                Pace::Reply if start.elapsed() >= LONG_WAIT => LONG_WAIT_PAUSE,
-                Pace::Reply => self.max_pause,
+            let cap = match start.elapsed() >= LONG_WAIT {
+                true => LONG_WAIT_PAUSE,
+                false => self.max_pause,
             };
             pause = (pause * 2).min(cap);
         }
@@ -333,16 +317,35 @@ impl<'c> Comm<'c> {
     /// give up the wait otherwise, since MPI owns the buffers of a collective in flight.
     /// Err (on every rank alike, from the lengths all of them see): the parts add up to more
     /// than one collective can carry (MPI's 32-bit counts).
-    pub fn all_gather_bytes(&self, mine: &[u8], mut watch: impl FnMut()) -> Result<Vec<Vec<u8>>, String> {
+    ///
+    /// `fill` is work to do instead of pausing: it does a little (a fraction of a millisecond)
+    /// and answers whether there was any; its time is not idle time.
+    pub fn all_gather_bytes(
+        &self,
+        mine: &[u8],
+        mut watch: impl FnMut(),
+        mut fill: impl FnMut() -> bool,
+    ) -> Result<Vec<Vec<u8>>, String> {
         use mpi::collective::CommunicatorCollectives;
         use mpi::datatype::PartitionMut;
         let start = Instant::now();
+        let mut filled = Duration::ZERO;
         let mut wait = |pending: &mut dyn FnMut() -> Option<()>| {
-            while self
-                .poll_paced(Some(Duration::from_secs(1)), Pace::Collective, &mut *pending)
-                .is_none()
-            {
-                watch();
+            let mut watched = Instant::now();
+            let mut pause = Duration::from_micros(5);
+            while pending().is_none() {
+                if watched.elapsed() >= Duration::from_secs(1) {
+                    watch();
+                    watched = Instant::now();
+                }
+                let filling = Instant::now();
+                if fill() {
+                    filled += filling.elapsed();
+                    pause = Duration::from_micros(5);
+                    continue;
+                }
+                std::thread::sleep(pause);
+                pause = (pause * 2).min(COLLECTIVE_MAX_PAUSE);
             }
         };
         let own = [mine.len() as u64];
@@ -377,9 +380,13 @@ impl<'c> Comm<'c> {
                 wait(&mut || completed(&mut pending));
             });
         }
+        let idle = start.elapsed().saturating_sub(filled);
         self.counters
             .idle_ns
-            .fetch_add(start.elapsed().as_nanos() as u64, Ordering::Relaxed);
+            .fetch_add(idle.as_nanos() as u64, Ordering::Relaxed);
+        self.counters
+            .filled_ns
+            .fetch_add(filled.as_nanos() as u64, Ordering::Relaxed);
         // What this rank gave and took, counted as if it had sent its part to each other rank
         // and been sent each of theirs: the library relays parts by its own algorithm (a ring,
         // recursive doubling), which moves parts through ranks, but every algorithm delivers

@@ -11,10 +11,17 @@ pub struct Counters {
     pub bytes_received: AtomicU64,
     /// Nanoseconds spent waiting for messages.
     pub idle_ns: AtomicU64,
+    /// Nanoseconds of waits for a collective filled with other work (`Comm::all_gather_bytes`):
+    /// not idle.
+    pub filled_ns: AtomicU64,
 }
 
 impl Counters {
     pub fn idle_s(&self) -> f64 {
         self.idle_ns.load(Ordering::Relaxed) as f64 * 1e-9
+    }
+
+    pub fn filled_s(&self) -> f64 {
+        self.filled_ns.load(Ordering::Relaxed) as f64 * 1e-9
     }
 }

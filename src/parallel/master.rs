@@ -14,6 +14,7 @@ use crate::diagnostics::warn;
 use crate::image::framebuffer::FrameBuffer;
 use crate::stats::{RankReport, RenderStats};
 use crate::tiles::{TileQueue, store_tile};
+use std::collections::{HashSet, VecDeque};
 use std::convert::Infallible;
 use std::time::Instant;
 
@@ -47,6 +48,8 @@ pub struct MasterCore<'a, 'c> {
     pub comm: &'a Comm<'c>,
     pub setup: &'a Setup<'a>,
     pub queue: TileQueue,
+    /// Tiles each rank began during the prepass (`Setup::claims`) and has not been given yet.
+    claimed: Vec<VecDeque<u32>>,
     pub frame: FrameBuffer,
     tiles_done: Vec<bool>,
     pub relay: RecordRelay<'a>,
@@ -66,10 +69,25 @@ impl<'a, 'c> MasterCore<'a, 'c> {
                 (0..tiles).collect(),
             ),
         };
+        // A claimed tile goes to its rank alone; one an earlier run finished (--checkpoint) to nobody.
+        let unfinished: HashSet<usize> = todo.iter().copied().collect();
+        let claimed: Vec<VecDeque<u32>> = (0..size)
+            .map(|rank| {
+                let claims = setup.claims.get(rank).map_or(&[][..], Vec::as_slice);
+                claims
+                    .iter()
+                    .copied()
+                    .filter(|&t| unfinished.contains(&(t as usize)))
+                    .collect()
+            })
+            .collect();
+        let taken: HashSet<usize> = claimed.iter().flatten().map(|&t| t as usize).collect();
+        let todo = todo.into_iter().filter(|t| !taken.contains(t)).collect();
         MasterCore {
             comm,
             setup,
             queue: TileQueue::new(todo),
+            claimed,
             frame,
             tiles_done,
             relay: RecordRelay::new(size, setup.cache()),
@@ -92,6 +110,11 @@ impl<'a, 'c> MasterCore<'a, 'c> {
             );
             end_job(self.comm, self.setup.cache(), &line)
         });
+    }
+
+    /// Whether every tile has been handed out (claimed ones included).
+    pub fn all_out(&self) -> bool {
+        self.queue.all_out() && self.claimed.iter().all(VecDeque::is_empty)
     }
 
     pub fn workers(&self) -> usize {
@@ -145,7 +168,8 @@ impl<'a, 'c> MasterCore<'a, 'c> {
                 if let Some(finished) = finished {
                     self.take_tile(source, finished)?;
                 }
-                let tile = self.queue.next().map(|i| i as u32);
+                let claimed = self.claimed.get_mut(source as usize).and_then(VecDeque::pop_front);
+                let tile = claimed.or_else(|| self.queue.next().map(|i| i as u32));
                 self.turned_away += usize::from(tile.is_none());
                 let records = sharing.records_with_work(self, source);
                 self.send(source, &Message::Work { thread, tile, records });
@@ -211,9 +235,9 @@ fn control(
             .map_err(|silence| sharing.lost(&core, &silence))?;
         core.handle(sharing, source, message?)?;
     }
-    if !core.queue.all_out() {
-        let (out, all) = (core.queue.handed_out(), core.queue.len());
-        return Err(format!("only {out} of {all} tiles were rendered"));
+    if !core.all_out() {
+        let left = core.queue.len() - core.queue.handed_out() + core.claimed.iter().map(VecDeque::len).sum::<usize>();
+        return Err(format!("{left} tiles were not rendered"));
     }
     let render_s = start.elapsed().as_secs_f64();
     sharing.gather(&mut core)?;

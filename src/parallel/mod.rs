@@ -2,6 +2,7 @@
 //! share cache records in one of the paper's ways (section 4): not at all, through the master,
 //! or by broadcast. Component mode (section 5) builds on the same master, tiles and transport.
 
+pub mod ahead;
 pub mod comm;
 pub mod component;
 pub mod counters;
@@ -28,6 +29,7 @@ use component::Roles;
 pub use error::{ParallelError, ParallelResult};
 use mpi::Threading;
 use protocol::{Kind, Message, Records};
+use std::sync::Mutex;
 use std::sync::atomic::AtomicU64;
 use std::sync::atomic::Ordering::Relaxed;
 use std::time::{Duration, Instant};
@@ -197,6 +199,12 @@ pub struct Setup<'a> {
     pub traffic_before: &'a Counters,
     /// When the role began: its report's wall time.
     pub start: Instant,
+    /// The tiles each rank began during the prepass (by rank), which the master hands it first,
+    /// and this worker's traces of its own (`ahead`).
+    pub claims: Vec<Vec<u32>>,
+    pub traced: Mutex<ahead::TracedTiles>,
+    /// What tracing ahead did on this worker.
+    pub ahead: ahead::AheadReport,
 }
 
 impl Setup<'_> {
@@ -241,6 +249,9 @@ impl Setup<'_> {
             wall_s: self.start.elapsed().as_secs_f64(),
             prepass_s: self.prepass.as_ref().map_or(0.0, |p| p.seconds),
             prepass_pool_s: self.prepass.as_ref().map_or(0.0, |p| p.pool_s),
+            ahead_pixels: self.ahead.pixels,
+            ahead_tiles: self.ahead.tiles,
+            ahead_s: self.ahead.seconds,
             last_bounce_cells: self.prepass.as_ref().map_or(0, |p| p.last_bounce_cells),
             last_bounce_samples: self.prepass.as_ref().map_or(0, |p| p.last_bounce_samples),
             last_bounce_rays: self
@@ -250,6 +261,17 @@ impl Setup<'_> {
             ..traffic_report(comm.rank(), role, &[comm.counters, helper, self.traffic_before], idle_s)
         }
     }
+}
+
+/// Whether a worker traces its tiles ahead while it waits in the prepass's rounds
+/// (`ahead`): component mode's split of the components, when the pixels only read a record set
+/// the prepass makes (not with the overture, which makes records as tiles render).
+fn traces_ahead(mode: Mode, job: &Job) -> bool {
+    mode == Mode::Component
+        && job.settings.prepass
+        && job.settings.overture == 0
+        && job.cache.is_some()
+        && job.shading.ambient_bounces > 0
 }
 
 /// Checks that MPI gives the threads the mode needs.
@@ -338,8 +360,6 @@ pub fn run(job_in: &ParallelJob<'_>) -> ParallelResult {
     // why and ends the whole job, or the others would wait for it for ever. Every rank loads the
     // scene; only the master opens the cache file (with --checkpoint, beside its journal).
     let checkpoint = if rank == 0 {
-        // Rank 0 alone writes images; the other ranks never open the image library.
-        crate::sys::image_io::open_in_background();
         host.check_outputs().unwrap_or_else(|e| end_job(&comm, None, &e));
         host.open_checkpoint(&all_tiles)
             .unwrap_or_else(|e| end_job(&comm, None, &e))
@@ -362,12 +382,36 @@ pub fn run(job_in: &ParallelJob<'_>) -> ParallelResult {
             return Err(stop_together(&comm, line.as_deref()));
         }
     };
+    // Rank 0 alone writes images; the other ranks never open the image library. It opens it
+    // now, while the workers start the prepass, not while it loads the scene: the opening holds
+    // the dynamic loader's lock, which the scene load's first calls into its libraries wait for
+    // (the master's load took 0.48 s against the workers' 0.23 s, and the prepass's first
+    // exchange waited for it: conference room, 3 ranks on 2 cores).
+    if rank == 0 {
+        crate::sys::image_io::open_in_background();
+    }
     // Every rank ends the prepass with the same cache; the modes then only read it (a gap's
     // record stays with the pixel that needed it).
-    let prepass = job.settings.prepass.then(|| {
-        prepass::run(&comm, &job, job_in.silence_limit, &hosts)
+    let prepassed = job.settings.prepass.then(|| {
+        let ahead = (rank != 0 && traces_ahead(job_in.mode, &job)).then(|| {
+            let integrator = Integrator::new(&job.scene, &job.tracer, &job.shading, job.cache.as_ref());
+            let worker = ((rank - 1) as usize, (size - 1) as usize);
+            ahead::TracingAhead::new(
+                integrator,
+                &job.camera,
+                &job.settings,
+                &all_tiles,
+                worker,
+                ahead::TRACE_BYTES_LIMIT,
+            )
+        });
+        prepass::run(&comm, &job, job_in.silence_limit, &hosts, ahead)
             .unwrap_or_else(|e| end_job(&comm, job.cache.as_ref(), &e))
     });
+    let (prepass, claims, traced, ahead) = match prepassed {
+        Some(p) => (Some(p.outcome), p.claims, p.traced, p.ahead),
+        None => Default::default(),
+    };
     job.prepass_threads = prepass.as_ref().map(|p| p.threads.clone()).unwrap_or_default();
     // The tiles take the prepass's edge pixels instead of tracing their corners again.
     job.settings.edge_map = prepass.as_ref().and_then(|p| p.edges.clone());
@@ -405,6 +449,9 @@ pub fn run(job_in: &ParallelJob<'_>) -> ParallelResult {
         sync: job_in.sync.map_or(job_in.mode.default_sync(), |n| n.max(1) as usize),
         traffic_before: &counters,
         start: Instant::now(),
+        claims,
+        traced: Mutex::new(traced),
+        ahead,
     };
     match roles {
         _ if rank == 0 => {

@@ -29,6 +29,7 @@ use crate::image::window::PixelWindow;
 use crate::irradiance::IrradianceCache;
 use crate::irradiance::index::FrozenIndex;
 use crate::irradiance::last_bounce::{self, LastBounceGrid};
+use crate::irradiance::record::Record;
 use crate::render::edges;
 use crate::render::pixel::{RenderSettings, ThreadClock, ThreadStats, eye_spread, pixel_offset};
 use crate::sampling::Rng;
@@ -446,6 +447,114 @@ fn site_visit(
     missed
 }
 
+/// The record set as the rounds add to it, the same in every process that keeps it: each
+/// round's records join the cache in site order, and after every round but the finest level's
+/// this prepass's records shrink where their neighbours disagree (`irradiance::validation`);
+/// the finest rounds fill the gaps shrinking opens. Only this prepass's records shrink: those
+/// it found (a cache file's, an earlier frame's) are final, so the views they were made for
+/// stay covered.
+pub struct RecordSet<'c> {
+    cache: &'c IrradianceCache,
+    /// The rounds look records up in this lock-free copy of the cache, which grows with it
+    /// and keeps its order (records shrink in place), so this prepass's records are those past
+    /// the `found` ones.
+    snapshot: FrozenIndex,
+    found: usize,
+    /// Rounds after which records shrink: the lattice's but its finest level's.
+    coarse: usize,
+    rounds: usize,
+}
+
+impl<'c> RecordSet<'c> {
+    /// The set for a prepass over `area`, from what `cache` holds.
+    pub fn new(cache: &'c IrradianceCache, area: crate::image::region::Region) -> Self {
+        let snapshot = cache.snapshot();
+        let lattice = rounds_in(area).len();
+        RecordSet {
+            cache,
+            found: snapshot.len(),
+            coarse: lattice.saturating_sub(finest_rounds(area.width(), area.height())),
+            rounds: 0,
+            snapshot,
+        }
+    }
+
+    pub fn snapshot(&self) -> &FrozenIndex {
+        &self.snapshot
+    }
+
+    /// Adds the next round's records, in order; answers how many another of them, placed
+    /// before, already covered (duplicates).
+    pub fn add_round(&mut self, records: Vec<Record>) -> u64 {
+        let before = self.snapshot.len();
+        let mut duplicates = 0;
+        for record in records {
+            let snapshot = &self.snapshot;
+            if self
+                .cache
+                .covered_in(snapshot, record.position, record.normal, record.headroom, 0)
+            {
+                duplicates += 1;
+            }
+            self.snapshot.push(record.clone());
+            self.cache.insert(record);
+        }
+        if self.rounds < self.coarse && self.snapshot.len() > before {
+            let (found, cache) = (self.found, self.cache);
+            cache.shrink_where_neighbours_disagree(&mut self.snapshot, |i| i >= found, |i| i >= before);
+        }
+        self.rounds += 1;
+        duplicates
+    }
+}
+
+/// What a process that keeps the records without taking part in the rounds hears next.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Kept {
+    /// A round: its log and its records in order, each with its site's pixel (y * width + x).
+    Round(RoundLog, Vec<(u32, Record)>),
+    /// The rounds are over: the pixels whose samples were visited one by one.
+    End(u64),
+}
+
+/// Keeps the record set the rounds make elsewhere (an MPI master: `parallel::prepass`) in
+/// `cache`, round by round as `next` hands them over, exactly as the processes that make them
+/// keep it: its file gets the same records, in the same order, and the same shrunk ones. An
+/// error of `next` ends it.
+pub fn keep_rounds<E>(
+    cache: &IrradianceCache,
+    camera: &Camera,
+    settings: &RenderSettings,
+    mut next: impl FnMut() -> Result<Kept, E>,
+) -> Result<PrepassOutcome, E> {
+    let start = Instant::now();
+    let mut outcome = PrepassOutcome::default();
+    let mut set = RecordSet::new(cache, settings.area(camera));
+    loop {
+        match next()? {
+            Kept::Round(log, records) => {
+                let width = camera.width;
+                outcome
+                    .record_pixels
+                    .extend(records.iter().map(|(pixel, _)| (pixel % width, pixel / width)));
+                outcome.records += records.len() as u64;
+                set.add_round(records.into_iter().map(|(_, record)| record).collect());
+                outcome.sites += log.sites;
+                outcome.rounds += 1;
+                outcome.round_log.push(log);
+            }
+            Kept::End(pixels_sampled) => {
+                outcome.pixels_sampled = pixels_sampled;
+                break;
+            }
+        }
+    }
+    // Nothing reads this copy (the master renders nothing): it is frozen without the fit.
+    cache.freeze();
+    outcome.seconds = start.elapsed().as_secs_f64();
+    Ok(outcome)
+}
+
 /// Runs the whole prepass in this process into `integrator`'s cache (nothing to do without one).
 /// `watch` hears of each round as it ends, with the rounds done and the rounds in all, and
 /// answers whether to go on (a render stopped by a signal ends after the round it is in, every
@@ -515,10 +624,11 @@ fn run_watched<P: Pool>(
         outcome.last_bounce_samples = grid.samples();
         cache.set_last_bounce(grid);
     }
-    // The rounds look records up in a lock-free copy of the cache, which grows with it.
-    let mut snapshot = cache.snapshot();
+    // Only the region's pixels (the whole image without --region) will be shaded.
+    let area = settings.area(camera);
+    let mut set = RecordSet::new(cache, area);
     let run = |sites: Vec<Site>,
-               snapshot: &mut FrozenIndex,
+               set: &mut RecordSet<'_>,
                outcome: &mut PrepassOutcome,
                pool: &mut Timed<'_, P>|
      -> Result<(), P::Error> {
@@ -526,6 +636,7 @@ fn run_watched<P: Pool>(
         let bytes_before = pool.bytes_received();
         let mut pooled = 0.0;
         let mine = pool.share().indices(sites.len());
+        let snapshot = set.snapshot();
         // Processes sharing a round first find which of their sites lack records, and then
         // share those sites out evenly: a round's time is its slowest process's, and the
         // records are nearly all of it (a site's lookup is about 1.5 us, a record at -ab 2
@@ -552,50 +663,41 @@ fn run_watched<P: Pool>(
         pooled += computed.elapsed().as_secs_f64();
         made.sort_by_key(|(index, _)| *index);
         let records = made.len();
+        let keeps = pool.keeps();
+        let mut kept = Vec::new();
+        let mut round = Vec::with_capacity(made.len());
         for (index, record) in made {
             let Some(&site) = sites.get(index as usize) else {
                 continue;
             };
-            // A record another of this round's sites made first would have served this one:
-            // the price of computing a round's records side by side.
-            if cache.covered_in(snapshot, record.position, record.normal, record.headroom, 0) {
-                outcome.threads[0].rays.duplicates += 1;
-            }
-            snapshot.push(record.clone());
             outcome.record_pixels.push((site.x, site.y));
-            outcome.records += 1;
-            cache.insert(record);
+            if keeps {
+                kept.push((site.y * camera.width + site.x, record.clone()));
+            }
+            round.push(record);
         }
+        outcome.records += round.len() as u64;
+        // A record another of this round's sites made first would have served this one:
+        // the price of computing a round's records side by side.
+        outcome.threads[0].rays.duplicates += set.add_round(round);
         outcome.sites += sites.len() as u64;
         outcome.rounds += 1;
-        outcome.round_log.push(RoundLog {
+        let log = RoundLog {
             sites: sites.len() as u64,
             records: records as u64,
             compute_s,
             pool_s: pooled,
             bytes: pool.bytes_received() - bytes_before,
             seconds: began.elapsed().as_secs_f64(),
-        });
-        Ok(())
+        };
+        outcome.round_log.push(log);
+        pool.kept(log, &kept)
     };
-    // Only the region's pixels (the whole image without --region) will be shaded.
-    let area = settings.area(camera);
     let lattice = rounds_in(area);
     let mut total = lattice.len();
-    // Records shrink where their neighbours disagree (`irradiance::validation`) after every
-    // round but the finest level's, whose rounds fill the gaps shrinking opens.
-    let coarse = lattice.len().saturating_sub(finest_rounds(area.width(), area.height()));
-    // Only this prepass's records shrink: those it found (a cache file's, an earlier frame's)
-    // are final, so the views they were made for stay covered. The snapshot keeps its order
-    // (records shrink in place), so this prepass's records are those past the ones it found.
-    let found = snapshot.len();
     let mut go_on = true;
-    for (k, sites) in lattice.into_iter().enumerate() {
-        let before = snapshot.len();
-        run(sites, &mut snapshot, &mut outcome, pool)?;
-        if k < coarse && snapshot.len() > before {
-            cache.shrink_where_neighbours_disagree(&mut snapshot, |i| i >= found, |i| i >= before);
-        }
+    for sites in lattice {
+        run(sites, &mut set, &mut outcome, pool)?;
         go_on = watch(outcome.rounds, total);
         if !go_on {
             break;
@@ -610,7 +712,7 @@ fn run_watched<P: Pool>(
     };
     if go_on && (spp > 1 || settings.jitter || edges.is_some()) {
         let needs = if spp > 1 || settings.jitter {
-            pixels_needing_samples(pass, &snapshot, pool, &mut outcome.threads)?
+            pixels_needing_samples(pass, set.snapshot(), pool, &mut outcome.threads)?
         } else {
             vec![false; settings.window(camera).pixels()]
         };
@@ -622,12 +724,13 @@ fn run_watched<P: Pool>(
         let more = sample_rounds(settings.window(camera), &needs);
         total += more.len();
         for sites in more {
-            run(sites, &mut snapshot, &mut outcome, pool)?;
+            run(sites, &mut set, &mut outcome, pool)?;
             if !watch(outcome.rounds, total) {
                 break;
             }
         }
     }
+    pool.ended(outcome.pixels_sampled)?;
     // The record set is complete: each record's overshoot is fitted from its neighbours, and
     // from now on lookups read the cache's lock-free copy.
     if go_on {

@@ -4,6 +4,7 @@
 //! results of all of them. One process alone (`Alone`) pools nothing; under mpirun the pool is
 //! a collective among the ranks (`parallel::prepass`). The prepass itself never knows which.
 
+use super::RoundLog;
 use crate::irradiance::last_bounce::GridSample;
 use crate::irradiance::record::Record;
 use std::convert::Infallible;
@@ -65,6 +66,20 @@ pub trait Pool {
     /// Bytes this process has taken in from the others so far (for the rounds' log).
     fn bytes_received(&self) -> u64 {
         0
+    }
+    /// A round as it joined the record set: its log and its records in order, each with its
+    /// site's pixel (y * width + x), for a process that keeps the records without taking part
+    /// in the rounds (an MPI master: `parallel::prepass`).
+    fn kept(&mut self, _log: RoundLog, _records: &[(u32, Record)]) -> Result<(), Self::Error> {
+        Ok(())
+    }
+    /// The rounds are over; `pixels_sampled` pixels had their samples visited one by one.
+    fn ended(&mut self, _pixels_sampled: u64) -> Result<(), Self::Error> {
+        Ok(())
+    }
+    /// Whether anybody hears of `kept` (the records are cloned for it only then).
+    fn keeps(&self) -> bool {
+        false
     }
 }
 
@@ -140,6 +155,18 @@ impl<P: Pool> Pool for Timed<'_, P> {
 
     fn bytes_received(&self) -> u64 {
         self.pool.bytes_received()
+    }
+
+    fn kept(&mut self, log: RoundLog, records: &[(u32, Record)]) -> Result<(), P::Error> {
+        self.time(|p| p.kept(log, records))
+    }
+
+    fn ended(&mut self, pixels_sampled: u64) -> Result<(), P::Error> {
+        self.time(|p| p.ended(pixels_sampled))
+    }
+
+    fn keeps(&self) -> bool {
+        self.pool.keeps()
     }
 }
 

@@ -1,10 +1,12 @@
 //! The prepass pooled over several processes, without mpirun: each process is a thread with its
 //! own job (scene, tracer, cache), and the pool hands parts over in memory the way an allgather
-//! does. Every process must end with the record set one process alone makes, record for
-//! record, in the same order, and the same pixel maps.
+//! among the workers does; the master keeps the rounds the first worker hands it
+//! (`keep_rounds`), as under mpirun. Every process must end with the record set one process
+//! alone makes, record for record, in the same order, and the same pixel maps.
 
 use super::*;
 use crate::cli::{Cli, Command};
+use crate::irradiance::record::Record;
 use crate::job::Job;
 use clap::Parser;
 use std::sync::{Arc, Barrier};
@@ -39,8 +41,7 @@ impl<T: Clone> Gather<T> {
     }
 }
 
-/// One process of the pool: the master (slot 0, no share, not among the grid's workers) or a
-/// worker.
+/// A worker of the pool (slot k of the workers); the first also hands the master its rounds.
 struct InMemory {
     slot: usize,
     share: Share,
@@ -48,6 +49,7 @@ struct InMemory {
     sites: Arc<Gather<Vec<u32>>>,
     rows: Arc<Gather<PixelRows>>,
     grid: Arc<Gather<GridRows>>,
+    to_master: Option<std::sync::mpsc::Sender<Kept>>,
 }
 
 impl Pool for InMemory {
@@ -66,16 +68,31 @@ impl Pool for InMemory {
     }
 
     fn grid_rows(&mut self, mine: GridRows) -> Result<GridRows, Infallible> {
-        assert_ne!(
-            self.share,
-            Share::Nothing,
-            "a process that renders nothing builds no grid"
-        );
-        Ok(self.grid.all(self.slot - 1, mine).concat())
+        Ok(self.grid.all(self.slot, mine).concat())
     }
 
     fn pixel_rows(&mut self, mine: PixelRows) -> Result<PixelRows, Infallible> {
         Ok(self.rows.all(self.slot, mine).concat())
+    }
+
+    fn kept(&mut self, log: RoundLog, records: &[(u32, crate::irradiance::record::Record)]) -> Result<(), Infallible> {
+        if let Some(to_master) = &self.to_master {
+            to_master
+                .send(Kept::Round(log, records.to_vec()))
+                .expect("the master listens");
+        }
+        Ok(())
+    }
+
+    fn ended(&mut self, pixels_sampled: u64) -> Result<(), Infallible> {
+        if let Some(to_master) = &self.to_master {
+            to_master.send(Kept::End(pixels_sampled)).expect("the master listens");
+        }
+        Ok(())
+    }
+
+    fn keeps(&self) -> bool {
+        self.to_master.is_some()
     }
 }
 
@@ -109,22 +126,30 @@ fn made(job: &Job, outcome: PrepassOutcome) -> Made {
     (cache.records(), outcome.record_pixels, edges)
 }
 
+/// What the master and each of `workers` workers made, the master's first (with no edge map:
+/// it renders nothing).
 fn pooled(workers: usize, extra: &[&str]) -> Vec<Made> {
-    let parties = workers + 1;
-    let (rounds, rows, grid) = (Gather::new(parties), Gather::new(parties), Gather::new(workers));
-    let sites = Gather::new(parties);
+    let (rounds, rows, grid) = (Gather::new(workers), Gather::new(workers), Gather::new(workers));
+    let sites = Gather::new(workers);
+    let (to_master, kept) = std::sync::mpsc::channel();
     std::thread::scope(|scope| {
-        let processes: Vec<_> = (0..parties)
+        let master = scope.spawn(move || {
+            let job = job(extra);
+            let cache = job.cache.as_ref().expect("a cache");
+            let Ok(outcome) = keep_rounds::<Infallible>(cache, &job.camera, &job.settings, || {
+                Ok(kept.recv().expect("the first worker hands every round over"))
+            });
+            made(&job, outcome)
+        });
+        let processes: Vec<_> = (0..workers)
             .map(|slot| {
                 let (rounds, rows, grid, sites) = (rounds.clone(), rows.clone(), grid.clone(), sites.clone());
+                let to_master = (slot == 0).then(|| to_master.clone());
                 scope.spawn(move || {
                     let job = job(extra);
-                    let share = match slot {
-                        0 => Share::Nothing,
-                        k => Share::Slice {
-                            index: k - 1,
-                            count: workers,
-                        },
+                    let share = Share::Slice {
+                        index: slot,
+                        count: workers,
                     };
                     let mut pool = InMemory {
                         slot,
@@ -133,6 +158,7 @@ fn pooled(workers: usize, extra: &[&str]) -> Vec<Made> {
                         sites,
                         rows,
                         grid,
+                        to_master,
                     };
                     let integrator = Integrator::new(&job.scene, &job.tracer, &job.shading, job.cache.as_ref());
                     let Ok(outcome) = run_shared(&integrator, &job.camera, &job.settings, &mut pool);
@@ -140,7 +166,10 @@ fn pooled(workers: usize, extra: &[&str]) -> Vec<Made> {
                 })
             })
             .collect();
-        processes.into_iter().map(|p| p.join().expect("a process")).collect()
+        drop(to_master);
+        let mut made = vec![master.join().expect("the master")];
+        made.extend(processes.into_iter().map(|p| p.join().expect("a process")));
+        made
     })
 }
 
@@ -159,12 +188,41 @@ fn every_pooled_process_ends_with_the_record_set_of_one_process() {
     assert!(alone.0.len() > 20, "{} records", alone.0.len());
     for workers in [1, 2, 3] {
         for (slot, process) in pooled(workers, &extra).into_iter().enumerate() {
-            assert!(process.0 == alone.0, "{workers} workers, process {slot}: other records");
+            if slot == 0 {
+                // The master keeps the records for the cache file, which holds no curvature
+                // (every process fits it from the records): it does not fit them, and so its
+                // cache lists them in the order they were placed.
+                let unfitted = |records: &[Record]| {
+                    let mut records: Vec<String> = (records.iter())
+                        .map(|r| {
+                            format!(
+                                "{:?}",
+                                Record {
+                                    curvature: 0.0,
+                                    ..r.clone()
+                                }
+                            )
+                        })
+                        .collect();
+                    records.sort();
+                    records
+                };
+                assert!(process.0.iter().all(|r| r.curvature == 0.0));
+                assert!(
+                    unfitted(&process.0) == unfitted(&alone.0),
+                    "{workers} workers: the master keeps other records"
+                );
+            } else {
+                assert!(process.0 == alone.0, "{workers} workers, process {slot}: other records");
+            }
             assert_eq!(process.1, alone.1, "{workers} workers, process {slot}: other pixels");
-            assert_eq!(
-                process.2, alone.2,
-                "{workers} workers, process {slot}: another edge map"
-            );
+            // The master keeps the records and renders nothing: it has no edge map.
+            if slot > 0 {
+                assert_eq!(
+                    process.2, alone.2,
+                    "{workers} workers, process {slot}: another edge map"
+                );
+            }
         }
     }
 }

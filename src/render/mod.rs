@@ -2,6 +2,7 @@
 //! counter until none are left, and each pixel averages `spp` stratified (jittered) samples over
 //! its area, which is the box filter a converged reference integrates.
 
+pub mod ahead;
 pub mod edges;
 pub mod noise;
 pub mod pixel;

@@ -10,6 +10,8 @@ use crate::render::noise::PixelNoise;
 use crate::sampling::Rng;
 use crate::scene::footprint::EmitterFootprint;
 use crate::scene::view::Camera;
+use crate::shading::deferred::DeferredIndirect;
+use crate::shading::direct::ShadowRatio;
 use crate::shading::{Integrator, RayCounts, SampleContext, SampleData, Work};
 use crate::tiles::Tile;
 use std::sync::Arc;
@@ -155,30 +157,52 @@ fn sample_hit(integrator: &Integrator<'_>, camera: &Camera, data: &SampleData) -
     })
 }
 
-/// The components of one pixel: the mean of its `samples`, each with its own primary ray, direct
-/// light and cache lookup (a box filter over the pixel's area); and its data layers, from the
-/// same samples' camera rays.
-pub fn render_pixel(
-    integrator: &Integrator<'_>,
-    camera: &Camera,
-    settings: &RenderSettings,
-    (x, y): (u32, u32),
-    samples: u32,
-    counts: &mut RayCounts,
-) -> (Components, PixelData) {
-    let samples = samples.max(1);
+/// What a pixel's samples traced (`trace_pixel`): each sample's light but the indirect diffuse
+/// light its eye path asks for where that is deferred (`shading::deferred`), and what the
+/// pixel's data layers and noise take from its rays. `finish_pixel` makes the pixel of it.
+#[derive(Clone, Debug)]
+pub struct PixelTrace {
+    pub(super) pixel: (u32, u32),
+    samples: Vec<SampleTrace>,
+    /// The direct light's ratio estimate's parts over all the pixel's camera-ray hits.
+    shadow_ratio: ShadowRatio,
+    /// The first-hit emission over the pixel's area by rays of its own (`emission_samples`).
+    split_emission: Option<glam::Vec3>,
+}
+
+/// One sample of a `PixelTrace`.
+#[derive(Clone, Debug)]
+struct SampleTrace {
+    components: Components,
+    /// Its share of the pixel's shadow-ray pool, its exact direct light and its measured noise
+    /// (`render::noise`).
+    pooled: ShadowRatio,
+    exact: glam::Vec3,
+    sampled_noise: f32,
+    albedo: glam::Vec3,
+    hit: Option<SampleHit>,
+    /// Where its eye path asks for indirect diffuse light, in the order it got there.
+    deferred: Vec<DeferredIndirect>,
+}
+
+impl PixelTrace {
+    /// Bytes it holds (for the bound on pixels traced ahead: `parallel::pipeline`).
+    pub fn bytes(&self) -> usize {
+        std::mem::size_of::<PixelTrace>()
+            + (self.samples.iter())
+                .map(|s| {
+                    std::mem::size_of::<SampleTrace>() + s.deferred.len() * std::mem::size_of::<DeferredIndirect>()
+                })
+                .sum::<usize>()
+    }
+}
+
+/// The pixel's sample context for sample 0 (the shadow rays' offsets from the pixel's own
+/// stream, which no sample uses).
+fn sample_context(camera: &Camera, settings: &RenderSettings, (x, y): (u32, u32), samples: u32) -> SampleContext {
     let pixel_index = y as u64 * camera.width as u64 + x as u64;
-    // Only worth it when the extra rays outnumber the pixel samples, which see emission anyway.
-    let split_emission = settings.emission_samples > samples
-        && settings
-            .emission_footprint
-            .as_ref()
-            .is_some_and(|footprint| footprint.covers(x, y));
-    let mut sum = Components::default();
-    // Offsets that place this pixel's shadow rays among the strata (a stream no sample uses).
     let mut pixel_rng = Rng::for_sample(settings.seed, pixel_index, u32::MAX as u64 + 1);
-    let mut work = Work::new(counts);
-    work.sample = SampleContext {
+    SampleContext {
         pixel: pixel_index as u32,
         index: 0,
         weight: 1.0 / samples as f32,
@@ -187,9 +211,49 @@ pub fn render_pixel(
         light_cell_offset: pixel_rng.next_u32(),
         centre_ray: (samples > 1).then(|| camera.ray(x as f32 + 0.5, y as f32 + 0.5)),
         eye_spread: 0.0,
-    };
-    let mut data = PixelDataSum::new(samples);
-    let mut noise = PixelNoise::default();
+    }
+}
+
+/// The components of one pixel: the mean of its `samples`, each with its own primary ray, direct
+/// light and cache lookup (a box filter over the pixel's area); and its data layers, from the
+/// same samples' camera rays. Once a prepass has made the record set, in two steps (each
+/// sample's indirect diffuse light looked up after its path is traced: `shading::deferred`),
+/// as the pixels traced ahead of the set (`trace_pixel`) are; else in one.
+pub fn render_pixel(
+    integrator: &Integrator<'_>,
+    camera: &Camera,
+    settings: &RenderSettings,
+    pixel: (u32, u32),
+    samples: u32,
+    counts: &mut RayCounts,
+) -> (Components, PixelData) {
+    let deferring = integrator.frozen && integrator.cache.is_some() && integrator.defer.is_none();
+    let trace = trace_pixel(integrator, camera, settings, pixel, samples, deferring, counts);
+    finish_pixel(integrator, camera, settings, trace, counts)
+}
+
+/// Traces a pixel's samples: all their light, but with `deferring` the indirect diffuse light
+/// their eye paths ask for is left for `finish_pixel` (which reads only the cache for it).
+pub fn trace_pixel(
+    integrator: &Integrator<'_>,
+    camera: &Camera,
+    settings: &RenderSettings,
+    (x, y): (u32, u32),
+    samples: u32,
+    deferring: bool,
+    counts: &mut RayCounts,
+) -> PixelTrace {
+    let samples = samples.max(1);
+    let pixel_index = y as u64 * camera.width as u64 + x as u64;
+    // Only worth it when the extra rays outnumber the pixel samples, which see emission anyway.
+    let split_emission = settings.emission_samples > samples
+        && settings
+            .emission_footprint
+            .as_ref()
+            .is_some_and(|footprint| footprint.covers(x, y));
+    let mut work = Work::new(counts);
+    work.sample = sample_context(camera, settings, (x, y), samples);
+    let mut traced = Vec::with_capacity(samples as usize);
     for s in 0..samples {
         let mut rng = Rng::for_sample(settings.seed, pixel_index, s as u64);
         let (jx, jy) = pixel_offset(s, samples, settings.jitter, &mut rng);
@@ -199,6 +263,7 @@ pub fn render_pixel(
         work.data = SampleData::default();
         work.sample_exact_direct = glam::Vec3::ZERO;
         work.sample_sampled_noise = 0.0;
+        work.deferred_indirect = deferring.then(Vec::new);
         // The sample's own share of the pixel's shadow-ray pool, for its noise.
         let pool = std::mem::take(&mut work.pixel_shadow_ratio);
         let components = if split_emission {
@@ -208,15 +273,17 @@ pub fn render_pixel(
         };
         let pooled = std::mem::replace(&mut work.pixel_shadow_ratio, pool);
         work.pixel_shadow_ratio += pooled;
-        noise.add(&components, pooled, work.sample_exact_direct, work.sample_sampled_noise);
-        sum += components;
-        data.add(work.data.albedo, sample_hit(integrator, camera, &work.data));
+        traced.push(SampleTrace {
+            components,
+            pooled,
+            exact: work.sample_exact_direct,
+            sampled_noise: work.sample_sampled_noise,
+            albedo: work.data.albedo,
+            hit: sample_hit(integrator, camera, &work.data),
+            deferred: work.deferred_indirect.take().unwrap_or_default(),
+        });
     }
-    data.set_noise(noise.finish());
-    let mut pixel = sum * (1.0 / samples as f32);
-    // The direct light's ratio estimate with its share taken over all the pixel's rays.
-    pixel.direct += work.pixel_shadow_ratio.estimate() / samples as f32;
-    if split_emission {
+    let split_emission = split_emission.then(|| {
         // The first-hit emission over the pixel's area by its own stratified rays (own streams,
         // after the pixel samples'): the two parts are estimated apart and add up to the pixel.
         let extra = settings.emission_samples;
@@ -227,7 +294,47 @@ pub fn render_pixel(
             let (origin, dir) = camera.ray(x as f32 + jx, y as f32 + jy);
             emission += integrator.first_emission(origin, dir, &mut work);
         }
-        pixel.emission += emission / extra as f32;
+        emission / extra as f32
+    });
+    PixelTrace {
+        pixel: (x, y),
+        samples: traced,
+        shadow_ratio: work.pixel_shadow_ratio,
+        split_emission,
+    }
+}
+
+/// The pixel from its trace: each sample's deferred lookups read from the cache (complete by
+/// now) and added to its light, then the samples' mean, noise and data layers.
+pub fn finish_pixel(
+    integrator: &Integrator<'_>,
+    camera: &Camera,
+    settings: &RenderSettings,
+    trace: PixelTrace,
+    counts: &mut RayCounts,
+) -> (Components, PixelData) {
+    let samples = trace.samples.len().max(1) as u32;
+    let mut work = Work::new(counts);
+    work.sample = sample_context(camera, settings, trace.pixel, samples);
+    let mut sum = Components::default();
+    let mut data = PixelDataSum::new(samples);
+    let mut noise = PixelNoise::default();
+    for (s, sample) in (0..).zip(trace.samples) {
+        let mut components = sample.components;
+        if !sample.deferred.is_empty() {
+            work.sample.index = s;
+            integrator.add_deferred(settings.seed, s, &sample.deferred, &mut components, &mut work);
+        }
+        noise.add(&components, sample.pooled, sample.exact, sample.sampled_noise);
+        sum += components;
+        data.add(sample.albedo, sample.hit);
+    }
+    data.set_noise(noise.finish());
+    let mut pixel = sum * (1.0 / samples as f32);
+    // The direct light's ratio estimate with its share taken over all the pixel's rays.
+    pixel.direct += trace.shadow_ratio.estimate() / samples as f32;
+    if let Some(emission) = trace.split_emission {
+        pixel.emission += emission;
     }
     (pixel, data.finish())
 }
@@ -267,6 +374,21 @@ pub fn render_tile(
     settings: &RenderSettings,
     tile: &Tile,
     counts: &mut RayCounts,
+    after_pixel: impl FnMut(&mut RayCounts),
+) -> Vec<PixelValue> {
+    render_tile_from(integrator, camera, settings, tile, None, counts, after_pixel)
+}
+
+/// As `render_tile`, for a tile whose first pixels (in its order) were traced ahead of the
+/// record set (`ahead::TileTrace`): those are finished from their traces, the others shaded.
+/// The tile comes out as `render_tile` would have made it, bit for bit.
+pub fn render_tile_from(
+    integrator: &Integrator<'_>,
+    camera: &Camera,
+    settings: &RenderSettings,
+    tile: &Tile,
+    traced: Option<super::ahead::TileTrace>,
+    counts: &mut RayCounts,
     mut after_pixel: impl FnMut(&mut RayCounts),
 ) -> Vec<PixelValue> {
     let width = (tile.x1 - tile.x0) as usize;
@@ -300,17 +422,26 @@ pub fn render_tile(
         }
         None => edges::edge_pixels(integrator, camera, tile, &mut Work::new(counts)),
     });
+    let mut traced = traced.map(|t| t.into_pixels(counts)).unwrap_or_default().into_iter();
     for (x, y) in pixel_order(tile, if grid_first { stride } else { 0 }) {
         let before = counts.records_level0;
         let index = (y - tile.y0) as usize * width + (x - tile.x0) as usize;
-        let samples = match &edges {
-            Some(edges) if edges[index] => {
-                counts.edge_pixels += 1;
-                settings.edge_samples
+        let (components, data) = match traced.next() {
+            Some(trace) => {
+                debug_assert_eq!(trace.pixel, (x, y), "a tile's traces follow its pixel order");
+                finish_pixel(integrator, camera, settings, trace, counts)
             }
-            _ => spp,
+            None => {
+                let samples = match &edges {
+                    Some(edges) if edges[index] => {
+                        counts.edge_pixels += 1;
+                        settings.edge_samples
+                    }
+                    _ => spp,
+                };
+                render_pixel(integrator, camera, settings, (x, y), samples, counts)
+            }
         };
-        let (components, data) = render_pixel(integrator, camera, settings, (x, y), samples, counts);
         let value = &mut values[index];
         value.components = components;
         value.data = data;

@@ -12,6 +12,7 @@
 //! the sample's context `work`.
 
 mod ambient;
+pub mod deferred;
 pub mod direct;
 pub mod glossy;
 mod hemisphere_batch;
@@ -23,7 +24,7 @@ mod work;
 
 pub use options::ShadingOptions;
 pub use work::{RayCounts, SampleContext, SampleData, Work};
-use work::{sanitize, timed_ambient};
+use work::{sanitize, sanitize_value, timed_ambient};
 
 use crate::image::components::Components;
 use crate::irradiance::IrradianceCache;
@@ -550,6 +551,18 @@ impl<'a> Integrator<'a> {
                 // the pixel's own random stream, as every other mode makes it.
                 Some(sink) if state.level == 0 && state.level < self.options.ambient_bounces && !self.frozen => {
                     self.cached_or_requested(sink, hit, dir, surface, state, counts)
+                }
+                // A pixel shaded in two steps (`deferred`): the point is looked up once the
+                // eye path is traced.
+                _ if state.level == 0 && state.level < self.options.ambient_bounces && self.cache.is_some() => {
+                    match counts.deferred_indirect.as_mut() {
+                        Some(later) => {
+                            let coefficient = state.throughput * surface.opacity * surface.diffuse;
+                            later.push(deferred::DeferredIndirect::new(*hit, state, coefficient));
+                            Vec3::ZERO
+                        }
+                        None => surface.diffuse * self.ambient_radiance(hit, state, rng, counts),
+                    }
                 }
                 _ => surface.diffuse * self.ambient_radiance(hit, state, rng, counts),
             };

@@ -2,6 +2,7 @@
 //! threads at the end), what the sample is, what its rays found for the data layers and the
 //! pixel's noise, and the guards every component passes (T_amb's clock, no NaN in the image).
 
+use super::deferred::DeferredIndirect;
 use super::direct;
 use super::pixel_irradiance::PixelIrradiance;
 use crate::image::components::Components;
@@ -95,6 +96,9 @@ pub struct Work<'a> {
     /// The cache's irradiance at the pixel's centre on the surface its samples last looked up,
     /// for its other samples there (`pixel_irradiance`).
     pub pixel_irradiance: Option<PixelIrradiance>,
+    /// Where the sample's eye path asks for indirect diffuse light, when it is looked up after
+    /// the path is traced (`deferred`); None: looked up as the path reaches it.
+    pub deferred_indirect: Option<Vec<DeferredIndirect>>,
 }
 
 impl<'a> Work<'a> {
@@ -107,6 +111,7 @@ impl<'a> Work<'a> {
             sample_exact_direct: Vec3::ZERO,
             sample_sampled_noise: 0.0,
             pixel_irradiance: None,
+            deferred_indirect: None,
         }
     }
 }
@@ -163,18 +168,20 @@ pub(super) fn timed_ambient<'w, T>(counts: &mut Work<'w>, work: impl FnOnce(&mut
 /// Drops (and counts) a component that is not a finite, non-negative colour, so no NaN or Inf
 /// can reach the image whatever the scene's numbers.
 pub(super) fn sanitize(c: Components, counts: &mut RayCounts) -> Components {
-    let fix = |v: Vec3, counts: &mut RayCounts| {
-        if v.is_finite() {
-            v.max(Vec3::ZERO)
-        } else {
-            counts.nonfinite += 1;
-            Vec3::ZERO
-        }
-    };
     Components {
-        emission: fix(c.emission, counts),
-        direct: fix(c.direct, counts),
-        specular: fix(c.specular, counts),
-        indirect: fix(c.indirect, counts),
+        emission: sanitize_value(c.emission, counts),
+        direct: sanitize_value(c.direct, counts),
+        specular: sanitize_value(c.specular, counts),
+        indirect: sanitize_value(c.indirect, counts),
+    }
+}
+
+/// One colour as `sanitize` leaves it.
+pub(super) fn sanitize_value(v: Vec3, counts: &mut RayCounts) -> Vec3 {
+    if v.is_finite() {
+        v.max(Vec3::ZERO)
+    } else {
+        counts.nonfinite += 1;
+        Vec3::ZERO
     }
 }

@@ -60,7 +60,7 @@ impl Sharing for ComponentSharing {
                 }
                 // A PR idles once no tile is left: the PAs that reported an empty queue before
                 // are dry now.
-                if core.queue.all_out() {
+                if core.all_out() {
                     self.balancer.all_tiles_out();
                     for share in self.balancer.rebalance() {
                         self.order(core, share);
@@ -71,7 +71,7 @@ impl Sharing for ComponentSharing {
             Message::PaStatus { queue, done, records } => {
                 core.sync(source, 0, records);
                 self.ledger.pa_done(source, done)?;
-                self.balancer.report(source, queue, core.queue.all_out());
+                self.balancer.report(source, queue, core.all_out());
                 for share in self.balancer.rebalance() {
                     self.order(core, share);
                 }

@@ -10,7 +10,8 @@ use super::{Roles, compute_request, send_results};
 use crate::parallel::comm::{Comm, Counters, Envelope, Marker, kind};
 use crate::parallel::protocol::{FinishedTile, Kind, Message, Records, Requests};
 use crate::parallel::{Intake, Setup, send_report};
-use crate::render::{ThreadClock, ThreadStats, render_tile};
+use crate::render::pixel::render_tile_from;
+use crate::render::{ThreadClock, ThreadStats};
 use crate::shading::Integrator;
 use crate::shading::request::{AmbientRequest, RequestBuffer, RequestResult};
 use std::cell::RefCell;
@@ -274,7 +275,10 @@ impl Pr<'_, '_> {
                 let (sent_before, own_before) = (sender.sent, self.own.computed);
                 let (camera, settings) = (&self.setup.job.camera, &self.setup.job.settings);
                 let (integrator, own, seed) = (&self.integrator, &mut self.own, self.setup.job_in.seed);
-                let pixels = render_tile(integrator, camera, settings, tile, &mut self.stats.rays, |_| {
+                // A tile this PR began during the prepass is finished from its traces (`ahead`).
+                let traced = self.setup.traced.lock().unwrap_or_else(|e| e.into_inner()).take(index);
+                let rays = &mut self.stats.rays;
+                let pixels = render_tile_from(integrator, camera, settings, tile, traced, rays, |_| {
                     if sink.len() >= send_at {
                         own.compute(integrator, sender.send(sink), seed);
                     }

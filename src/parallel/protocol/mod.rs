@@ -15,7 +15,7 @@ use crate::image::framebuffer::{Layer, PixelValue};
 use crate::irradiance::codec::{self, RECORD_BYTES};
 use crate::irradiance::last_bounce::{GridSample, Received};
 use crate::irradiance::record::Record;
-use crate::prepass::{GridRows, PixelRows};
+use crate::prepass::{GridRows, Kept, PixelRows, RoundLog};
 use crate::shading::request::{AmbientRequest, RequestResult};
 use crate::stats::RankReport;
 use glam::Vec3;
@@ -24,7 +24,7 @@ use std::sync::OnceLock;
 use wire::{Put, Reader};
 
 /// The first byte of every message; a rank of another build is refused, not misread.
-pub const PROTOCOL_VERSION: u8 = 5;
+pub const PROTOCOL_VERSION: u8 = 6;
 
 /// A last bounce's grid sample on the wire: four vectors (position, normal, direct, indirect).
 const GRID_SAMPLE_BYTES: usize = 4 * 12;
@@ -84,6 +84,8 @@ kinds! {
     PrepassGrid = 18, "prepass grid rows";
     PrepassPixels = 19, "prepass pixel rows";
     PrepassSites = 20, "prepass sites";
+    TileClaims = 21, "tile claims";
+    PrepassKept = 22, "prepass records kept";
     /// Tags WORK_BASE + thread.
     Work = WORK_BASE as isize, "work";
     /// Tags RECORDS_DOWN_BASE + thread.
@@ -168,6 +170,15 @@ pub enum Message {
     /// Every rank -> every rank (a collective): the sites of its share of a prepass round
     /// that lack records (indices into the round's sites).
     PrepassSites(Vec<u32>),
+    /// The first worker -> MC: a prepass round as the workers made it (the MC takes no part in
+    /// the rounds): its log, and its records in order, each with its site's pixel index
+    /// (`y * width + x`), which the MC keeps (the cache file) as every worker does; or the end
+    /// of the rounds. One kind for both, so that the end can never be taken before a round
+    /// sent ahead of it.
+    PrepassKept(Kept),
+    /// Every rank -> every rank (a collective, after the prepass): the tiles it has begun
+    /// (traced ahead: `parallel::ahead`), which the master hands it first and nobody else.
+    TileClaims(Vec<u32>),
     /// Worker -> MC: give me a tile, with the tile finished before, if any.
     WorkRequest {
         thread: u32,
@@ -230,12 +241,20 @@ impl Message {
                 put_records(&mut out, records);
             }
             Message::RecordsDown { records, .. } => put_records(&mut out, records),
-            Message::PrepassRound(round) => {
-                out.put_u32(round.len() as u32);
-                for (index, record) in round {
-                    out.put_u32(*index);
-                    codec::encode(record, &mut out);
+            Message::PrepassRound(round) => put_indexed_records(&mut out, round),
+            Message::PrepassKept(Kept::Round(log, records)) => {
+                out.put_u8(0);
+                out.put_u64(log.sites);
+                out.put_u64(log.records);
+                for seconds in [log.compute_s, log.pool_s, log.seconds] {
+                    out.put_u64(seconds.to_bits());
                 }
+                out.put_u64(log.bytes);
+                put_indexed_records(&mut out, records);
+            }
+            Message::PrepassKept(Kept::End(pixels_sampled)) => {
+                out.put_u8(1);
+                out.put_u64(*pixels_sampled);
             }
             Message::PrepassGrid(rows) => {
                 out.put_u32(rows.len() as u32);
@@ -249,7 +268,7 @@ impl Message {
                     }
                 }
             }
-            Message::PrepassSites(sites) => {
+            Message::PrepassSites(sites) | Message::TileClaims(sites) => {
                 out.put_u32(sites.len() as u32);
                 sites.iter().for_each(|&s| out.put_u32(s));
             }
@@ -320,16 +339,24 @@ impl Message {
             Kind::InitialRecords => Message::InitialRecords(take_records(&mut r)?),
             Kind::PrepassStart => Message::PrepassStart(take_records(&mut r)?),
             Kind::FinalRecords => Message::FinalRecords(take_records(&mut r)?),
-            Kind::PrepassRound => {
-                let count = r.count(4 + RECORD_BYTES)?;
-                let mut round = Vec::with_capacity(count);
-                for _ in 0..count {
-                    let index = r.u32()?;
-                    let record = codec::decode(r.take(RECORD_BYTES)?)
-                        .map_err(|e| r.error(format_args!("record for site {index} refused: {e:?}")))?;
-                    round.push((index, record));
+            Kind::PrepassRound => Message::PrepassRound(take_indexed_records(&mut r)?),
+            // The first byte tells an end (1) from a round (0).
+            Kind::PrepassKept if r.u8()? == 1 => Message::PrepassKept(Kept::End(r.u64()?)),
+            Kind::PrepassKept => {
+                let (sites, records) = (r.u64()?, r.u64()?);
+                let mut seconds = [0.0; 3];
+                for s in &mut seconds {
+                    *s = f64::from_bits(r.u64()?);
                 }
-                Message::PrepassRound(round)
+                let log = RoundLog {
+                    sites,
+                    records,
+                    compute_s: seconds[0],
+                    pool_s: seconds[1],
+                    seconds: seconds[2],
+                    bytes: r.u64()?,
+                };
+                Message::PrepassKept(Kept::Round(log, take_indexed_records(&mut r)?))
             }
             Kind::PrepassGrid => {
                 let count = r.count(8)?;
@@ -356,6 +383,10 @@ impl Message {
             Kind::PrepassSites => {
                 let count = r.count(4)?;
                 Message::PrepassSites((0..count).map(|_| r.u32()).collect::<Result<_, _>>()?)
+            }
+            Kind::TileClaims => {
+                let count = r.count(4)?;
+                Message::TileClaims((0..count).map(|_| r.u32()).collect::<Result<_, _>>()?)
             }
             Kind::PrepassPixels => {
                 let count = r.count(8)?;
@@ -437,6 +468,29 @@ fn put_records(out: &mut Vec<u8>, records: &Records) {
     out.reserve(4 + records.records.len() * RECORD_BYTES);
     out.put_u32(records.records.len() as u32);
     records.records.iter().for_each(|record| codec::encode(record, out));
+}
+
+/// Records each with a number (a site's index, or its pixel): every one must be valid (ranks
+/// must keep the same records), so one that is not fails the message.
+fn put_indexed_records(out: &mut Vec<u8>, records: &[(u32, Record)]) {
+    out.reserve(4 + records.len() * (4 + RECORD_BYTES));
+    out.put_u32(records.len() as u32);
+    for (index, record) in records {
+        out.put_u32(*index);
+        codec::encode(record, out);
+    }
+}
+
+fn take_indexed_records(r: &mut Reader<'_>) -> Result<Vec<(u32, Record)>, ProtocolError> {
+    let count = r.count(4 + RECORD_BYTES)?;
+    let mut records = Vec::with_capacity(count);
+    for _ in 0..count {
+        let index = r.u32()?;
+        let record = codec::decode(r.take(RECORD_BYTES)?)
+            .map_err(|e| r.error(format_args!("record for site {index} refused: {e:?}")))?;
+        records.push((index, record));
+    }
+    Ok(records)
 }
 
 fn take_records(r: &mut Reader<'_>) -> Result<Records, ProtocolError> {

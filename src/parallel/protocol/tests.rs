@@ -91,6 +91,19 @@ fn every_message() -> Vec<Message> {
         Message::PrepassStart(Records::default()),
         Message::PrepassRound(vec![(3, record(0)), (9, record(4))]),
         Message::PrepassSites(vec![4, 0, 17, u32::MAX]),
+        Message::TileClaims(vec![1, 3, 5]),
+        Message::PrepassKept(crate::prepass::Kept::End(77)),
+        Message::PrepassKept(crate::prepass::Kept::Round(
+            crate::prepass::RoundLog {
+                sites: 9,
+                records: 1,
+                compute_s: 0.5,
+                pool_s: 0.25,
+                seconds: 1.0,
+                bytes: 132,
+            },
+            vec![(40, record(3))],
+        )),
         Message::PrepassGrid(vec![(0, vec![]), (4, vec![grid_sample(1.0), grid_sample(-2.5)])]),
         // Rows of 0, 3, 8 and 11 flags: the bits pack into whole bytes, and the last one's rest.
         Message::PrepassPixels(vec![
