@@ -162,6 +162,9 @@ pub struct RankReport {
     pub prepass_s: f64,
     #[serde(default)]
     pub prepass_pool_s: f64,
+    /// Of `prepass_s`, the seconds fitting and freezing the complete record set.
+    #[serde(default)]
+    pub prepass_fit_s: f64,
     /// Component mode under a prepass: the pixels this worker traced ahead of the record set
     /// (`parallel::ahead`), the tiles they began, and the seconds of its waits in the rounds'
     /// collectives it filled so (part of `prepass_pool_s`; the rest was idle).
@@ -198,6 +201,8 @@ pub struct RenderStats {
     pub cache_build: &'static str,
     /// The prepass: seconds, rounds, sites looked at and records made (all in the totals too).
     pub prepass_s: f64,
+    /// Of `prepass_s`, the seconds fitting and freezing the complete record set.
+    pub prepass_fit_s: f64,
     pub prepass_rounds: u64,
     pub prepass_sites: u64,
     pub prepass_records: u64,
@@ -292,6 +297,7 @@ impl RenderStats {
     pub fn add_prepass(&mut self, prepass: &crate::prepass::PrepassOutcome) {
         self.cache_build = "prepass";
         self.prepass_s = prepass.seconds;
+        self.prepass_fit_s = prepass.fit_s;
         self.prepass_rounds = prepass.rounds as u64;
         self.prepass_sites = prepass.sites;
         self.prepass_records = prepass.records;

@@ -247,6 +247,7 @@ fn control(
         wall_s: start.elapsed().as_secs_f64(),
         prepass_s: setup.prepass.as_ref().map_or(0.0, |p| p.seconds),
         prepass_pool_s: setup.prepass.as_ref().map_or(0.0, |p| p.pool_s),
+        prepass_fit_s: setup.prepass.as_ref().map_or(0.0, |p| p.fit_s),
         ..super::traffic_report(0, "mc", &[comm.counters], comm.counters.idle_s())
     }];
     ranks.extend(core.reports.into_iter().skip(1).flatten());

@@ -13,6 +13,7 @@ pub mod prepass;
 pub mod protocol;
 pub mod pulse;
 pub mod relay;
+pub mod transport;
 pub mod worker;
 
 use crate::checkpoint::{Checkpoint, Restored};
@@ -249,6 +250,7 @@ impl Setup<'_> {
             wall_s: self.start.elapsed().as_secs_f64(),
             prepass_s: self.prepass.as_ref().map_or(0.0, |p| p.seconds),
             prepass_pool_s: self.prepass.as_ref().map_or(0.0, |p| p.pool_s),
+            prepass_fit_s: self.prepass.as_ref().map_or(0.0, |p| p.fit_s),
             ahead_pixels: self.ahead.pixels,
             ahead_tiles: self.ahead.tiles,
             ahead_s: self.ahead.seconds,
@@ -331,6 +333,9 @@ pub fn run(job_in: &ParallelJob<'_>) -> ParallelResult {
     let session_dir = std::env::var("PMIX_SERVER_TMPDIR").or_else(|_| std::env::var("OMPI_FILE_LOCATION"));
     let launcher = session_dir.ok().as_deref().and_then(pid_in_session_dir);
     crate::sys::process::die_with_parent(launcher).map_err(ParallelError::Input)?;
+    if let Some(pml) = transport::this_host_asks_for() {
+        crate::sys::process::set_before_threads(transport::PML_VARIABLE, pml);
+    }
     let Some((universe, granted)) = mpi::initialize_with_threading(Threading::Multiple) else {
         return Err(ParallelError::Failed("MPI could not be initialised".into()));
     };

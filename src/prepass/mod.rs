@@ -94,6 +94,9 @@ pub struct PrepassOutcome {
     pub round_log: Vec<RoundLog>,
     /// Seconds in the pool (every exchange, rounds and rows: see `pool::Timed`).
     pub pool_s: f64,
+    /// Seconds fitting the records' overshoot and freezing the set once it was complete: a
+    /// part every rank repeats (what `bench/prepass_sim.py` models as serial).
+    pub fit_s: f64,
 }
 
 /// One round of the prepass as one process saw it: the whole round's sites and records, and
@@ -733,11 +736,13 @@ fn run_watched<P: Pool>(
     pool.ended(outcome.pixels_sampled)?;
     // The record set is complete: each record's overshoot is fitted from its neighbours, and
     // from now on lookups read the cache's lock-free copy.
+    let fitting = Instant::now();
     if go_on {
         cache.fit_curvatures_and_freeze();
     } else {
         cache.freeze();
     }
+    outcome.fit_s = fitting.elapsed().as_secs_f64();
     outcome.edges = edges.map(std::sync::Arc::new);
     outcome.seconds = start.elapsed().as_secs_f64();
     outcome.pool_s = timed.seconds;

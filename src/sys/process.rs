@@ -30,6 +30,15 @@ pub fn die_with_parent(launcher: Option<u32>) -> Result<(), String> {
     Ok(())
 }
 
+/// Sets an environment variable for libraries this process starts later (MPI reads its
+/// parameters from the environment when it is initialised). Only while this process has one
+/// thread: `parallel::run` calls it before MPI starts any thread and before the rank's own.
+pub fn set_before_threads(name: &str, value: &str) {
+    // SAFETY: no other thread exists yet to read or write the environment at the same time
+    // (the caller's contract above).
+    unsafe { std::env::set_var(name, value) };
+}
+
 /// Ends a finished command with `code` once its output is flushed, running no exit handlers.
 /// The libraries the image library loads start threads in their static constructors
 /// (log4cplus, through OpenImageIO's DICOM reader, starts a pool of four) and tear them down in
