@@ -6,9 +6,10 @@ The sibling of bench/icsim.py, which replays the progressive modes' cache traces
 needs no trace: its work is a fixed sequence of phases, the same on every rank count, whose
 sizes come from a one-process run's --stats (`prepass_round_log`: sites, records and compute
 seconds per round) and whose costs come from that run's times. How the default build runs under
-mpirun (src/parallel/prepass.rs, src/prepass/mod.rs, src/parallel/master.rs and worker.rs):
-rank 0 is a master that renders nothing, the W = P - 1 workers share every list interleaved
-(worker k takes items k, k + W, ...), and every exchange is an allgather polled with pauses.
+mpirun (src/parallel/prepass.rs, src/prepass/mod.rs, src/parallel/ahead.rs, src/parallel/master.rs
+and worker.rs): rank 0 is a master that renders nothing and takes no part in the rounds; the
+W = P - 1 workers share every list interleaved (worker k takes items k, k + W, ...) on a
+communicator of their own, and every exchange among them is an allgather polled with pauses.
 
   load       every rank loads the scene and builds its BVH (in parallel on a cluster; ranks
              sharing cores here take turns).
@@ -19,12 +20,20 @@ rank 0 is a master that renders nothing, the W = P - 1 workers share every list 
              the round waits for the slowest worker, whose records are the expected maximum of
              the round's R records dealt to W workers (binomial, each record independently on
              any worker: the sites are interleaved, so clusters are spread), then two
-             allgathers over all P ranks (lengths, then 4 + 128 bytes a record), then every
-             rank inserts the records and shrinks them where neighbours disagree (the serial
-             part of a round: the one-process round's seconds beyond its compute).
-  maps       the edge map's strips shared by the workers, bit-packed, allgathered over P.
+             allgathers among the W workers (lengths, then 4 + 128 bytes a record), then every
+             worker inserts the records and shrinks them where neighbours disagree (the serial
+             part of a round: the one-process round's seconds beyond its compute). The first
+             worker hands each round's records to the master once, from a thread of its own
+             (off the critical path; its bytes are counted).
+  ahead      component mode: a worker waiting at a round's barrier traces its tiles' eye paths,
+             direct and specular light meanwhile (src/parallel/ahead.rs), and what it traced
+             leaves its final pass: a share of its waits (the share tracing filled in a
+             calibration run) up to the traceable share of its final pass (that run's trace
+             seconds a pixel over the final pass's) and the 64 MiB of traces it may hold.
+  maps       the edge map's strips shared by the workers, bit-packed, allgathered among them.
   samples    the edge pixels' sample rounds: more rounds as above.
-  fit        the record set's curvature fit and freeze (serial, on every rank).
+  fit        the record set's curvature fit and freeze (serial, on every worker: the
+             one-process run's `prepass_fit_s`).
   final      tiles on demand: a worker sends the finished tile (200 bytes a pixel) with its
              next request and waits for the master's reply; the master takes the tiles one at a
              time, so its link carries the whole image.
@@ -37,11 +46,10 @@ Modelled as latency + (P - 1) per-message overheads + the busiest link's bytes o
 bandwidth (a rank sends its part P - 1 times and receives everyone else's). The alternatives
 (`--algorithm ring|bruck`) replace that by P - 1 or ceil(log2 P) steps, each paying latency.
 
-Polling. A waiting rank sleeps between tests with pauses that double to 0.5 ms (0.1 ms at the
-master) and, once it has waited 20 ms, 5 ms (src/parallel/comm.rs). The data allgather cannot
-complete before every rank has seen the lengths' and posted its part, so a round pays the
-longest pause of any rank that waited long in the lengths' step: the master (it has no share)
-and the workers that finished early.
+Polling. A worker waiting in a collective sleeps between tests with pauses that double to
+0.2 ms (src/parallel/comm.rs COLLECTIVE_MAX_PAUSE); one tracing ahead tests between steps of 16
+pixels. The data allgather cannot complete before every worker has seen the lengths' and posted
+its part, so a round pays the longest pause of the workers that waited.
 
 Ranks sharing cores (this machine, mpirun --oversubscribe): the compute of a phase takes
 max(slowest rank, all ranks' work / cores) with the effective cores measured by a one-process
@@ -85,6 +93,10 @@ EDGE_STRIP = 8  # src/prepass/mod.rs: rows of an edge map's strip
 MAX_SITE_PIXELS = 1 << 18  # src/irradiance/last_bounce.rs: the grid's sites at most
 MAX_PAUSE, MASTER_MAX_PAUSE = 0.5e-3, 0.1e-3  # src/parallel/comm.rs
 LONG_WAIT, LONG_WAIT_PAUSE = 20e-3, 5e-3  # src/parallel/comm.rs
+COLLECTIVE_MAX_PAUSE = 0.2e-3  # src/parallel/comm.rs: a wait in the prepass's collectives
+KEPT_HEADER = 1 + 8 * 6 + 4  # a round's log and record count, as the first worker hands it to the master
+# src/parallel/ahead.rs: the traces a worker may hold, and about what a traced pixel holds.
+TRACE_BYTES_LIMIT, TRACE_BYTES_PER_PIXEL = 64 << 20, 400
 # Per-message CPU cost of posting and progressing one point-to-point part of a collective
 # (LogP's gap): an assumption, not measured here. TCP through the kernel a few microseconds;
 # an RDMA network (what 100 Gbit clusters run MPI over) under one.
@@ -130,8 +142,9 @@ def uncontended(stats):
     The measured mpirun runs are not corrected (their load average is kept instead)."""
     k = 1.0 / max(stats.get("busy_over_cpu") or 1.0, 1.0)
     out = dict(stats)
-    for key in ("wall_s", "load_s", "build_s", "render_s", "prepass_s"):
-        out[key] = stats[key] * k
+    for key in ("wall_s", "load_s", "build_s", "render_s", "prepass_s", "prepass_fit_s"):
+        if key in stats and stats[key] is not None:
+            out[key] = stats[key] * k
     out["prepass_round_log"] = [{key: (v * k if key.endswith("_s") or key == "seconds" else v) for key, v in r.items()}
                                 for r in stats["prepass_round_log"]]
     return out
@@ -163,9 +176,9 @@ class Profile:
             self.edge_s = max(gap - grid_fit, 0.0)
         else:
             grid_fit, self.edge_s = gap, 0.0
-        # The fit and freeze at the end: what an MPI master spends in its prepass outside the
-        # rounds and the pool (it builds no grid and no map: `fit_s`, from a calibration run),
-        # else nothing; the grid is the rest of the gap.
+        # The fit and freeze at the end (the run's own `prepass_fit_s`); the grid is the rest
+        # of the gap.
+        fit_s = stats.get("prepass_fit_s") if fit_s is None else fit_s
         self.fit_s = min(fit_s or 0.0, grid_fit)
         self.grid_s = max(grid_fit - self.fit_s, 0.0)
         self.grid_samples = stats.get("last_bounce_samples", 0)
@@ -186,6 +199,10 @@ class Profile:
     # A tile's cost of going through the master (encoding, the rendezvous of a large message
     # polled with pauses, storing it) beyond its bytes on the link: from a calibration run.
     tile_overhead_s = 0.0
+    # Component mode's tracing ahead (a calibration run at -np 3): the share of a worker's
+    # seconds in the collectives that tracing filled, and the seconds a traced pixel took.
+    ahead_fill = 0.0
+    ahead_pixel_s = 0.0
 
     def tiles(self):
         return math.ceil(self.width / 32) * math.ceil(self.height / 32)
@@ -327,8 +344,8 @@ GROUPS = [
     ("serial", ("load", "setup", "fit", "round_serial"), "the serial share: scene load and BVH build, record inserts, fit "
                                                 "(every rank repeats them)"),
     ("split", ("grid", "maps"), "the grid's and edge map's rows over the workers"),
-    ("compute", ("compute", "shared_cores"), "the rounds' lookups and records, evenly shared (and on shared "
-                                               "cores, the ranks' turns)"),
+    ("compute", ("compute", "shared_cores", "ahead"), "the rounds' lookups and records, evenly shared (and on "
+                                                        "shared cores, the ranks' turns)"),
     ("imbalance", ("imbalance",), "the rounds' imbalance: the slowest worker's records"),
     ("latency", ("latency", "wake"), "round latency: the collectives' latency and per-message costs, and the "
                                      "polling pauses"),
@@ -347,6 +364,7 @@ class Result:
         self.alone = {}
         self.final_bound = ""
         self.bytes = 0
+        self.ahead_s = 0.0
 
     @property
     def wall(self):
@@ -399,6 +417,8 @@ def simulate(profile, ranks, net, cores=None, mode="broadcast", change=()):
     for k in ("compute", "imbalance", "shared_cores", "latency", "bytes", "wake", "round_serial"):
         part[k] = 0.0
     latency_only = Net(net.lat, math.inf, net.gap, net.algorithm)
+    ahead = mode == "component" and W >= 2 and pr.ahead_pixel_s > 0 and "no_ahead" not in change
+    waits = 0.0
     for k, r in enumerate(pr.rounds):
         S, R = r["sites"], r["records"]
         work = S * pr.site_s + R * pr.record_s
@@ -406,22 +426,23 @@ def simulate(profile, ranks, net, cores=None, mode="broadcast", change=()):
         slowest = math.ceil(S / W) * pr.site_s + top * pr.record_s
         compute = spread(work, slowest)
         mine = math.ceil(top) * RECORD_WIRE + 4
-        total = R * RECORD_WIRE + 4 * P
-        lengths = net.allgather(P, LENGTH_BYTES, P * LENGTH_BYTES)
-        data = net.allgather(P, mine, total)
-        fixed = latency_only.allgather(P, mine, total)
-        # Who waited long in the lengths' step: the master for the whole compute, and the
-        # workers done 20 ms or more before the slowest; each notices the lengths up to its
-        # pause late, and the data step waits for the last to post.
-        early = share_below(R, W, top - LONG_WAIT / pr.record_s) * W if pr.record_s > 0 and W > 1 else 0.0
-        pauses = [(2 * wake(compute, True), 1), (2 * wake(LONG_WAIT, False), early),
-                  (2 * wake(0.0, False), max(W - early, 0.0))]
-        res.bytes += (R * RECORD_WIRE + 4 * P) * (P - 1) + LENGTH_BYTES * P * (P - 1)
+        total = R * RECORD_WIRE + 4 * W
+        lengths = net.allgather(W, LENGTH_BYTES, W * LENGTH_BYTES)
+        data = net.allgather(W, mine, total)
+        fixed = latency_only.allgather(W, mine, total)
+        # The workers that waited for the slowest notice the lengths up to their pause late (a
+        # pause doubles up to COLLECTIVE_MAX_PAUSE), and the data step waits for the last to
+        # post. In component mode they trace between steps of 16 pixels instead.
+        waited = max(slowest - work / W, 0.0)
+        pause = 16 * pr.ahead_pixel_s if ahead else min(max(waited, 5e-6), COLLECTIVE_MAX_PAUSE)
+        pauses = [(pause, max(W - 1, 0))]
+        res.bytes += (R * RECORD_WIRE + 4 * W) * (W - 1) + LENGTH_BYTES * W * (W - 1)
+        res.bytes += R * RECORD_WIRE + KEPT_HEADER  # the round, to the master once
         part["compute"] += work / W
         part["imbalance"] += max(slowest - work / W, 0.0)
         part["shared_cores"] += compute - max(slowest, work / W)
         exchange = {"latency": lengths + fixed, "bytes": data - fixed,
-                    "wake": longest_wake(pauses) + wake(data, False)}
+                    "wake": longest_wake(pauses) + min(max(data, 5e-6), COLLECTIVE_MAX_PAUSE) / 2}
         if "overlap" in change and k + 1 < len(pr.rounds):
             # The next round's lookups made while the exchange is in flight (against the cache
             # before this round's records, and checked again near them): the exchange hides
@@ -432,6 +453,9 @@ def simulate(profile, ranks, net, cores=None, mode="broadcast", change=()):
             exchange = {key: v * keep for key, v in exchange.items()}
         for key, v in exchange.items():
             part[key] += v
+        # A worker's wait in this round: for the slowest (the mean worker's share of its
+        # lead) and for the exchange.
+        waits += waited + sum(exchange.values())
         part["round_serial"] += r["serial_s"] * repeat
     alone["compute"] = sum(r["compute_s"] for r in pr.rounds)
     alone["round_serial"] = sum(r["serial_s"] for r in pr.rounds)
@@ -440,47 +464,40 @@ def simulate(profile, ranks, net, cores=None, mode="broadcast", change=()):
     edge_bytes = math.ceil(pr.width / 8) * pr.height + strips * ROW_HEADER
     share = math.ceil(strips / W) / strips
     part["maps"], alone["maps"] = spread(pr.edge_s, pr.edge_s * share), pr.edge_s
-    part["maps_comm"] = (net.allgather(P, LENGTH_BYTES, P * LENGTH_BYTES)
-                         + net.allgather(P, edge_bytes * share, edge_bytes)) if pr.edge_s else 0.0
+    part["maps_comm"] = (net.allgather(W, LENGTH_BYTES, W * LENGTH_BYTES)
+                         + net.allgather(W, edge_bytes * share, edge_bytes)) if pr.edge_s and W > 1 else 0.0
     if pr.edge_s:
-        res.bytes += (edge_bytes + 4 * P) * (P - 1) + LENGTH_BYTES * P * (P - 1)
+        res.bytes += (edge_bytes + 4 * W) * (W - 1) + LENGTH_BYTES * W * (W - 1)
     res.bytes += pr.pixels * PIXEL_WIRE  # the final pass's tiles, to the master
-    part["fit"], alone["fit"] = pr.fit_s * repeat, pr.fit_s
+    # The workers fit; the master only freezes its copy (for the cache file).
+    part["fit"], alone["fit"] = pr.fit_s * (W / cores if cores is not None and W > cores else 1.0), pr.fit_s
     if "fit_split" in change:
         # Each worker fits its share of the records and an allgather hands out the fits (a
         # record's curvature: 24 bytes).
-        part["fit"] = pr.fit_s / W + net.allgather(P, 24 * pr.records / W, 24 * pr.records)
-    part["final"], res.final_bound = final_pass(pr, W, net, cores, mode, change)
+        part["fit"] = pr.fit_s / W + net.allgather(W, 24 * pr.records / W, 24 * pr.records)
+    # Tracing ahead: a share of each worker's waits, up to the traceable part of its final pass
+    # and the traces it may hold; that much leaves its final pass.
+    res.ahead_s = 0.0
+    if ahead:
+        pixels = min(pr.pixels / W, TRACE_BYTES_LIMIT / TRACE_BYTES_PER_PIXEL)
+        res.ahead_s = min(pr.ahead_fill * waits, pixels * pr.ahead_pixel_s)
+        if cores is not None and W > cores:
+            # Ranks sharing cores: a waiting worker's tracing takes a core from one still
+            # computing, so the prepass lasts its share of that work longer.
+            part["ahead"] = W * res.ahead_s / cores - res.ahead_s
+    part["final"], res.final_bound = final_pass(pr, W, net, cores, mode, change, res.ahead_s)
     alone["final"] = pr.final_s
     return res
 
 
-# The build the stored measurements (docs/scaling/measured.json, 7 Dec 05:19-05:29) were made
-# with: the prepass over collectives (commit 9738e7b), where component mode's PAs still waited
-# for requests through the final pass. Since 4d4b64c every worker renders the final pass in
-# component mode too (a complete record set leaves the PAs nothing), and since 3dba04e and
-# bff6d43 a round's misses are dealt evenly and collectives poll at most every 0.2 ms: the
-# validation simulates the measured build ("component-idle-pas"), the prediction today's.
-MEASURED_COMPONENT = "component-idle-pas"
-
-
-def renderers(mode, workers):
-    """The workers that render the final pass's tiles: all of them (today's build, every mode);
-    in the measured build's component mode only the PRs (the PAs, max(W / 2, 1) of them,
-    src/parallel/component/mod.rs Roles::choose, waited for requests that a complete record set
-    no longer makes)."""
-    if mode == MEASURED_COMPONENT and workers >= 2:
-        return workers - max(workers // 2, 1)
-    return workers
-
-
-def final_pass(pr, W, net, cores, mode, change=()):
+def final_pass(pr, W, net, cores, mode, change=(), ahead_s=0.0):
     """Tiles on demand (32x32): each a round trip through the master that carries the finished
     tile back. Bound by the rendering workers (their tiles and round trips, and the last
-    tile's tail) or by the master's link (every tile's bytes)."""
-    n = renderers(mode, W)
+    tile's tail) or by the master's link (every tile's bytes). Every worker renders, in every
+    mode; `ahead_s` of each worker's share was traced during the prepass."""
+    n = W
     tiles = math.ceil(pr.width / 32) * math.ceil(pr.height / 32)
-    per_tile = pr.final_s / tiles
+    per_tile = max(pr.final_s - n * ahead_s, 0.0) / tiles
     tile_bytes = pr.pixels / tiles * (HALF_PIXEL if "half_tiles" in change else PIXEL_WIRE)
     # On shared cores the rendering ranks take turns with each other (the idle PAs sleep).
     speed = min(cores, n) / n if cores is not None and n > cores else 1.0
@@ -534,7 +551,11 @@ def read_run(stats_path, elapsed):
     # Beside the load, the prepass and the final pass: setting up the ranks' roles, writing the
     # image, gathering the reports.
     extra = s["wall_s"] - s["load_s"] - s["build_s"] - s["prepass_s"] - s["render_s"]
-    return {"wall_s": s["wall_s"], "mpirun_s": elapsed, "extra_s": max(extra, 0.0), "prepass_s": s["prepass_s"], "render_s": s["render_s"],
+    workers = [r for r in s["per_rank"][1:]]
+    ahead = {"ahead_s": sum(r.get("ahead_s", 0.0) for r in workers),
+             "ahead_pixels": sum(r.get("ahead_pixels", 0) for r in workers),
+             "workers_pool_s": sum(r.get("prepass_pool_s", 0.0) for r in workers)}
+    return {**ahead, "wall_s": s["wall_s"], "mpirun_s": elapsed, "extra_s": max(extra, 0.0), "prepass_s": s["prepass_s"], "render_s": s["render_s"],
             "load_s": s["load_s"] + s["build_s"], "bytes": s["bytes"], "records": s["prepass_records"],
             "master_own_s": max(own, 0.0), "mode": s["mode"], "load_average": load_average()}
 
@@ -605,7 +626,7 @@ ROUND_KEYS = ("sites", "records", "compute_s", "pool_s", "seconds")
 
 def slim(stats):
     """The --stats fields the model reads (the store stays small)."""
-    keep = ("width", "height", "wall_s", "load_s", "build_s", "render_s", "prepass_s", "prepass_records",
+    keep = ("width", "height", "wall_s", "load_s", "build_s", "render_s", "prepass_s", "prepass_fit_s", "prepass_records",
             "last_bounce_samples", "edge_pixels", "mode", "ranks")
     out = {k: stats.get(k) for k in keep}
     out["prepass_round_log"] = [{k: r[k] for k in ROUND_KEYS} for r in stats["prepass_round_log"]]
@@ -626,26 +647,34 @@ def profile_runs(case, work, store, threads2=False):
     store.setdefault("profiles", {})[name] = entry
     calibrate(case, work, store)
     print(f"profile {name}: one process {entry['default']['wall_s']:.2f} s (busy/cpu "
-          f"{entry['default']['busy_over_cpu'] or 0:.2f}), fit {entry['fit_s']:.3f} s (the -np 2 master's own)")
+          f"{entry['default']['busy_over_cpu'] or 0:.2f}), fit {entry['default'].get('prepass_fit_s') or 0:.3f} s")
 
 
 def calibrate(case, work, store):
-    """A run at -np 2 (broadcast: a master and one worker) for what one process cannot show: the
-    master's fit time, the setup beyond the phases, and a tile's cost of going through the
-    master (the final pass's time beyond one process's, per tile). Not one of the validated runs."""
+    """Runs for what one process cannot show, not among the validated runs: at -np 2
+    (broadcast: a master and one worker) the setup beyond the phases and a tile's cost of going
+    through the master (the final pass's time beyond one process's, per tile); at -np 3 in
+    component mode the share of the workers' waits that tracing ahead filled and a traced
+    pixel's seconds."""
     entry = store["profiles"][f"{case['scene']}-{case['size']}"]
     run, error = mpi_local(2, case["path"], case["size"], case["options"], "broadcast", work)
     if run is None:
         raise RuntimeError(f"calibration run failed: {error}")
-    entry["fit_s"], entry["mpi_extra_s"], entry["calibration_final_s"] = run["master_own_s"], run["extra_s"], run["render_s"]
-    print(f"calibration {case['scene']}-{case['size']} -np 2: fit {run['master_own_s']:.3f} s, setup {run['extra_s']:.3f} s, "
-          f"final pass {run['render_s']:.3f} s")
+    entry["mpi_extra_s"], entry["calibration_final_s"] = run["extra_s"], run["render_s"]
+    ahead, error = mpi_local(3, case["path"], case["size"], case["options"], "component", work)
+    if ahead is None:
+        raise RuntimeError(f"calibration run failed: {error}")
+    entry["ahead_fill"] = ahead["ahead_s"] / max(ahead["workers_pool_s"], 1e-9)
+    entry["ahead_pixel_s"] = ahead["ahead_s"] / max(ahead["ahead_pixels"], 1)
+    print(f"calibration {case['scene']}-{case['size']}: -np 2 setup {run['extra_s']:.3f} s, final pass "
+          f"{run['render_s']:.3f} s; -np 3 component: tracing ahead filled {100 * entry['ahead_fill']:.0f}% of the "
+          f"workers' waits, {entry['ahead_pixel_s'] * 1e6:.2f} us a pixel")
 
 
 def profile_of(store, case, cores=True):
     e = store["profiles"][f"{case['scene']}-{case['size']}"]
-    pr = Profile(e["default"], e.get("noedge"), e.get("threads2") if cores else None, e.get("fit_s"),
-                 e.get("mpi_extra_s"))
+    pr = Profile(e["default"], e.get("noedge"), e.get("threads2") if cores else None, None, e.get("mpi_extra_s"))
+    pr.ahead_fill, pr.ahead_pixel_s = e.get("ahead_fill", 0.0), e.get("ahead_pixel_s", 0.0)
     if e.get("calibration_final_s") is not None:
         pr.tile_overhead_s = max(e["calibration_final_s"] - pr.final_s, 0.0) / pr.tiles()
     return pr
@@ -712,8 +741,7 @@ def validate(store, algorithm="linear"):
         profile.cores = machine.cores
         net = local if where == "local" else Net(*store["links"][where], GAP["tcp"], algorithm)
         # Every rank of the test bed runs on this machine's cores too.
-        measured_mode = MEASURED_COMPONENT if mode == "component" else mode
-        res = simulate(profile, np, net, cores=profile.cores, mode=measured_mode)
+        res = simulate(profile, np, net, cores=profile.cores, mode=mode)
         real = statistics.median(r["wall_s"] for r in runs)
         # Rank 0's load and prepass together: its prepass starts with a collective that waits
         # for the slowest rank's load, so the two apart are not comparable with the model's.
@@ -776,9 +804,9 @@ def target_profile(store):
     its grid and final pass; the fit (no MPI master measured there) from the local case's
     calibration run scaled by the records, the setup as the local case's."""
     base = profile_of(store, LOCAL, cores=False)
-    records = store["target"]["prepass_records"]
-    out = Profile(store["target"], fit_s=base.fit_s * records / max(base.records, 1), mpi_extra_s=base.mpi_extra_s)
+    out = Profile(store["target"], mpi_extra_s=base.mpi_extra_s)
     out.tile_overhead_s = base.tile_overhead_s
+    out.ahead_fill, out.ahead_pixel_s = base.ahead_fill, base.ahead_pixel_s
     return out
 
 
@@ -820,14 +848,14 @@ def predict(store, algorithms=("linear", "bruck")):
 # Changes not made, simulated to see what each would buy: (label, mode, algorithm, change flags).
 CHANGES = [
     ("as is (component mode, linear iallgatherv)", "component", "linear", ()),
-    ("every worker renders the final pass (the PAs too, as --mode broadcast does)", "broadcast", "linear", ()),
+    ("no tracing ahead (as --mode broadcast renders)", "component", "linear", ("no_ahead",)),
     ("tiles sent at 24 bytes a pixel (the four layers at half precision)", "component", "linear", ("half_tiles",)),
     ("workers write their tiles themselves (MPI-IO), not through the master", "component", "linear",
      ("direct_tiles",)),
     ("the fit shared by the workers (their shares allgathered)", "component", "linear", ("fit_split",)),
     ("a Bruck (ceil(log2 P) steps) allgather", "component", "bruck", ()),
     ("the next round's lookups overlap the collective", "component", "linear", ("overlap",)),
-    ("all of these", "broadcast", "bruck", ("direct_tiles", "fit_split", "overlap")),
+    ("all of these but the first", "component", "bruck", ("direct_tiles", "fit_split", "overlap")),
 ]
 
 
@@ -888,43 +916,47 @@ def write_docs(store, validation, check, target, prediction, ifs, log):
         "- **grid**: the last bounce's rows over the W = P - 1 workers, then an allgather among them (48 bytes a sample).",
         "- **rounds**: per round, a worker looks up ceil(S/W) sites and makes its share of the R records; the round "
         "waits for the slowest worker, whose share is the expected maximum of R records dealt binomially to W "
-        "workers (the sites are interleaved, so a cluster of records spreads); then two allgathers over all P ranks "
-        "(the lengths, then 4 + 128 bytes a record); then every rank inserts the records (the serial part).",
-        "- **maps**: the edge map's strips over the workers, bit-packed rows allgathered; then the edge pixels' sample rounds.",
-        "- **fit**: the record set's curvature fit, on every rank (the -np 2 calibration run's master time outside "
-        "the rounds and the pool).",
+        "workers (the sites are interleaved, so a cluster of records spreads; the build deals a round's misses "
+        "evenly, so this is an upper bound on its imbalance); then two allgathers among the W workers, on a "
+        "communicator of their own (the lengths, then 4 + 128 bytes a record); then every worker inserts the "
+        "records (the serial part). The master takes no part: the first worker hands it each round's records "
+        "once, from a thread of its own (off the critical path; the bytes are counted).",
+        "- **ahead** (component mode): a worker waiting at a round's barrier traces its tiles' eye paths, direct "
+        "and specular light, and that work leaves its final pass: the share of its waits that tracing filled "
+        "in a -np 3 calibration run, up to the traceable share of its final pass (the calibration's seconds a "
+        "traced pixel) and the 64 MiB of traces a worker may hold.",
+        "- **maps**: the edge map's strips over the workers, bit-packed rows allgathered among them; then the "
+        "edge pixels' sample rounds.",
+        "- **fit**: the record set's curvature fit, on every worker (the one-process run's `prepass_fit_s`).",
         "- **final**: 32x32 tiles on demand, each a round trip through the master carrying the tile back (200 bytes "
         "a pixel) plus a tile's overhead beyond one process (the -np 2 calibration run's final pass beyond the "
         "one-process final pass, per tile: encoding, a large message's rendezvous polled with pauses); bound by "
         "the rendering workers or by the master, which takes the tiles one at a time (their bytes on its link, "
-        "and decoding and storing them at an assumed 1 GB/s). Every worker renders tiles, in component mode "
-        "(the default under mpirun) too. The measured runs were made with the build before that change, whose "
-        "PAs (W/2) waited through the final pass for requests a complete record set no longer makes: the "
-        "validation simulates that build, the prediction today's (`MEASURED_COMPONENT` in the script). "
-        "Today's build also deals a round's misses evenly (the model keeps the binomial share of the measured "
-        "build: an upper bound on today's imbalance) and polls collectives at most every 0.2 ms.",
+        "and decoding and storing them at an assumed 1 GB/s). Every worker renders tiles, in every mode.",
         "",
         "Per-site and per-record seconds are fitted (least squares) to the one-process run's per-round compute "
         "seconds. The collective is Open MPI 4.1's libnbc `MPI_Iallgatherv`, which is linear (each rank posts a "
         "send to and a receive from every other rank at once: `ompi/mca/coll/libnbc/nbc_iallgatherv.c`, "
-        "\"simple linear\"; `ompi_info` offers no other algorithm for it): latency + 2(P - 1) per-message costs "
+        "\"simple linear\"; `ompi_info` offers no other algorithm for it): latency + 2(W - 1) per-message costs "
         "+ the busiest link's bytes over the bandwidth. Alternatives modelled: Bruck/recursive doubling "
-        "(ceil(log2 P) steps) and ring (P - 1 steps). Polling: a rank notices a completed collective up to its "
-        "pause late (0.5 ms; 0.1 ms at the master; 5 ms once it has waited 20 ms, as the master does through "
-        "every round's compute), and the data allgather waits for the last rank to post. Ranks sharing this "
-        "machine's cores: a phase takes max(slowest rank, all work / effective cores) (effective cores: one "
-        "thread's compute over two threads'), and what every rank repeats takes P / cores times as long. "
-        "Per-message cost (LogP gap): 5 us over TCP, 0.5 us over RDMA (assumed, not measured). The effective "
-        "cores of every case are the machine's, from the conference 640x360 runs at 1 and 2 threads. The "
-        "one-process profiles' times are divided by their threads' busy over CPU seconds (the share of the cores "
-        "other jobs took); the mpirun runs are not corrected, and their load average is listed.",
+        "(ceil(log2 W) steps) and ring (W - 1 steps). Polling: a worker notices a completed collective up to its "
+        "pause late (pauses double up to 0.2 ms; a worker tracing ahead looks between steps of 16 pixels), and "
+        "the data allgather waits for the last worker to post. Ranks sharing this machine's cores: a phase takes "
+        "max(slowest rank, all work / effective cores) (effective cores: one thread's compute over two threads'), "
+        "and what every rank repeats takes P / cores times as long. Per-message cost (LogP gap): 5 us over TCP, "
+        "0.5 us over RDMA (assumed, not measured). The effective cores of every case are the machine's, from the "
+        "conference 640x360 runs at 1 and 2 threads. The one-process profiles' times are divided by their "
+        "threads' busy over CPU seconds (the share of the cores other jobs took); the mpirun runs are not "
+        "corrected, and their load average is listed.",
         "",
         "## Inputs",
         "",
     ]
     for name, e in store["profiles"].items():
-        pr = Profile(e["default"], e.get("noedge"), e.get("threads2"), e.get("fit_s"), e.get("mpi_extra_s"))
-        lines.append(f"- `{name}` one process, one thread: {pr.summary()}.")
+        pr = Profile(e["default"], e.get("noedge"), e.get("threads2"), None, e.get("mpi_extra_s"))
+        lines.append(f"- `{name}` one process, one thread: {pr.summary()}; tracing ahead (-np 3, component) "
+                     f"filled {100 * e.get('ahead_fill', 0.0):.0f}% of the workers' waits at "
+                     f"{1e6 * e.get('ahead_pixel_s', 0.0):.2f} us a pixel.")
     lines += ["", "Links (`icrender bench messages`: latency from the smallest message's half round trip, bandwidth "
                   "from a stream; the median of 3 measurements):", ""]
     lines += [f"- {k}: latency {v[0] * 1e6:.1f} us, bandwidth {v[1] / 1e6:.0f} MB/s" for k, v in store["links"].items()]
@@ -933,8 +965,8 @@ def write_docs(store, validation, check, target, prediction, ifs, log):
               f"machine (2 cores, mpirun --oversubscribe), {LOCAL['scene']} {LOCAL['size']} {LOCAL['options']} and "
               f"{SMALL['scene']} {SMALL['size']} {SMALL['options']}; test "
               f"bed: network namespaces on the same 2 cores, links capped by tc, {TESTBED['scene']} "
-              f"{TESTBED['size']} {TESTBED['options']}. broadcast: every worker renders the final pass; component: "
-              "the default mode.", ""]
+              f"{TESTBED['size']} {TESTBED['options']}. broadcast: no tracing ahead; component: the default mode, "
+              "tracing ahead.", ""]
     lines.append(table(validation, ["where", "scene", "size", "mode", "ranks", "repeats", "real_wall_s", "sim_wall_s", "wall_err_pct",
                                     "spread_pct", "prepass_err_pct", "final_err_pct", "real_mb", "bytes_err_pct",
                                     "load_average"],
@@ -955,8 +987,8 @@ def write_docs(store, validation, check, target, prediction, ifs, log):
     lines += ["", f"## Prediction: {TARGET['scene']} {TARGET['size']} {TARGET['options']}", "",
               f"From a one-process, one-thread `icrender render` at {TARGET['size']} (its times without other "
               f"jobs' share of the cores): {target.summary()}. Its grid includes the edge map (no run without the "
-              f"edge map at this size; both are shared by the workers). The fit's time is the {LOCAL['size']} "
-              f"calibration's scaled by the records, the per-tile overhead the {LOCAL['size']} calibration's. One process: {t1:.1f} s. Efficiency = one process's time / (P x wall), P "
+              f"edge map at this size; both are shared by the workers). The per-tile overhead and the tracing ahead are "
+              f"the {LOCAL['size']} calibration's. One process: {t1:.1f} s. Efficiency = one process's time / (P x wall), P "
               "counting the master; build efficiency: the same without the scene load, BVH build and setup that "
               "every rank pays before it starts. Loss shares (of P x wall) say what bounds it; they and the "
               "efficiency sum to 100%.", ""]
