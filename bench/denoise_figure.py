@@ -60,7 +60,7 @@ def main():
         ("raw composite", composite(layers), reference),
         ("denoised (layer `denoised`)", layers["denoised"], reference),
         ("direct, raw", layers["direct"], None),
-        ("direct.denoised", layers["direct.denoised"], None),
+        ("direct_denoised", layers["direct_denoised"], None),
     ]
     plt = common.ensure_module("matplotlib.pyplot", "matplotlib")
     fig, axes = plt.subplots(1, 4, figsize=(16, 4.6))

@@ -9,6 +9,7 @@
 #include <strings.h>
 
 #include <algorithm>
+#include <thread>
 #include <climits>
 #include <cmath>
 #include <cstdlib>
@@ -72,14 +73,39 @@ bool pixel_count(uint32_t width, uint32_t height, size_t channels, size_t *out) 
 
 // Rows per write_scanlines call: a multiple of the 16-line blocks EXR ZIP compresses, and small
 // enough that the interleaved copy stays far below the size of a many-layer frame.
-constexpr uint32_t kStripRows = 64;
+constexpr uint32_t kStripRows = 256;
 
 }  // namespace
 
-extern "C" int icr_exr_write(const char *path, uint32_t width, uint32_t height, icr_window window,
-                             const icr_channel *channels,
-                             size_t channel_count, const icr_attribute *attributes, size_t attribute_count,
-                             int half_float, char *err, size_t err_len) {
+namespace {
+
+// The planes of icr_exr_write, interleaved into a strip (icr_fill_rows over whole planes).
+struct Planes {
+    const icr_channel *channels;
+    size_t count;
+    size_t width;
+};
+
+int fill_from_planes(void *context, uint32_t y0, uint32_t y1, float *strip) {
+    const Planes &p = *static_cast<const Planes *>(context);
+    for (uint32_t y = y0; y < y1; ++y) {
+        float *row = strip + size_t(y - y0) * p.width * p.count;
+        const size_t src = size_t(y) * p.width;
+        for (size_t c = 0; c < p.count; ++c) {
+            const float *plane = p.channels[c].data + src;
+            for (size_t x = 0; x < p.width; ++x) row[x * p.count + c] = plane[x];
+        }
+    }
+    return 0;
+}
+
+}  // namespace
+
+extern "C" int icr_exr_write_rows(const char *path, uint32_t width, uint32_t height, icr_window window,
+                                  const icr_channel *channels, size_t channel_count,
+                                  const icr_attribute *attributes, size_t attribute_count, int half_float,
+                                  const char *compression, icr_fill_rows fill, void *context, char *err,
+                                  size_t err_len) {
     clear_error(err, err_len);
     try {
         if (!path || !*path) return write_error(err, err_len, "empty path");
@@ -87,6 +113,7 @@ extern "C" int icr_exr_write(const char *path, uint32_t width, uint32_t height, 
             return write_error(err, err_len, "invalid image size " + std::to_string(width) + "x" + std::to_string(height));
         if (!channels || channel_count == 0) return write_error(err, err_len, "no channels to write");
         if (channel_count > size_t(INT_MAX)) return write_error(err, err_len, "too many channels");
+        if (!fill) return write_error(err, err_len, "no source of pixels");
         size_t total;
         if (!pixel_count(width, height, channel_count, &total)) return write_error(err, err_len, "image too large");
         if (attribute_count && !attributes) return write_error(err, err_len, "attributes missing");
@@ -110,8 +137,6 @@ extern "C" int icr_exr_write(const char *path, uint32_t width, uint32_t height, 
         for (size_t c = 0; c < channel_count; ++c) {
             if (!channels[c].name || !*channels[c].name)
                 return write_error(err, err_len, "channel " + std::to_string(c) + " has no name");
-            if (!channels[c].data)
-                return write_error(err, err_len, std::string("channel ") + channels[c].name + " has no data");
             // OpenEXR keeps channels in a map by name, so a duplicate would silently replace
             // the earlier plane.
             if (std::find(spec.channelnames.begin(), spec.channelnames.end(), channels[c].name) !=
@@ -130,7 +155,7 @@ extern "C" int icr_exr_write(const char *path, uint32_t width, uint32_t height, 
             for (size_t c = 0; c < channel_count; ++c)
                 spec.channelformats.push_back(channels[c].full_float ? OIIO::TypeDesc::FLOAT : OIIO::TypeDesc::HALF);
         }
-        spec.attribute("compression", "zip");
+        spec.attribute("compression", compression && *compression ? compression : "zip");
         for (size_t i = 0; i < attribute_count; ++i) {
             if (!attributes[i].name || !*attributes[i].name)
                 return write_error(err, err_len, "attribute " + std::to_string(i) + " has no name");
@@ -147,6 +172,9 @@ extern "C" int icr_exr_write(const char *path, uint32_t width, uint32_t height, 
             }
         }
 
+        // OpenEXR compresses the line blocks of one write on its own thread pool: as many
+        // threads as the machine has.
+        OIIO::attribute("exr_threads", int(std::max(1u, std::thread::hardware_concurrency())));
         // By format name: the path is a temporary name whose extension says nothing.
         std::unique_ptr<OIIO::ImageOutput> out = OIIO::ImageOutput::create("openexr");
         if (!out) return write_error(err, err_len, oiio_error("OpenEXR writer unavailable", ""));
@@ -156,13 +184,9 @@ extern "C" int icr_exr_write(const char *path, uint32_t width, uint32_t height, 
         std::vector<float> strip(w * nch * std::min<size_t>(kStripRows, height));
         for (uint32_t y0 = 0; y0 < height; y0 += kStripRows) {
             const uint32_t y1 = std::min<uint32_t>(height, y0 + kStripRows);
-            for (uint32_t y = y0; y < y1; ++y) {
-                float *row = strip.data() + size_t(y - y0) * w * nch;
-                const size_t src = size_t(y) * w;
-                for (size_t c = 0; c < nch; ++c) {
-                    const float *plane = channels[c].data + src;
-                    for (size_t x = 0; x < w; ++x) row[x * nch + c] = plane[x];
-                }
+            if (fill(context, y0, y1, strip.data()) != 0) {
+                out->close();
+                return write_error(err, err_len, "the pixels could not be made");
             }
             // Scanlines are numbered in the display window's coordinates.
             if (!out->write_scanlines(window.y + int(y0), window.y + int(y1), 0, OIIO::TypeDesc::FLOAT,
@@ -181,6 +205,22 @@ extern "C" int icr_exr_write(const char *path, uint32_t width, uint32_t height, 
     } catch (...) {
         return write_error(err, err_len, "EXR write failed: unknown exception");
     }
+}
+
+extern "C" int icr_exr_write(const char *path, uint32_t width, uint32_t height, icr_window window,
+                             const icr_channel *channels, size_t channel_count, const icr_attribute *attributes,
+                             size_t attribute_count, int half_float, const char *compression, char *err,
+                             size_t err_len) {
+    clear_error(err, err_len);
+    if (channels)
+        for (size_t c = 0; c < channel_count; ++c)
+            if (!channels[c].data)
+                return write_error(err, err_len,
+                                   std::string("channel ") + (channels[c].name ? channels[c].name : "?") +
+                                       " has no data");
+    Planes planes{channels, channel_count, width};
+    return icr_exr_write_rows(path, width, height, window, channels, channel_count, attributes, attribute_count,
+                              half_float, compression, fill_from_planes, &planes, err, err_len);
 }
 
 extern "C" int icr_png_write(const char *path, uint32_t width, uint32_t height, const uint8_t *rgb, char *err,

@@ -325,12 +325,17 @@ pub struct RenderArgs {
     /// Cryptomatte always stay full floats.
     #[arg(long = "half")]
     pub half: bool,
+    /// The EXR's codec: zip (lossless, what Blender and Nuke write float layers with), piz
+    /// (lossless, smaller for noisy light, slower), dwaa (lossy, for light alone: needs --aovs
+    /// none), none.
+    #[arg(long = "compression", value_enum, default_value_t = crate::image::output::ExrCompression::Zip)]
+    pub compression: crate::image::output::ExrCompression,
     /// Data layers and Cryptomatte types to write, comma-separated: albedo, normal, depth,
     /// position, crypto_object, crypto_material; or none, or all (default: all but position).
     #[arg(long = "aovs", value_name = "LIST", value_parser = parse_aovs)]
     pub aovs: Option<AovList>,
     /// Denoise with Intel Open Image Denoise: each noisy lighting layer (direct, specular,
-    /// indirect) is written again as `<layer>.denoised` beside the raw one, and their sum with
+    /// indirect) is written again as `<layer>_denoised` beside the raw one, and their sum with
     /// the emission as the layer `denoised` (the PNG preview shows it). Needs the library
     /// scripts/install-deps.sh unpacks; without it the render stops before it starts.
     #[arg(long = "denoise")]

@@ -104,6 +104,15 @@ pub fn validate(args: &RenderArgs) -> Result<(), String> {
     if args.af_read_only && args.ambient_file.is_none() {
         return Err("--af-read-only needs a cache file to read: give -af FILE".into());
     }
+    if args.compression == crate::image::output::ExrCompression::Dwaa && (!args.aovs().is_empty() || args.ic_records) {
+        // OpenEXR's DWA codec is lossy on every channel it takes for colour (named R, G, B or
+        // Y), whatever its type: it would blur Cryptomatte's IDs and the data layers.
+        return Err(
+            "--compression dwaa is lossy on every channel named R, G, B or Y, the data layers' and \
+                    Cryptomatte's too: give --aovs none (and no --ic-records) with it, or a lossless codec (zip, piz)"
+                .into(),
+        );
+    }
     args.frames()?;
     Ok(())
 }

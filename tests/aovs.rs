@@ -388,6 +388,76 @@ fn oiiotool_lists_every_layer_and_data_stays_float_under_half() {
     }
 }
 
+/// Every `--compression` reads back in oiiotool, which names the codec; the lossless ones give
+/// the zip file's pixels bit for bit. dwaa, lossy on every channel named like colour (it blurred
+/// Cryptomatte's IDs when tried), is refused beside data layers and keeps light close.
+#[test]
+fn every_compression_reads_back_in_oiiotool_and_only_dwaa_changes_the_light() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = project_dir().join("scenes/cornell.gltf");
+    let args = |codec: &str, aovs: &str| -> Vec<String> {
+        let out = dir.path().join(format!("{codec}.exr"));
+        [
+            "render",
+            scene.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+            "-q",
+            "--no-preview",
+            "--overwrite",
+            "-x",
+            "24",
+            "-y",
+            "24",
+            "--half",
+            "--aovs",
+            aovs,
+            "--compression",
+            codec,
+        ]
+        .map(String::from)
+        .to_vec()
+    };
+    let write = |codec: &str, aovs: &str| {
+        let args = args(codec, aovs);
+        run_ok(&args.iter().map(String::as_str).collect::<Vec<_>>());
+        let out = &args[3];
+        let info = std::process::Command::new("oiiotool")
+            .args(["--info", "-v", out])
+            .output()
+            .expect("oiiotool (openimageio-tools) is installed");
+        assert!(info.status.success(), "oiiotool cannot read the {codec} file");
+        let text = String::from_utf8_lossy(&info.stdout).to_string();
+        let said = text
+            .lines()
+            .find_map(|l| l.trim().strip_prefix("compression:"))
+            .map(|c| c.trim().trim_matches('"').to_string());
+        assert_eq!(said.as_deref(), Some(codec), "{text}");
+        read_with_crypto(Path::new(out))
+    };
+    let zip = write("zip", "all");
+    for codec in ["piz", "none"] {
+        let other = write(codec, "all");
+        assert_eq!(zip.channels.len(), other.channels.len(), "{codec}");
+        for (name, data) in &zip.channels {
+            assert_eq!(data.as_slice(), channel(&other, name), "{codec}: {name}");
+        }
+    }
+    let refused = run(&args("dwaa", "all").iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(!refused.status.success());
+    let said = stderr(&refused);
+    assert!(
+        said.contains("--compression dwaa") && said.contains("--aovs none"),
+        "{said}"
+    );
+    assert!(!dir.path().join("dwaa.exr").exists());
+    let dwaa = write("dwaa", "none");
+    let (a, b) = (channel(&zip, "R"), channel(&dwaa, "R"));
+    let scale = a.iter().fold(0f32, |m, v| m.max(v.abs())).max(1e-6);
+    let worst = a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0f32, f32::max);
+    assert!(worst <= 0.1 * scale, "dwaa moved R by {worst} of {scale}");
+}
+
 /// Every data channel of two images, bit for bit.
 fn assert_same_data(a: &ImageData, b: &ImageData, what: &str) {
     let data: Vec<&String> = a

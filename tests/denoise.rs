@@ -66,7 +66,7 @@ fn the_denoised_direct_layer_is_closer_to_a_converged_reference_than_the_raw_one
     let out = run_ok(&args);
 
     let errors = compared(&image, &reference);
-    let (raw, denoised) = (layer_error(&errors, "direct"), layer_error(&errors, "direct.denoised"));
+    let (raw, denoised) = (layer_error(&errors, "direct"), layer_error(&errors, "direct_denoised"));
     let rel = |e: &Value| e["rel_mse"].as_f64().unwrap();
     let rmse = |e: &Value| e["rmse"].as_f64().unwrap();
     // Measured: relMSE 2.2e-2 raw, 9.5e-3 denoised; RMSE 2.3e-2 and 1.4e-2.
@@ -84,14 +84,14 @@ fn the_denoised_direct_layer_is_closer_to_a_converged_reference_than_the_raw_one
     let info = String::from_utf8_lossy(&info.stdout);
     for channel in [
         "direct.R",
-        "direct.denoised.R",
-        "specular.denoised.B",
+        "direct_denoised.R",
+        "specular_denoised.B",
         "denoised.G",
         "emission.R",
     ] {
         assert!(info.contains(channel), "oiiotool lists no {channel}:\n{info}");
     }
-    assert!(!info.contains("emission.denoised"), "{info}");
+    assert!(!info.contains("emission_denoised"), "{info}");
 
     // The header says what was denoised, how, and in what time.
     let read = read_image(
@@ -101,7 +101,7 @@ fn the_denoised_direct_layer_is_closer_to_a_converged_reference_than_the_raw_one
     .unwrap();
     assert_eq!(
         read.attribute("icrender/denoised"),
-        Some("direct.denoised specular.denoised denoised")
+        Some("direct_denoised specular_denoised denoised")
     );
     let how = read.attribute("icrender/denoise").unwrap();
     assert!(
@@ -116,7 +116,7 @@ fn the_denoised_direct_layer_is_closer_to_a_converged_reference_than_the_raw_one
     assert!(seconds > 0.0);
     let stats: Value = serde_json::from_str(&std::fs::read_to_string(&stats).unwrap()).unwrap();
     assert!(stats["denoise_s"].as_f64().unwrap() > 0.0, "{stats}");
-    assert_eq!(stats["denoised_layers"][0], "direct.denoised");
+    assert_eq!(stats["denoised_layers"][0], "direct_denoised");
     // ... and the summary on stderr.
     let said = stderr(&out);
     assert!(
@@ -134,7 +134,7 @@ fn the_denoised_direct_layer_is_closer_to_a_converged_reference_than_the_raw_one
                 .collect()
         })
     };
-    let expected = sum(&["emission", "direct.denoised", "specular.denoised"]);
+    let expected = sum(&["emission", "direct_denoised", "specular_denoised"]);
     let written = rgb(&read, "denoised");
     for c in 0..3 {
         for (a, b) in written[c].iter().zip(&expected[c]) {
@@ -268,7 +268,7 @@ fn a_clean_direct_layer_is_not_blurred_by_the_filter() {
         run_ok(&args);
         let errors = compared(&image, &reference);
         let rel = |layer| layer_error(&errors, layer)["rel_mse"].as_f64().unwrap();
-        let (raw, denoised) = (rel("direct"), rel("direct.denoised"));
+        let (raw, denoised) = (rel("direct"), rel("direct_denoised"));
         assert!(
             denoised < bound * raw,
             "{sampling:?}: direct against the reference: relMSE raw {raw:.3e}, denoised {denoised:.3e}"
@@ -292,8 +292,8 @@ fn the_indirect_layer_is_denoised_without_the_cache_only() {
     let dir = tempfile::tempdir().unwrap();
     let scene = cornell();
     for (accuracy, expected) in [
-        ("0.2", "direct.denoised specular.denoised denoised"),
-        ("0", "direct.denoised specular.denoised indirect.denoised denoised"),
+        ("0.2", "direct_denoised specular_denoised denoised"),
+        ("0", "direct_denoised specular_denoised indirect_denoised denoised"),
     ] {
         let image = dir.path().join(format!("aa-{accuracy}.exr"));
         run_ok(&[
@@ -327,11 +327,11 @@ fn the_indirect_layer_is_denoised_without_the_cache_only() {
         );
         assert!(read.channel("indirect.R").is_some(), "-aa {accuracy}");
         let indirect = if accuracy == "0" {
-            "indirect.denoised"
+            "indirect_denoised"
         } else {
             "indirect"
         };
-        let planes: Vec<[Vec<f32>; 3]> = ["emission", "direct.denoised", "specular.denoised", indirect]
+        let planes: Vec<[Vec<f32>; 3]> = ["emission", "direct_denoised", "specular_denoised", indirect]
             .iter()
             .map(|l| rgb(&read, l))
             .collect();
@@ -387,23 +387,23 @@ fn denoise_under_mpirun_writes_the_denoised_layers_on_the_master() {
     let read = read_image(&image, &["icrender/denoised", "icrender/denoise"]).unwrap();
     assert_eq!(
         read.attribute("icrender/denoised"),
-        Some("direct.denoised specular.denoised indirect.denoised denoised")
+        Some("direct_denoised specular_denoised indirect_denoised denoised")
     );
     let how = read.attribute("icrender/denoise").unwrap();
     assert!(
         how.contains("quality fast") && how.contains("weighed against the raw layer"),
         "{how}"
     );
-    assert!(read.channel("indirect.denoised.R").is_some());
+    assert!(read.channel("indirect_denoised.R").is_some());
     assert!(stderr(&out).contains("icrender: denoised direct, specular, indirect"));
     // Had the pixels' noise been lost on the way (zero everywhere), the weighing would have
     // kept every raw value: the denoised layers would be the raw ones.
     for layer in ["direct", "indirect"] {
-        let (raw, denoised) = (rgb(&read, layer), rgb(&read, &format!("{layer}.denoised")));
+        let (raw, denoised) = (rgb(&read, layer), rgb(&read, &format!("{layer}_denoised")));
         let changed = (0..3).any(|c| raw[c].iter().zip(&denoised[c]).any(|(a, b)| (a - b).abs() > 1e-4));
         assert!(
             changed,
-            "{layer}.denoised is the raw {layer}: no noise reached the master"
+            "{layer}_denoised is the raw {layer}: no noise reached the master"
         );
     }
 }
@@ -442,7 +442,7 @@ fn shadowed_floor(dir: &Path, area: bool) -> std::path::PathBuf {
 fn punctual_light_traced_exactly_leaves_nothing_to_denoise() {
     // Four samples a pixel across the blocker's and its shadow's hard edges: their spread is
     // the pixels' content, not noise (each point light has its own shadow ray), so no filter
-    // runs and `direct.denoised` is the raw layer; lit by an area light (sampled shadow rays,
+    // runs and `direct_denoised` is the raw layer; lit by an area light (sampled shadow rays,
     // a penumbra) the same view's direct light is filtered.
     let dir = tempfile::tempdir().unwrap();
     for area in [false, true] {
@@ -453,14 +453,14 @@ fn punctual_light_traced_exactly_leaves_nothing_to_denoise() {
         let image = render_file(dir.path(), &scene, &format!("area-{area}"), &args);
         let read = read_image(&image, &["icrender/denoise"]).unwrap();
         let said = read.attribute("icrender/denoise").unwrap().to_string();
-        let (raw, denoised) = (rgb(&read, "direct"), rgb(&read, "direct.denoised"));
+        let (raw, denoised) = (rgb(&read, "direct"), rgb(&read, "direct_denoised"));
         if area {
             assert!(said.contains("layers direct each denoised"), "{said}");
             assert_ne!(raw, denoised, "the area light's direct layer is filtered");
         } else {
             assert!(
                 said.contains("not started: no layer to filter")
-                    && said.contains("direct left as rendered in direct.denoised (no Monte Carlo noise measured)")
+                    && said.contains("direct left as rendered in direct_denoised (no Monte Carlo noise measured)")
                     && !said.contains("guided by")
                     && !said.contains("each denoised"),
                 "{said}"

@@ -197,6 +197,7 @@ pub fn run(args: &MergeArgs) -> CommandResult {
     let attributes = header(&parts)?;
     // The parts' light layers are half floats when they were rendered with --half.
     let half = parts[0].settings.split("; ").any(|item| item == "--half true");
+    let compression = output::ExrCompression::from_settings(&parts[0].settings);
     let channels: Vec<ChannelPlane<'_>> = planes
         .iter()
         .map(|(name, data)| ChannelPlane {
@@ -214,6 +215,7 @@ pub fn run(args: &MergeArgs) -> CommandResult {
             &channels,
             &attributes,
             half,
+            compression.name(),
         )
     })
     .map_err(|e| CommandError::failed(format!("{}: {e}", out.display())))?;

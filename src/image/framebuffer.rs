@@ -152,6 +152,11 @@ impl FrameBuffer {
         self.data.iter_mut().for_each(|d| d.scale(factor));
     }
 
+    /// Sum of all layers at the window's pixel `i` (row-major).
+    pub fn composite_at(&self, i: usize) -> Vec3 {
+        self.layers.iter().map(|l| l[i]).sum()
+    }
+
     /// Sum of all layers, pixel by pixel.
     pub fn composite(&self) -> Vec<Vec3> {
         (0..self.layers[0].len())

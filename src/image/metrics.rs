@@ -45,12 +45,13 @@ pub fn rgb_layers(image: &ImageData) -> Vec<String> {
 }
 
 /// The reference layer a layer of the image is measured against: a denoised layer
-/// (`<layer>.denoised`, or `denoised` for the composite; see image/denoise.rs) against the
-/// reference's own layer, every other layer against the layer of the same name.
+/// (`<layer>_denoised`, or `denoised` for the composite; see image/denoise.rs; files of earlier
+/// builds named them `<layer>.denoised`) against the reference's own layer, every other layer
+/// against the layer of the same name.
 pub fn reference_layer(layer: &str) -> &str {
     match layer.strip_suffix("denoised") {
         Some("") => "",
-        Some(base) => base.strip_suffix('.').unwrap_or(layer),
+        Some(base) => base.strip_suffix(['_', '.']).unwrap_or(layer),
         None => layer,
     }
 }
@@ -176,6 +177,7 @@ mod tests {
 
     #[test]
     fn denoised_layers_are_measured_against_the_references_raw_layers() {
+        assert_eq!(reference_layer("direct_denoised"), "direct");
         assert_eq!(reference_layer("direct.denoised"), "direct");
         assert_eq!(reference_layer("denoised"), "");
         assert_eq!(reference_layer("direct"), "direct");
@@ -187,12 +189,12 @@ mod tests {
             ("denoised.R", 1.25),
             ("denoised.G", 1.25),
             ("denoised.B", 1.25),
-            ("direct.denoised.R", 0.5),
-            ("direct.denoised.G", 0.5),
-            ("direct.denoised.B", 0.5),
-            ("specular.denoised.R", 0.5),
-            ("specular.denoised.G", 0.5),
-            ("specular.denoised.B", 0.5),
+            ("direct_denoised.R", 0.5),
+            ("direct_denoised.G", 0.5),
+            ("direct_denoised.B", 0.5),
+            ("specular_denoised.R", 0.5),
+            ("specular_denoised.G", 0.5),
+            ("specular_denoised.B", 0.5),
         ]);
         let b = image(&[
             ("R", 1.0),
@@ -204,7 +206,7 @@ mod tests {
         ]);
         let errors = compare(&a, &b).unwrap();
         let names: Vec<&str> = errors.iter().map(|e| e.layer.as_str()).collect();
-        assert_eq!(names, ["composite", "denoised", "direct.denoised"]);
+        assert_eq!(names, ["composite", "denoised", "direct_denoised"]);
         assert!((errors[1].rmse - 0.25).abs() < 1e-12);
         assert!((errors[2].rmse - 0.5).abs() < 1e-12);
         assert_eq!(errors[2].reference_mean, 0.0);

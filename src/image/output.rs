@@ -5,7 +5,7 @@ use super::cryptomatte::{RANKS, Ranks};
 use super::data::{Aov, PixelData};
 use super::framebuffer::{FrameBuffer, Layer};
 use super::preview::tone_map;
-use crate::sys::image_io::{self, ChannelPlane, Window};
+use crate::sys::image_io::{self, Window};
 use glam::Vec3;
 use std::path::{Path, PathBuf};
 
@@ -45,60 +45,97 @@ pub fn check_writable(path: &Path) -> Result<(), String> {
 pub const CRYPTO_OBJECT: &str = "CryptoObject";
 pub const CRYPTO_MATERIAL: &str = "CryptoMaterial";
 
-/// A plane for the file: its channel name, values, and whether it must stay 32-bit float
-/// whatever `--half` says (data layers and Cryptomatte: a half float cannot hold an ID's bits,
+/// Where a channel of the file takes its values from, pixel by pixel. Data layers and
+/// Cryptomatte stay 32-bit float whatever `--half` says (a half float cannot hold an ID's bits,
 /// nor a far depth or a world position to the precision a compositor needs).
-struct Plane {
-    name: String,
-    data: Vec<f32>,
-    full_float: bool,
+#[derive(Clone, Copy)]
+enum Source<'a> {
+    Composite(usize),
+    Alpha,
+    /// A light layer (or a denoised one) and its component.
+    Light(&'a [Vec3], usize),
+    Records,
+    Albedo(usize),
+    Normal(usize),
+    Depth,
+    Position(usize),
+    /// A Cryptomatte type's rank: its ID's bits or its coverage.
+    Crypto {
+        object: bool,
+        rank: usize,
+        id: bool,
+    },
 }
 
-/// The planes of the data layers in `aovs`, in that order.
-fn data_planes(frame: &FrameBuffer, aovs: &[Aov]) -> Vec<Plane> {
-    let data = frame.data();
-    let plane = |name: String, value: &dyn Fn(&PixelData) -> f32| Plane {
-        name,
-        data: data.iter().map(value).collect(),
-        full_float: true,
-    };
-    let vector = |layer: &str, channels: [&str; 3], value: &dyn Fn(&PixelData) -> Vec3| -> Vec<Plane> {
+impl Source<'_> {
+    fn full_float(self) -> bool {
+        !matches!(
+            self,
+            Source::Composite(_) | Source::Alpha | Source::Light(..) | Source::Records
+        )
+    }
+
+    fn value(self, frame: &FrameBuffer, i: usize) -> f32 {
+        let data = |i: usize| -> &PixelData { &frame.data()[i] };
+        match self {
+            Source::Composite(c) => frame.composite_at(i)[c],
+            Source::Alpha => 1.0,
+            Source::Light(plane, c) => plane[i][c],
+            Source::Records => frame.records()[i],
+            Source::Albedo(c) => data(i).albedo[c],
+            Source::Normal(c) => data(i).normal[c],
+            Source::Depth => data(i).depth,
+            Source::Position(c) => data(i).position[c],
+            Source::Crypto { object, rank, id } => {
+                let ranks: &Ranks = if object { &data(i).object } else { &data(i).material };
+                let entry = ranks[rank];
+                if id { f32::from_bits(entry.id) } else { entry.coverage }
+            }
+        }
+    }
+}
+
+/// The channels of the data layers in `aovs`, in that order.
+fn data_channels(aovs: &[Aov]) -> Vec<(String, Source<'static>)> {
+    let vector = |layer: &str, names: [&str; 3], source: fn(usize) -> Source<'static>| {
         (0..3)
-            .map(|c| plane(format!("{layer}.{}", channels[c]), &|d| value(d)[c]))
-            .collect()
+            .map(move |c| (format!("{layer}.{}", names[c]), source(c)))
+            .collect::<Vec<_>>()
     };
-    let crypto = |layer: &str, ranks: &dyn Fn(&PixelData) -> &Ranks| -> Vec<Plane> {
+    let crypto = |layer: &str, object: bool| {
         let mut out = Vec::new();
         for level in 0..RANKS / 2 {
             for (c, channel) in ["R", "G", "B", "A"].iter().enumerate() {
-                let rank = 2 * level + c / 2;
-                let id = c % 2 == 0;
-                out.push(plane(format!("{layer}{level:02}.{channel}"), &|d| {
-                    let e = ranks(d)[rank];
-                    if id { f32::from_bits(e.id) } else { e.coverage }
-                }));
+                let source = Source::Crypto {
+                    object,
+                    rank: 2 * level + c / 2,
+                    id: c % 2 == 0,
+                };
+                out.push((format!("{layer}{level:02}.{channel}"), source));
             }
         }
         out
     };
-    let mut planes = Vec::new();
+    let mut channels = Vec::new();
     for aov in aovs {
         match aov {
-            Aov::Albedo => planes.extend(vector("albedo", ["R", "G", "B"], &|d| d.albedo)),
-            Aov::Normal => planes.extend(vector("normal", ["X", "Y", "Z"], &|d| d.normal)),
-            Aov::Depth => planes.push(plane("depth.Z".into(), &|d| d.depth)),
-            Aov::Position => planes.extend(vector("position", ["X", "Y", "Z"], &|d| d.position)),
-            Aov::CryptoObject => planes.extend(crypto(CRYPTO_OBJECT, &|d| &d.object)),
-            Aov::CryptoMaterial => planes.extend(crypto(CRYPTO_MATERIAL, &|d| &d.material)),
+            Aov::Albedo => channels.extend(vector("albedo", ["R", "G", "B"], Source::Albedo)),
+            Aov::Normal => channels.extend(vector("normal", ["X", "Y", "Z"], Source::Normal)),
+            Aov::Depth => channels.push(("depth.Z".to_string(), Source::Depth)),
+            Aov::Position => channels.extend(vector("position", ["X", "Y", "Z"], Source::Position)),
+            Aov::CryptoObject => channels.extend(crypto(CRYPTO_OBJECT, true)),
+            Aov::CryptoMaterial => channels.extend(crypto(CRYPTO_MATERIAL, false)),
         }
     }
-    planes
+    channels
 }
 
 /// Writes the composite as R G B A, each given layer as `layer.R/G/B`, then each of
 /// `extra_layers` (a name and a plane: the denoised layers) the same way, and the data layers
-/// of `aovs` (always 32-bit float, see `Plane`). The frame's pixels lie at `window` in the
-/// whole image (a part of a --region render).
+/// of `aovs` (always 32-bit float, see `Source`). The frame's pixels lie at `window` in the
+/// whole image (a part of a --region render). The pixels go to the file a strip of rows at a
+/// time, made from the frame as they go: no planar copy of the image is held (at 3840x2160 with
+/// every default layer such a copy took 1.5 GB, and making it a pass over the frame per channel).
 #[allow(clippy::too_many_arguments)]
 pub fn write_exr(
     path: &Path,
@@ -109,53 +146,109 @@ pub fn write_exr(
     extra_layers: &[(&str, &[Vec3])],
     attributes: &[(String, String)],
     half_float: bool,
+    compression: ExrCompression,
     records_layer: bool,
 ) -> Result<(), String> {
-    let composite = frame.composite();
-    let split = |pixels: &[Vec3]| -> [Vec<f32>; 3] { std::array::from_fn(|c| pixels.iter().map(|p| p[c]).collect()) };
-    let light = |name: String, data: Vec<f32>| Plane {
-        name,
-        data,
-        full_float: false,
-    };
-    let mut planes: Vec<Plane> = Vec::new();
-    for (c, data) in ["R", "G", "B"].into_iter().zip(split(&composite)) {
-        planes.push(light(c.into(), data));
-    }
-    planes.push(light("A".into(), vec![1.0f32; composite.len()]));
+    const RGB: [&str; 3] = ["R", "G", "B"];
+    let mut channels: Vec<(String, Source<'_>)> = Vec::new();
+    channels.extend(
+        RGB.iter()
+            .enumerate()
+            .map(|(c, n)| (n.to_string(), Source::Composite(c))),
+    );
+    channels.push(("A".to_string(), Source::Alpha));
     for &l in layers {
-        for (c, data) in ["R", "G", "B"].into_iter().zip(split(frame.layer(l))) {
-            planes.push(light(format!("{}.{c}", l.name()), data));
-        }
+        let plane = frame.layer(l);
+        channels.extend(
+            RGB.iter()
+                .enumerate()
+                .map(|(c, n)| (format!("{}.{n}", l.name()), Source::Light(plane, c))),
+        );
     }
     for &(name, plane) in extra_layers {
-        for (c, data) in ["R", "G", "B"].into_iter().zip(split(plane)) {
-            planes.push(light(format!("{name}.{c}"), data));
+        if plane.len() != frame.width as usize * frame.height as usize {
+            return Err(format!(
+                "layer {name} has {} pixels for {}x{}",
+                plane.len(),
+                frame.width,
+                frame.height
+            ));
         }
+        channels.extend(
+            RGB.iter()
+                .enumerate()
+                .map(|(c, n)| (format!("{name}.{n}"), Source::Light(plane, c))),
+        );
     }
     if records_layer {
-        planes.push(light("ic_records.Y".into(), frame.records().to_vec()));
+        channels.push(("ic_records.Y".to_string(), Source::Records));
     }
-    planes.extend(data_planes(frame, aovs));
-    let channels: Vec<ChannelPlane<'_>> = planes
+    channels.extend(data_channels(aovs));
+    let names: Vec<image_io::ChannelName<'_>> = channels
         .iter()
-        .map(|p| ChannelPlane {
-            name: &p.name,
-            data: &p.data,
-            full_float: p.full_float,
+        .map(|(name, source)| image_io::ChannelName {
+            name,
+            full_float: source.full_float(),
         })
         .collect();
+    let sources: Vec<Source<'_>> = channels.iter().map(|(_, s)| *s).collect();
+    let width = frame.width as usize;
+    let mut fill = |y0: u32, y1: u32, strip: &mut [f32]| {
+        let rows = (y0 as usize * width)..(y1 as usize * width);
+        for (pixel, values) in rows.zip(strip.chunks_exact_mut(sources.len())) {
+            for (value, source) in values.iter_mut().zip(&sources) {
+                *value = source.value(frame, pixel);
+            }
+        }
+    };
     write_atomically(path, |tmp| {
-        image_io::write_exr(
+        image_io::write_exr_rows(
             tmp,
             frame.width,
             frame.height,
             window,
-            &channels,
+            &names,
             attributes,
             half_float,
+            compression.name(),
+            &mut fill,
         )
     })
+}
+
+/// The EXR's codec (`--compression`). Zip, lossless, is what Blender and Nuke write float
+/// layers with by default; piz, lossless too, packs noisy light tighter but compresses and
+/// reads slower; dwaa is lossy on every channel named like colour, whatever its type, so only
+/// for light alone (`job::validate` refuses it beside data layers); none writes the bytes as
+/// they are.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
+pub enum ExrCompression {
+    #[default]
+    Zip,
+    Piz,
+    Dwaa,
+    None,
+}
+
+impl ExrCompression {
+    /// OpenEXR's name for it (OpenImageIO's `compression` attribute).
+    pub fn name(self) -> &'static str {
+        match self {
+            ExrCompression::Zip => "zip",
+            ExrCompression::Piz => "piz",
+            ExrCompression::Dwaa => "dwaa",
+            ExrCompression::None => "none",
+        }
+    }
+
+    /// The codec a file's settings line names (`--compression X`), zip where it names none.
+    pub fn from_settings(settings: &str) -> Self {
+        settings
+            .split("; ")
+            .find_map(|item| item.strip_prefix("--compression "))
+            .and_then(|name| <Self as clap::ValueEnum>::from_str(name, true).ok())
+            .unwrap_or_default()
+    }
 }
 
 /// Whether a channel written by `write_exr` is a data layer or Cryptomatte (always 32-bit

@@ -113,7 +113,8 @@ impl Window {
 
 /// Writes an OpenEXR with the given channels (in order) and string attributes to exactly `path`;
 /// with `half_float`, every channel not marked `full_float` is stored as half. The channels
-/// hold `width` x `height` pixels placed at `window` in the display window.
+/// hold `width` x `height` pixels placed at `window` in the display window, compressed with
+/// OpenEXR's codec named `compression`.
 #[allow(clippy::too_many_arguments)]
 pub fn write_exr(
     path: &Path,
@@ -123,6 +124,7 @@ pub fn write_exr(
     channels: &[ChannelPlane<'_>],
     attributes: &[(String, String)],
     half_float: bool,
+    compression: &str,
 ) -> Result<(), String> {
     let pixels = width as usize * height as usize;
     if u64::from(window.x) + u64::from(width) > u64::from(window.full_width)
@@ -162,6 +164,7 @@ pub fn write_exr(
         })
         .collect();
     let path = c_path(path)?;
+    let compression = c_text(compression);
     let lib = library()?;
     let mut err = vec![0 as c_char; ERR_LEN];
     // SAFETY: every pointer refers to data alive for the call; planes hold width*height values.
@@ -181,10 +184,127 @@ pub fn write_exr(
             attrs.as_ptr(),
             attrs.len(),
             half_float as i32,
+            compression.as_ptr(),
             err.as_mut_ptr(),
             err.len(),
         )
     };
+    if rc == 0 { Ok(()) } else { Err(buffer_message(&err)) }
+}
+
+/// A channel of an EXR written row by row: its name, and whether it stays 32-bit float in a
+/// half-float file.
+pub struct ChannelName<'a> {
+    pub name: &'a str,
+    pub full_float: bool,
+}
+
+/// Makes the pixels of rows `y0..y1` of the data window (0 its top row) into `strip`: row by
+/// row, pixel by pixel, every channel in the order given.
+pub type FillRows<'a> = dyn FnMut(u32, u32, &mut [f32]) + 'a;
+
+/// What the trampoline needs to hand a strip to the filler.
+struct FillContext<'a, 'b> {
+    values_per_row: usize,
+    fill: &'a mut FillRows<'b>,
+    /// Whether `fill` panicked (the write stops; the panic goes on once C++ has returned).
+    panic: Option<Box<dyn std::any::Any + Send>>,
+}
+
+unsafe extern "C" fn fill_rows(context: *mut std::ffi::c_void, y0: u32, y1: u32, strip: *mut f32) -> i32 {
+    // SAFETY: `context` is the FillContext `write_exr_rows` passed, alive for the call; the
+    // writer hands a strip of (y1 - y0) rows of values_per_row floats.
+    let context = unsafe { &mut *context.cast::<FillContext<'_, '_>>() };
+    let strip = unsafe { std::slice::from_raw_parts_mut(strip, (y1 - y0) as usize * context.values_per_row) };
+    // A panic must not unwind into C++.
+    match std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| (context.fill)(y0, y1, strip))) {
+        Ok(()) => 0,
+        Err(panic) => {
+            context.panic = Some(panic);
+            1
+        }
+    }
+}
+
+/// Writes an OpenEXR as `write_exr` does, its pixels made a strip of rows at a time by `fill`
+/// (top to bottom) rather than read from planes: the caller holds no planar copy of the image.
+#[allow(clippy::too_many_arguments)]
+pub fn write_exr_rows(
+    path: &Path,
+    width: u32,
+    height: u32,
+    window: Window,
+    channels: &[ChannelName<'_>],
+    attributes: &[(String, String)],
+    half_float: bool,
+    compression: &str,
+    fill: &mut FillRows<'_>,
+) -> Result<(), String> {
+    if u64::from(window.x) + u64::from(width) > u64::from(window.full_width)
+        || u64::from(window.y) + u64::from(height) > u64::from(window.full_height)
+        || window.x > i32::MAX as u32
+        || window.y > i32::MAX as u32
+    {
+        return Err(format!(
+            "the pixels {width}x{height} at ({}, {}) do not lie inside the image {}x{}",
+            window.x, window.y, window.full_width, window.full_height
+        ));
+    }
+    let names: Vec<CString> = channels.iter().map(|c| c_text(c.name)).collect();
+    let planes: Vec<abi::icr_channel> = channels
+        .iter()
+        .zip(&names)
+        .map(|(c, n)| abi::icr_channel {
+            name: n.as_ptr(),
+            data: std::ptr::null(),
+            full_float: c.full_float as i32,
+        })
+        .collect();
+    let attr_text: Vec<(CString, CString)> = attributes.iter().map(|(k, v)| (c_text(k), c_text(v))).collect();
+    let attrs: Vec<abi::icr_attribute> = attr_text
+        .iter()
+        .map(|(k, v)| abi::icr_attribute {
+            name: k.as_ptr(),
+            value: v.as_ptr(),
+        })
+        .collect();
+    let path = c_path(path)?;
+    let compression = c_text(compression);
+    let lib = library()?;
+    let mut err = vec![0 as c_char; ERR_LEN];
+    let mut context = FillContext {
+        values_per_row: width as usize * channels.len(),
+        fill,
+        panic: None,
+    };
+    // SAFETY: every pointer refers to data alive for the call; the writer calls `fill_rows`
+    // with `context` only during the call, with strips of whole rows.
+    let rc = unsafe {
+        lib.icr_exr_write_rows(
+            path.as_ptr(),
+            width,
+            height,
+            abi::icr_window {
+                x: window.x as i32,
+                y: window.y as i32,
+                full_width: window.full_width,
+                full_height: window.full_height,
+            },
+            planes.as_ptr(),
+            planes.len(),
+            attrs.as_ptr(),
+            attrs.len(),
+            half_float as i32,
+            compression.as_ptr(),
+            Some(fill_rows),
+            (&raw mut context).cast(),
+            err.as_mut_ptr(),
+            err.len(),
+        )
+    };
+    if let Some(panic) = context.panic.take() {
+        std::panic::resume_unwind(panic);
+    }
     if rc == 0 { Ok(()) } else { Err(buffer_message(&err)) }
 }
 

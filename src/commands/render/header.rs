@@ -91,6 +91,7 @@ pub fn part_settings(args: &RenderArgs) -> String {
             }
         ),
         format!("--half {}", args.half),
+        format!("--compression {}", args.compression.name()),
         format!("--ic-records {}", args.ic_records),
         format!("--denoise {}", if args.denoise { quality_name(args) } else { "off" }),
     ]);
@@ -153,7 +154,7 @@ pub(super) fn guides_text(d: &denoise::DenoisedFrame) -> &'static str {
     }
 }
 
-/// "; specular left as rendered in specular.denoised (0.13 % of the measured noise, under 1 %)" for the
+/// "; specular left as rendered in specular_denoised (0.13 % of the measured noise, under 1 %)" for the
 /// layers the denoiser wrote as rendered, with why (`denoise::LeftRaw`).
 pub(super) fn left_raw_text(d: &denoise::DenoisedFrame) -> String {
     d.left_raw
@@ -189,13 +190,13 @@ pub(super) fn denoise_attributes(d: &denoise::DenoisedFrame, args: &RenderArgs) 
                              denoised layers and any raw one (not the composite denoised itself)";
     let how = if filtered.is_empty() {
         format!(
-            "{}; every noisy layer written as rendered into <layer>.denoised{}; {COMPOSITE}",
+            "{}; every noisy layer written as rendered into <layer>_denoised{}; {COMPOSITE}",
             d.denoiser,
             left_raw_text(d),
         )
     } else {
         format!(
-            "{}, RT filter, quality {}, {}; layers {} each denoised into <layer>.denoised{} \
+            "{}, RT filter, quality {}, {}; layers {} each denoised into <layer>_denoised{} \
              (emission is not noisy and not denoised; indirect only where each pixel samples it, \
              -aa 0){}; {COMPOSITE}",
             d.denoiser,
@@ -387,6 +388,7 @@ pub fn rerun_command(args: &RenderArgs) -> String {
         frame,
         fps,
         half,
+        compression,
         aovs: _,
         denoise,
         denoise_quality,
@@ -485,6 +487,9 @@ pub fn rerun_command(args: &RenderArgs) -> String {
             aovs.join(",")
         },
     ]);
+    if *compression != crate::image::output::ExrCompression::Zip {
+        push(&["--compression", compression.name()]);
+    }
     for (on, name) in [
         (*half, "--half"),
         (*ic_records, "--ic-records"),

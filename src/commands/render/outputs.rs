@@ -287,6 +287,7 @@ impl Outputs {
             &extra,
             &attributes,
             args.half,
+            args.compression,
             args.ic_records,
         )
         .map_err(|e| CommandError::failed(format!("{}: {e}", self.exr.display())))?;

@@ -59,9 +59,13 @@ pub fn layers_to_denoise(written: &[Layer], per_pixel_indirect: bool) -> Vec<Lay
         .collect()
 }
 
-/// The EXR layer a denoised layer is written as: `<layer>.denoised`, beside the raw one.
+/// The EXR layer a denoised layer is written as: `<layer>_denoised`, beside the raw one. One
+/// name with no dot of its own, so that every compositor reads it as one layer: Nuke and
+/// oiiotool take what comes before a channel's last dot as its layer, but Blender reads
+/// `a.b.R` as render layer `a`, pass `b` (`direct.denoised.R` became pass `denoised` of a
+/// render layer `direct`, apart from the other passes).
 pub fn denoised_name(layer: Layer) -> String {
-    format!("{}.denoised", layer.name())
+    format!("{}_denoised", layer.name())
 }
 
 /// The EXR layer of the denoised composite: the raw emission plus the denoised layers (the raw
@@ -460,6 +464,37 @@ pub fn denoise_frame(
 mod tests {
     use super::filter::{floats, vectors};
     use super::*;
+
+    /// A channel's layer as Blender reads a single-part EXR (render layer, pass, channel: a
+    /// name with one dot is a pass of the unnamed render layer) and as Nuke and oiiotool read it
+    /// (everything before the last dot).
+    fn layers_as_read(channel: &str) -> (String, String) {
+        let parts: Vec<&str> = channel.split('.').collect();
+        let blender = match parts.len() {
+            2 => parts[0].to_string(),
+            n if n >= 3 => format!("{}/{}", parts[0], parts[1..n - 1].join(".")),
+            _ => String::new(),
+        };
+        let nuke = channel.rsplit_once('.').map_or("", |(layer, _)| layer).to_string();
+        (blender, nuke)
+    }
+
+    #[test]
+    fn every_compositor_reads_a_denoised_layer_as_a_pass_of_its_own() {
+        for layer in NOISY_LAYERS {
+            let name = denoised_name(layer);
+            let (blender, nuke) = layers_as_read(&format!("{name}.R"));
+            assert_eq!(blender, name, "Blender reads {name}.R as {blender}");
+            assert_eq!(nuke, name);
+            let (raw, _) = layers_as_read(&format!("{}.R", layer.name()));
+            assert_ne!(raw, name, "the denoised layer stays apart from the raw one");
+        }
+        assert_eq!(
+            layers_as_read("direct.denoised.R").0,
+            "direct/denoised",
+            "the old name, as Blender read it"
+        );
+    }
     use crate::image::components::Components;
     use crate::image::data::PixelData;
     use crate::sampling::Rng;
@@ -726,7 +761,7 @@ mod tests {
         }
         let written = [Layer::Emission, Layer::Direct];
         let denoised = denoise_frame(&frame, &written, true, unmeasured(), Quality::Fast, Some(2), false).unwrap();
-        assert_eq!(denoised.names(), ["direct.denoised", "denoised"]);
+        assert_eq!(denoised.names(), ["direct_denoised", "denoised"]);
         assert!(
             denoised.guided,
             "every frame carries the albedo and normal planes that guide it"
@@ -870,7 +905,7 @@ mod tests {
         let denoised = denoise_frame(&frame, &written, false, four_samples(), Quality::Fast, Some(2), false).unwrap();
         assert_eq!(
             denoised.names(),
-            ["direct.denoised", "specular.denoised", "denoised"],
+            ["direct_denoised", "specular_denoised", "denoised"],
             "the layer set stays the same for a compositor's script"
         );
         assert_eq!(denoised.filtered(), [Layer::Direct]);
