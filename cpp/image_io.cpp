@@ -77,30 +77,6 @@ constexpr uint32_t kStripRows = 256;
 
 }  // namespace
 
-namespace {
-
-// The planes of icr_exr_write, interleaved into a strip (icr_fill_rows over whole planes).
-struct Planes {
-    const icr_channel *channels;
-    size_t count;
-    size_t width;
-};
-
-int fill_from_planes(void *context, uint32_t y0, uint32_t y1, float *strip) {
-    const Planes &p = *static_cast<const Planes *>(context);
-    for (uint32_t y = y0; y < y1; ++y) {
-        float *row = strip + size_t(y - y0) * p.width * p.count;
-        const size_t src = size_t(y) * p.width;
-        for (size_t c = 0; c < p.count; ++c) {
-            const float *plane = p.channels[c].data + src;
-            for (size_t x = 0; x < p.width; ++x) row[x * p.count + c] = plane[x];
-        }
-    }
-    return 0;
-}
-
-}  // namespace
-
 extern "C" int icr_exr_write_rows(const char *path, uint32_t width, uint32_t height, icr_window window,
                                   const icr_channel *channels, size_t channel_count,
                                   const icr_attribute *attributes, size_t attribute_count, int half_float,
@@ -205,22 +181,6 @@ extern "C" int icr_exr_write_rows(const char *path, uint32_t width, uint32_t hei
     } catch (...) {
         return write_error(err, err_len, "EXR write failed: unknown exception");
     }
-}
-
-extern "C" int icr_exr_write(const char *path, uint32_t width, uint32_t height, icr_window window,
-                             const icr_channel *channels, size_t channel_count, const icr_attribute *attributes,
-                             size_t attribute_count, int half_float, const char *compression, char *err,
-                             size_t err_len) {
-    clear_error(err, err_len);
-    if (channels)
-        for (size_t c = 0; c < channel_count; ++c)
-            if (!channels[c].data)
-                return write_error(err, err_len,
-                                   std::string("channel ") + (channels[c].name ? channels[c].name : "?") +
-                                       " has no data");
-    Planes planes{channels, channel_count, width};
-    return icr_exr_write_rows(path, width, height, window, channels, channel_count, attributes, attribute_count,
-                              half_float, compression, fill_from_planes, &planes, err, err_len);
 }
 
 extern "C" int icr_png_write(const char *path, uint32_t width, uint32_t height, const uint8_t *rgb, char *err,

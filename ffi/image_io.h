@@ -13,7 +13,7 @@
 extern "C" {
 #endif
 
-/* One named float channel plane: width * height values, rows top to bottom. */
+/* One named float channel: its name and format (`data` is unused by the row writer). */
 typedef struct icr_channel {
     const char *name;         /* e.g. "R", "direct.G" */
     const float *data;
@@ -39,18 +39,6 @@ typedef struct icr_window {
 } icr_window;
 
 /*
- * Writes an OpenEXR (half or float, chosen by `half_float`, except channels marked full_float,
- * which stay float: OpenImageIO's per-channel formats) with the channels in the order given,
- * to exactly `path` (which need not end in .exr: the caller writes to a temporary name and
- * renames). The channels hold the data window's width x height pixels. `compression` is
- * OpenEXR's name of the codec (zip, piz, dwaa, none, ...); NULL or empty means zip.
- */
-int icr_exr_write(const char *path, uint32_t width, uint32_t height, icr_window window,
-                  const icr_channel *channels, size_t channel_count,
-                  const icr_attribute *attributes, size_t attribute_count,
-                  int half_float, const char *compression, char *err, size_t err_len);
-
-/*
  * Fills rows [y0, y1) of the data window (0 is its top row) into `strip`, interleaved: row by
  * row, pixel by pixel, every channel in the order given. Returns 0, or non-zero to abandon the
  * write (the writer then fails with "the pixels could not be made").
@@ -58,9 +46,13 @@ int icr_exr_write(const char *path, uint32_t width, uint32_t height, icr_window 
 typedef int (*icr_fill_rows)(void *context, uint32_t y0, uint32_t y1, float *strip);
 
 /*
- * As icr_exr_write, but the pixels come a strip of rows at a time from `fill` (called in order,
- * top to bottom) instead of from whole planes: the caller holds no planar copy of the image.
- * The channels' `data` is not read and may be NULL.
+ * Writes an OpenEXR (half or float, chosen by `half_float`, except channels marked full_float,
+ * which stay float: OpenImageIO's per-channel formats) with the channels in the order given,
+ * to exactly `path` (which need not end in .exr: the caller writes to a temporary name and
+ * renames). `compression` is OpenEXR's name of the codec (zip, piz, dwaa, none, ...); NULL or
+ * empty means zip. The pixels come a strip of rows at a time from `fill` (called in order, top
+ * to bottom): the caller need hold no planar copy of the image. The channels' `data` is not
+ * read and may be NULL.
  */
 int icr_exr_write_rows(const char *path, uint32_t width, uint32_t height, icr_window window,
                        const icr_channel *channels, size_t channel_count,

@@ -127,16 +127,6 @@ pub fn write_exr(
     compression: &str,
 ) -> Result<(), String> {
     let pixels = width as usize * height as usize;
-    if u64::from(window.x) + u64::from(width) > u64::from(window.full_width)
-        || u64::from(window.y) + u64::from(height) > u64::from(window.full_height)
-        || window.x > i32::MAX as u32
-        || window.y > i32::MAX as u32
-    {
-        return Err(format!(
-            "the pixels {width}x{height} at ({}, {}) do not lie inside the image {}x{}",
-            window.x, window.y, window.full_width, window.full_height
-        ));
-    }
     if let Some(bad) = channels.iter().find(|c| c.data.len() != pixels) {
         return Err(format!(
             "channel {} has {} values for {} pixels",
@@ -145,51 +135,33 @@ pub fn write_exr(
             pixels
         ));
     }
-    let names: Vec<CString> = channels.iter().map(|c| c_text(c.name)).collect();
-    let planes: Vec<abi::icr_channel> = channels
+    let names: Vec<ChannelName<'_>> = channels
         .iter()
-        .zip(&names)
-        .map(|(c, n)| abi::icr_channel {
-            name: n.as_ptr(),
-            data: c.data.as_ptr(),
-            full_float: c.full_float as i32,
+        .map(|c| ChannelName {
+            name: c.name,
+            full_float: c.full_float,
         })
         .collect();
-    let attr_text: Vec<(CString, CString)> = attributes.iter().map(|(k, v)| (c_text(k), c_text(v))).collect();
-    let attrs: Vec<abi::icr_attribute> = attr_text
-        .iter()
-        .map(|(k, v)| abi::icr_attribute {
-            name: k.as_ptr(),
-            value: v.as_ptr(),
-        })
-        .collect();
-    let path = c_path(path)?;
-    let compression = c_text(compression);
-    let lib = library()?;
-    let mut err = vec![0 as c_char; ERR_LEN];
-    // SAFETY: every pointer refers to data alive for the call; planes hold width*height values.
-    let rc = unsafe {
-        lib.icr_exr_write(
-            path.as_ptr(),
-            width,
-            height,
-            abi::icr_window {
-                x: window.x as i32,
-                y: window.y as i32,
-                full_width: window.full_width,
-                full_height: window.full_height,
-            },
-            planes.as_ptr(),
-            planes.len(),
-            attrs.as_ptr(),
-            attrs.len(),
-            half_float as i32,
-            compression.as_ptr(),
-            err.as_mut_ptr(),
-            err.len(),
-        )
+    let width = width as usize;
+    let mut fill = |y0: u32, y1: u32, strip: &mut [f32]| {
+        let rows = (y0 as usize * width)..(y1 as usize * width);
+        for (pixel, values) in rows.zip(strip.chunks_exact_mut(channels.len())) {
+            for (value, channel) in values.iter_mut().zip(channels) {
+                *value = channel.data[pixel];
+            }
+        }
     };
-    if rc == 0 { Ok(()) } else { Err(buffer_message(&err)) }
+    write_exr_rows(
+        path,
+        width as u32,
+        height,
+        window,
+        &names,
+        attributes,
+        half_float,
+        compression,
+        &mut fill,
+    )
 }
 
 /// A channel of an EXR written row by row: its name, and whether it stays 32-bit float in a
@@ -227,7 +199,8 @@ unsafe extern "C" fn fill_rows(context: *mut std::ffi::c_void, y0: u32, y1: u32,
 }
 
 /// Writes an OpenEXR as `write_exr` does, its pixels made a strip of rows at a time by `fill`
-/// (top to bottom) rather than read from planes: the caller holds no planar copy of the image.
+/// (top to bottom) rather than read from planes: the caller need hold no planar copy of the
+/// image.
 #[allow(clippy::too_many_arguments)]
 pub fn write_exr_rows(
     path: &Path,
