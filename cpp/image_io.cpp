@@ -71,9 +71,14 @@ bool pixel_count(uint32_t width, uint32_t height, size_t channels, size_t *out) 
     return !__builtin_mul_overflow(wh, channels, out);
 }
 
-// Rows per write_scanlines call: a multiple of the 16-line blocks EXR ZIP compresses, and small
-// enough that the interleaved copy stays far below the size of a many-layer frame.
-constexpr uint32_t kStripRows = 256;
+// Rows per write_scanlines call: a multiple of the 16-line blocks EXR ZIP compresses (several
+// blocks a call, for OpenEXR's pool to compress side by side), as many as fit in about 32 MiB of
+// interleaved floats (a 4K frame with every layer: 48 rows), between 16 and 256.
+constexpr size_t kStripBytes = size_t(32) << 20;
+uint32_t strip_rows(size_t width, size_t channels) {
+    const size_t row = std::max<size_t>(1, width * channels * sizeof(float));
+    return uint32_t(std::clamp<size_t>(kStripBytes / row / 16 * 16, 16, 256));
+}
 
 }  // namespace
 
@@ -157,9 +162,10 @@ extern "C" int icr_exr_write_rows(const char *path, uint32_t width, uint32_t hei
         if (!out->open(path, spec)) return write_error(err, err_len, oiio_error("cannot open for writing", out->geterror()));
 
         const size_t w = width, nch = channel_count;
-        std::vector<float> strip(w * nch * std::min<size_t>(kStripRows, height));
-        for (uint32_t y0 = 0; y0 < height; y0 += kStripRows) {
-            const uint32_t y1 = std::min<uint32_t>(height, y0 + kStripRows);
+        const uint32_t rows = strip_rows(w, nch);
+        std::vector<float> strip(w * nch * std::min<size_t>(rows, height));
+        for (uint32_t y0 = 0; y0 < height; y0 += rows) {
+            const uint32_t y1 = std::min<uint32_t>(height, y0 + rows);
             if (fill(context, y0, y1, strip.data()) != 0) {
                 out->close();
                 return write_error(err, err_len, "the pixels could not be made");

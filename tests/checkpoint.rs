@@ -392,3 +392,94 @@ fn a_checkpoint_of_another_job_is_refused_by_name() {
         "a fully restored image is the journalled one"
     );
 }
+
+/// A file system that fills up while the image is written (a 512 KiB tmpfs this test mounts and
+/// unmounts; root only, as CI runs): one line naming the file and saying the file system is
+/// full and what was kept, exit non-zero, no partial file; the checkpoint and the cache file,
+/// elsewhere, stay whole, and the same command with room to write resumes every tile.
+#[test]
+fn a_full_disk_names_the_file_and_loses_neither_the_checkpoint_nor_the_cache() {
+    let root = Command::new("id")
+        .arg("-u")
+        .output()
+        .map(|o| o.stdout == b"0\n")
+        .unwrap_or(false);
+    if !root {
+        eprintln!("skipped: mounting a small tmpfs needs root");
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let small = dir.path().join("small");
+    std::fs::create_dir(&small).unwrap();
+    let mount = |size: &str| {
+        let status = Command::new("mount")
+            .args([
+                "-t",
+                "tmpfs",
+                "-o",
+                &format!("size={size}"),
+                "tmpfs",
+                small.to_str().unwrap(),
+            ])
+            .status()
+            .unwrap();
+        assert!(status.success(), "mount a tmpfs on {}", small.display());
+    };
+    let unmount = || {
+        let _ = Command::new("umount").arg(&small).status();
+    };
+    let (journal, cache) = (dir.path().join("journal"), dir.path().join("cache.af"));
+    let out = small.join("out.exr");
+    let stats = dir.path().join("stats.json");
+    let args: Vec<String> = [
+        "render",
+        cornell().to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "-x",
+        "128",
+        "-y",
+        "128",
+        "-q",
+        "--no-preview",
+        "--checkpoint",
+        journal.to_str().unwrap(),
+        "-af",
+        cache.to_str().unwrap(),
+        "--stats",
+        stats.to_str().unwrap(),
+    ]
+    .map(String::from)
+    .to_vec();
+    mount("256k");
+    let full = Command::new(binary()).args(&args).output().unwrap();
+    let left: Vec<_> = std::fs::read_dir(&small)
+        .unwrap()
+        .flatten()
+        .map(|e| e.file_name())
+        .collect();
+    unmount();
+    assert!(!full.status.success());
+    let said = String::from_utf8_lossy(&full.stderr).to_string();
+    assert_eq!(said.trim_end().lines().count(), 1, "{said}");
+    assert!(
+        said.contains(out.to_str().unwrap()) && said.contains("the file system is full"),
+        "{said}"
+    );
+    assert!(said.contains(journal.to_str().unwrap()), "says what was kept: {said}");
+    assert!(left.is_empty(), "left behind on the full disk: {left:?}");
+    let cache_bytes = std::fs::metadata(&cache).unwrap().len();
+    assert!(cache_bytes > 0);
+    mount("16m");
+    let again = Command::new(binary()).args(&args).output().unwrap();
+    let written = out.exists();
+    unmount();
+    assert!(again.status.success(), "{}", String::from_utf8_lossy(&again.stderr));
+    assert!(written);
+    assert_eq!(
+        tiles_rendered(&read_stats(&stats)),
+        0,
+        "every tile is resumed from the checkpoint"
+    );
+    assert!(std::fs::metadata(&cache).unwrap().len() >= cache_bytes);
+}

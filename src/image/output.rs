@@ -24,10 +24,25 @@ pub fn write_atomically(path: &Path, write: impl FnOnce(&Path) -> Result<(), Str
     let result = write(&temporary).and_then(|()| {
         std::fs::rename(&temporary, path).map_err(|e| format!("cannot move the finished file into place: {e}"))
     });
+    let result = result.map_err(|e| match full_file_system(&temporary) {
+        Some(free) => format!("the file system is full ({free} bytes free): {e}"),
+        None => e,
+    });
     if result.is_err() {
         let _ = std::fs::remove_file(&temporary);
     }
     result
+}
+
+/// Whether the file system holding `temporary` (a file being written, or its directory) is
+/// full, as seen before the partial file is removed: the bytes left if under 1 MiB.
+fn full_file_system(temporary: &Path) -> Option<u64> {
+    let at = if temporary.exists() {
+        temporary.to_path_buf()
+    } else {
+        temporary.parent().filter(|p| !p.as_os_str().is_empty())?.to_path_buf()
+    };
+    crate::sys::disk::free_bytes(&at).filter(|&free| free < 1 << 20)
 }
 
 /// Fails early, before any rendering, if `path` could not be written at the end.

@@ -25,6 +25,7 @@ mod generated {
 use generated::{abi as abi_bindings, embree as embree_bindings, image as image_bindings};
 
 pub mod alloc;
+pub mod disk;
 pub mod embree;
 pub mod image_io;
 pub mod oidn;

@@ -290,7 +290,7 @@ impl Outputs {
             args.compression,
             args.ic_records,
         )
-        .map_err(|e| CommandError::failed(format!("{}: {e}", self.exr.display())))?;
+        .map_err(|e| CommandError::failed(format!("{}: {e}; {}", self.exr.display(), super::kept_after_stop(args))))?;
         if let Some(png) = &self.png {
             // The preview is for looking at: the denoised composite when there is one.
             let composite = denoised
