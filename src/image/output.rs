@@ -287,15 +287,76 @@ pub fn write_json(path: &Path, value: &impl serde::Serialize) -> Result<(), Stri
     write_atomically(path, |tmp| std::fs::write(tmp, &text).map_err(|e| e.to_string()))
 }
 
-/// Writes a composite, tone-mapped, as an 8-bit PNG.
-pub fn write_preview(path: &Path, width: u32, height: u32, composite: &[Vec3]) -> Result<(), String> {
+/// A finished file under a temporary name beside its target, not yet in place: `place` renames
+/// it over the target; dropped unplaced, it is removed. For a file made beside another (the
+/// preview while the EXR is written) that must appear only if the other does.
+pub struct StagedFile {
+    temporary: PathBuf,
+    target: PathBuf,
+    placed: bool,
+}
+
+impl StagedFile {
+    pub fn place(mut self) -> Result<(), String> {
+        self.placed = true;
+        std::fs::rename(&self.temporary, &self.target).map_err(|e| {
+            let _ = std::fs::remove_file(&self.temporary);
+            format!("cannot move the finished file into place: {e}")
+        })
+    }
+}
+
+impl Drop for StagedFile {
+    fn drop(&mut self) {
+        if !self.placed {
+            let _ = std::fs::remove_file(&self.temporary);
+        }
+    }
+}
+
+/// The preview: a composite, tone-mapped, as an 8-bit PNG under a temporary name beside `path`,
+/// to be placed later.
+pub fn stage_preview(path: &Path, width: u32, height: u32, composite: &[Vec3]) -> Result<StagedFile, String> {
     let rgb = tone_map(composite);
-    write_atomically(path, |tmp| image_io::write_png(tmp, width, height, &rgb))
+    let staged = StagedFile {
+        temporary: temporary_beside(path),
+        target: path.to_path_buf(),
+        placed: false,
+    };
+    image_io::write_png(&staged.temporary, width, height, &rgb).map_err(|e| {
+        match full_file_system(&staged.temporary) {
+            Some(free) => format!("the file system is full ({free} bytes free): {e}"),
+            None => e,
+        }
+    })?;
+    Ok(staged)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_staged_file_appears_only_when_placed() {
+        let dir = tempfile::tempdir().unwrap();
+        let target = dir.path().join("out.png");
+        std::fs::write(&target, b"old").unwrap();
+        let staged = |dir: &Path| StagedFile {
+            temporary: temporary_beside(&dir.join("out.png")),
+            target: dir.join("out.png"),
+            placed: false,
+        };
+        let dropped = staged(dir.path());
+        std::fs::write(&dropped.temporary, b"new").unwrap();
+        drop(dropped);
+        assert_eq!(std::fs::read(&target).unwrap(), b"old");
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1, "no temporary left");
+        let placed = staged(dir.path());
+        std::fs::write(&placed.temporary, b"new").unwrap();
+        placed.place().unwrap();
+        assert_eq!(std::fs::read(&target).unwrap(), b"new");
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
+    }
 
     #[test]
     fn failed_write_leaves_the_old_file_and_no_temporary() {
