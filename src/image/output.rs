@@ -4,7 +4,7 @@
 use super::cryptomatte::{RANKS, Ranks};
 use super::data::{Aov, PixelData};
 use super::framebuffer::{FrameBuffer, Layer};
-use super::preview::tone_map;
+use super::preview::tone_map_each;
 use crate::sys::image_io::{self, Window};
 use glam::Vec3;
 use std::path::{Path, PathBuf};
@@ -314,10 +314,15 @@ impl Drop for StagedFile {
     }
 }
 
-/// The preview: a composite, tone-mapped, as an 8-bit PNG under a temporary name beside `path`,
-/// to be placed later.
-pub fn stage_preview(path: &Path, width: u32, height: u32, composite: &[Vec3]) -> Result<StagedFile, String> {
-    let rgb = tone_map(composite);
+/// The preview: a composite (`pixel` by index, `width` x `height` of them), tone-mapped, as an
+/// 8-bit PNG under a temporary name beside `path`, to be placed later.
+pub fn stage_preview(
+    path: &Path,
+    width: u32,
+    height: u32,
+    pixel: impl Fn(usize) -> Vec3,
+) -> Result<StagedFile, String> {
+    let rgb = tone_map_each(width as usize * height as usize, pixel);
     let staged = StagedFile {
         temporary: temporary_beside(path),
         target: path.to_path_buf(),

@@ -7,20 +7,29 @@ use glam::Vec3;
 const MIDDLE_GREY: f32 = 0.18;
 
 pub fn tone_map(pixels: &[Vec3]) -> Vec<u8> {
-    let lit: Vec<f32> = pixels
-        .iter()
-        .map(|&p| luminance(p))
-        .filter(|l| l.is_finite() && *l > 0.0)
-        .collect();
-    let exposure = if lit.is_empty() {
+    tone_map_each(pixels.len(), |i| pixels[i])
+}
+
+/// `tone_map` of the `count` pixels `pixel` gives by index, made on the fly: no copy of the
+/// image is held but the 8-bit result (a frame's composite is its layers' sum, computed twice
+/// here rather than kept: 100 MB at 4K).
+pub fn tone_map_each(count: usize, pixel: impl Fn(usize) -> Vec3) -> Vec<u8> {
+    let (mut log_sum, mut lit) = (0.0f64, 0usize);
+    for i in 0..count {
+        let l = luminance(pixel(i));
+        if l.is_finite() && l > 0.0 {
+            log_sum += (l.max(1e-8) as f64).ln();
+            lit += 1;
+        }
+    }
+    let exposure = if lit == 0 {
         1.0
     } else {
-        let log_mean = lit.iter().map(|l| (l.max(1e-8) as f64).ln()).sum::<f64>() / lit.len() as f64;
-        MIDDLE_GREY / (log_mean.exp() as f32)
+        MIDDLE_GREY / ((log_sum / lit as f64).exp() as f32)
     };
-    let mut out = Vec::with_capacity(pixels.len() * 3);
-    for &p in pixels {
-        let v = p * exposure;
+    let mut out = Vec::with_capacity(count * 3);
+    for i in 0..count {
+        let v = pixel(i) * exposure;
         let mapped = if v.is_finite() { v / (Vec3::ONE + v) } else { Vec3::ZERO };
         for c in mapped.to_array() {
             out.push((linear_to_srgb(c.clamp(0.0, 1.0)) * 255.0 + 0.5) as u8);

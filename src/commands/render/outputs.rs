@@ -282,11 +282,11 @@ impl Outputs {
         // once the EXR is: 0.5 s of a 1080p frame's writing no longer comes after it.
         let preview = |png: &std::path::PathBuf| {
             // The preview is for looking at: the denoised composite when there is one.
-            let composite = denoised
-                .as_ref()
-                .map_or_else(|| frame.composite(), |d| d.composite.clone());
-            output::stage_preview(png, frame.width, frame.height, &composite)
-                .map_err(|e| CommandError::failed(format!("{}: {e}", png.display())))
+            let staged = match &denoised {
+                Some(d) => output::stage_preview(png, frame.width, frame.height, |i| d.composite[i]),
+                None => output::stage_preview(png, frame.width, frame.height, |i| frame.composite_at(i)),
+            };
+            staged.map_err(|e| CommandError::failed(format!("{}: {e}", png.display())))
         };
         let (exr, png) = std::thread::scope(|scope| {
             let png = self.png.as_ref().map(|png| scope.spawn(move || preview(png)));
