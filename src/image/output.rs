@@ -20,18 +20,19 @@ fn temporary_beside(path: &Path) -> PathBuf {
 /// Runs `write` on a temporary path, then renames it to `path`; on failure removes the
 /// temporary file and leaves whatever was at `path` untouched.
 pub fn write_atomically(path: &Path, write: impl FnOnce(&Path) -> Result<(), String>) -> Result<(), String> {
-    let temporary = temporary_beside(path);
-    let result = write(&temporary).and_then(|()| {
-        std::fs::rename(&temporary, path).map_err(|e| format!("cannot move the finished file into place: {e}"))
-    });
-    let result = result.map_err(|e| match full_file_system(&temporary) {
-        Some(free) => format!("the file system is full ({free} bytes free): {e}"),
-        None => e,
-    });
-    if result.is_err() {
-        let _ = std::fs::remove_file(&temporary);
-    }
-    result
+    stage(path, write)?.place()
+}
+
+/// Runs `write` on a temporary path beside `path` and keeps the file there, staged: a failed
+/// write leaves no temporary file and says so when the file system is full.
+pub fn stage(path: &Path, write: impl FnOnce(&Path) -> Result<(), String>) -> Result<StagedFile, String> {
+    let staged = StagedFile {
+        temporary: temporary_beside(path),
+        target: path.to_path_buf(),
+        placed: false,
+    };
+    write(&staged.temporary).map_err(|e| staged.explain(e))?;
+    Ok(staged)
 }
 
 /// Whether the file system holding `temporary` (a file being written, or its directory) is
@@ -110,13 +111,22 @@ impl Source<'_> {
     }
 }
 
+const RGB: [&str; 3] = ["R", "G", "B"];
+const XYZ: [&str; 3] = ["X", "Y", "Z"];
+
+/// A three-channel layer's channels, `layer.R` ... (or `R` ... for the unnamed layer), each
+/// taking its values from `source` of its component.
+fn three<'a>(layer: &str, names: [&str; 3], source: impl Fn(usize) -> Source<'a>) -> Vec<(String, Source<'a>)> {
+    (0..3)
+        .map(|c| match layer {
+            "" => (names[c].to_string(), source(c)),
+            _ => (format!("{layer}.{}", names[c]), source(c)),
+        })
+        .collect()
+}
+
 /// The channels of the data layers in `aovs`, in that order.
 fn data_channels(aovs: &[Aov]) -> Vec<(String, Source<'static>)> {
-    let vector = |layer: &str, names: [&str; 3], source: fn(usize) -> Source<'static>| {
-        (0..3)
-            .map(move |c| (format!("{layer}.{}", names[c]), source(c)))
-            .collect::<Vec<_>>()
-    };
     let crypto = |layer: &str, object: bool| {
         let mut out = Vec::new();
         for level in 0..RANKS / 2 {
@@ -134,10 +144,10 @@ fn data_channels(aovs: &[Aov]) -> Vec<(String, Source<'static>)> {
     let mut channels = Vec::new();
     for aov in aovs {
         match aov {
-            Aov::Albedo => channels.extend(vector("albedo", ["R", "G", "B"], Source::Albedo)),
-            Aov::Normal => channels.extend(vector("normal", ["X", "Y", "Z"], Source::Normal)),
+            Aov::Albedo => channels.extend(three("albedo", RGB, Source::Albedo)),
+            Aov::Normal => channels.extend(three("normal", XYZ, Source::Normal)),
             Aov::Depth => channels.push(("depth.Z".to_string(), Source::Depth)),
-            Aov::Position => channels.extend(vector("position", ["X", "Y", "Z"], Source::Position)),
+            Aov::Position => channels.extend(three("position", XYZ, Source::Position)),
             Aov::CryptoObject => channels.extend(crypto(CRYPTO_OBJECT, true)),
             Aov::CryptoMaterial => channels.extend(crypto(CRYPTO_MATERIAL, false)),
         }
@@ -164,21 +174,11 @@ pub fn write_exr(
     compression: ExrCompression,
     records_layer: bool,
 ) -> Result<(), String> {
-    const RGB: [&str; 3] = ["R", "G", "B"];
-    let mut channels: Vec<(String, Source<'_>)> = Vec::new();
-    channels.extend(
-        RGB.iter()
-            .enumerate()
-            .map(|(c, n)| (n.to_string(), Source::Composite(c))),
-    );
+    let mut channels = three("", RGB, Source::Composite);
     channels.push(("A".to_string(), Source::Alpha));
     for &l in layers {
         let plane = frame.layer(l);
-        channels.extend(
-            RGB.iter()
-                .enumerate()
-                .map(|(c, n)| (format!("{}.{n}", l.name()), Source::Light(plane, c))),
-        );
+        channels.extend(three(l.name(), RGB, |c| Source::Light(plane, c)));
     }
     for &(name, plane) in extra_layers {
         if plane.len() != frame.width as usize * frame.height as usize {
@@ -189,11 +189,7 @@ pub fn write_exr(
                 frame.height
             ));
         }
-        channels.extend(
-            RGB.iter()
-                .enumerate()
-                .map(|(c, n)| (format!("{name}.{n}"), Source::Light(plane, c))),
-        );
+        channels.extend(three(name, RGB, |c| Source::Light(plane, c)));
     }
     if records_layer {
         channels.push(("ic_records.Y".to_string(), Source::Records));
@@ -297,12 +293,21 @@ pub struct StagedFile {
 }
 
 impl StagedFile {
+    /// Renames the file over its target; on failure it is removed (on drop).
     pub fn place(mut self) -> Result<(), String> {
+        std::fs::rename(&self.temporary, &self.target)
+            .map_err(|e| self.explain(format!("cannot move the finished file into place: {e}")))?;
         self.placed = true;
-        std::fs::rename(&self.temporary, &self.target).map_err(|e| {
-            let _ = std::fs::remove_file(&self.temporary);
-            format!("cannot move the finished file into place: {e}")
-        })
+        Ok(())
+    }
+
+    /// A failed write's message, with the file system's state when it is full (seen before
+    /// the partial file is removed).
+    fn explain(&self, e: String) -> String {
+        match full_file_system(&self.temporary) {
+            Some(free) => format!("the file system is full ({free} bytes free): {e}"),
+            None => e,
+        }
     }
 }
 
@@ -323,18 +328,7 @@ pub fn stage_preview(
     pixel: impl Fn(usize) -> Vec3,
 ) -> Result<StagedFile, String> {
     let rgb = tone_map_each(width as usize * height as usize, pixel);
-    let staged = StagedFile {
-        temporary: temporary_beside(path),
-        target: path.to_path_buf(),
-        placed: false,
-    };
-    image_io::write_png(&staged.temporary, width, height, &rgb).map_err(|e| {
-        match full_file_system(&staged.temporary) {
-            Some(free) => format!("the file system is full ({free} bytes free): {e}"),
-            None => e,
-        }
-    })?;
-    Ok(staged)
+    stage(path, |tmp| image_io::write_png(tmp, width, height, &rgb))
 }
 
 #[cfg(test)]
