@@ -117,39 +117,38 @@ fn generate_abi_bindings(out: &Path) {
         .expect("writing image ABI bindings");
 }
 
-/// Include directories and libraries of OpenImageIO from pkg-config, with the Debian layout as
-/// the fallback so a machine without the .pc file still builds.
+/// What pkg-config says of `package` for `arg` (e.g. `--libs-only-l`), each word without
+/// `prefix` (`-l`, `-I`); None where pkg-config or the .pc file is missing.
+fn pkg_config(package: &str, arg: &str, prefix: &str) -> Option<Vec<String>> {
+    Command::new("pkg-config")
+        .args([arg, package])
+        .output()
+        .ok()
+        .filter(|o| o.status.success())
+        .map(|o| {
+            String::from_utf8_lossy(&o.stdout)
+                .split_whitespace()
+                .filter_map(|f| f.strip_prefix(prefix).map(String::from))
+                .collect()
+        })
+}
+
+/// Include directories and libraries of OpenImageIO, and of OpenEXR (whose own API copies a
+/// streamed EXR's compressed tiles into the final file, cpp/image_io.cpp), from pkg-config, with
+/// the Debian layout as the fallback so a machine without the .pc files still builds.
 fn openimageio_flags() -> (Vec<String>, Vec<String>) {
-    let query = |arg: &str| {
-        Command::new("pkg-config")
-            .args([arg, "OpenImageIO"])
-            .output()
-            .ok()
-            .filter(|o| o.status.success())
-            .map(|o| {
-                String::from_utf8_lossy(&o.stdout)
-                    .split_whitespace()
-                    .map(String::from)
-                    .collect::<Vec<_>>()
-            })
-    };
-    let includes = query("--cflags-only-I")
-        .map(|v| {
-            v.into_iter()
-                .filter_map(|f| f.strip_prefix("-I").map(String::from))
-                .collect()
-        })
-        .unwrap_or_default();
-    let mut libs: Vec<String> = query("--libs-only-l")
-        .map(|v| {
-            v.into_iter()
-                .filter_map(|f| f.strip_prefix("-l").map(String::from))
-                .collect()
-        })
-        .unwrap_or_else(|| vec!["OpenImageIO".into()]);
+    let mut includes = pkg_config("OpenImageIO", "--cflags-only-I", "-I").unwrap_or_default();
+    let mut libs = pkg_config("OpenImageIO", "--libs-only-l", "-l").unwrap_or_else(|| vec!["OpenImageIO".into()]);
     if !libs.iter().any(|l| l == "OpenImageIO_Util") {
         libs.push("OpenImageIO_Util".into());
     }
+    includes.extend(
+        pkg_config("OpenEXR", "--cflags-only-I", "-I")
+            .unwrap_or_else(|| vec!["/usr/include/OpenEXR".into(), "/usr/include/Imath".into()]),
+    );
+    libs.extend(
+        pkg_config("OpenEXR", "--libs-only-l", "-l").unwrap_or_else(|| vec!["OpenEXR-3_1".into(), "Iex-3_1".into()]),
+    );
     (includes, libs)
 }
 

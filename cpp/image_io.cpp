@@ -6,6 +6,10 @@
 #include "../ffi/image_io.h"
 
 #include <OpenImageIO/imageio.h>
+#include <ImfHeader.h>
+#include <ImfStringAttribute.h>
+#include <ImfTiledInputFile.h>
+#include <ImfTiledOutputFile.h>
 #include <strings.h>
 
 #include <algorithm>
@@ -17,6 +21,7 @@
 #include <exception>
 #include <map>
 #include <memory>
+#include <mutex>
 #include <new>
 #include <string>
 #include <vector>
@@ -80,6 +85,75 @@ uint32_t strip_rows(size_t width, size_t channels) {
     return uint32_t(std::clamp<size_t>(kStripBytes / row / 16 * 16, 16, 256));
 }
 
+// The spec of a layered EXR of `width` x `height` pixels at `window` with these channels, or
+// the reason there can be none (empty on success). Shared by the row writer and the stream.
+std::string exr_spec(uint32_t width, uint32_t height, icr_window window, const icr_channel *channels,
+                     size_t channel_count, int half_float, const char *compression, OIIO::ImageSpec &spec) {
+    if (width == 0 || height == 0 || width > uint32_t(INT_MAX) || height > uint32_t(INT_MAX))
+        return "invalid image size " + std::to_string(width) + "x" + std::to_string(height);
+    if (!channels || channel_count == 0) return "no channels to write";
+    if (channel_count > size_t(INT_MAX)) return "too many channels";
+    size_t total;
+    if (!pixel_count(width, height, channel_count, &total)) return "image too large";
+    if (window.x < 0 || window.y < 0 || window.full_width > uint32_t(INT_MAX) ||
+        window.full_height > uint32_t(INT_MAX) || uint64_t(window.x) + width > window.full_width ||
+        uint64_t(window.y) + height > window.full_height)
+        return "the data window does not lie inside the display window";
+    spec = OIIO::ImageSpec(int(width), int(height), int(channel_count),
+                           half_float ? OIIO::TypeDesc::HALF : OIIO::TypeDesc::FLOAT);
+    // A part of a larger image: its pixels sit at (x, y) of the full display window.
+    spec.x = window.x;
+    spec.y = window.y;
+    spec.full_x = 0;
+    spec.full_y = 0;
+    spec.full_width = int(window.full_width);
+    spec.full_height = int(window.full_height);
+    spec.channelnames.clear();
+    spec.alpha_channel = -1;
+    spec.z_channel = -1;
+    for (size_t c = 0; c < channel_count; ++c) {
+        if (!channels[c].name || !*channels[c].name) return "channel " + std::to_string(c) + " has no name";
+        // OpenEXR keeps channels in a map by name, so a duplicate would silently replace the
+        // earlier plane.
+        if (std::find(spec.channelnames.begin(), spec.channelnames.end(), channels[c].name) != spec.channelnames.end())
+            return std::string("duplicate channel name ") + channels[c].name;
+        spec.channelnames.emplace_back(channels[c].name);
+        // The ImageSpec constructor guesses alpha from the channel count; only a channel
+        // really named A (or Z) should be treated specially.
+        if (spec.channelnames.back() == "A") spec.alpha_channel = int(c);
+        if (spec.channelnames.back() == "Z") spec.z_channel = int(c);
+    }
+    // Per-channel formats only when they differ: a file of one format keeps spec.format.
+    if (half_float &&
+        std::any_of(channels, channels + channel_count, [](const icr_channel &ch) { return ch.full_float != 0; })) {
+        for (size_t c = 0; c < channel_count; ++c)
+            spec.channelformats.push_back(channels[c].full_float ? OIIO::TypeDesc::FLOAT : OIIO::TypeDesc::HALF);
+    }
+    spec.attribute("compression", compression && *compression ? compression : "zip");
+    return "";
+}
+
+// The header attributes, all text but OpenEXR's PixelAspectRatio (a float), passed to `put`
+// as (name, text) or ("PixelAspectRatio", ratio); the reason they cannot be, or empty.
+template <typename Text, typename Ratio>
+std::string each_attribute(const icr_attribute *attributes, size_t attribute_count, Text text, Ratio ratio) {
+    if (attribute_count && !attributes) return "attributes missing";
+    for (size_t i = 0; i < attribute_count; ++i) {
+        if (!attributes[i].name || !*attributes[i].name) return "attribute " + std::to_string(i) + " has no name";
+        const std::string name = attributes[i].name, value = attributes[i].value ? attributes[i].value : "";
+        if (name == "PixelAspectRatio") {
+            char *end = nullptr;
+            const float r = std::strtof(value.c_str(), &end);
+            if (value.empty() || *end != '\0' || !(r > 0.0f) || !std::isfinite(r))
+                return "PixelAspectRatio " + value + " is not a positive number";
+            ratio(r);
+        } else {
+            text(name, value);
+        }
+    }
+    return "";
+}
+
 }  // namespace
 
 extern "C" int icr_exr_write_rows(const char *path, uint32_t width, uint32_t height, icr_window window,
@@ -90,68 +164,15 @@ extern "C" int icr_exr_write_rows(const char *path, uint32_t width, uint32_t hei
     clear_error(err, err_len);
     try {
         if (!path || !*path) return write_error(err, err_len, "empty path");
-        if (width == 0 || height == 0 || width > uint32_t(INT_MAX) || height > uint32_t(INT_MAX))
-            return write_error(err, err_len, "invalid image size " + std::to_string(width) + "x" + std::to_string(height));
-        if (!channels || channel_count == 0) return write_error(err, err_len, "no channels to write");
-        if (channel_count > size_t(INT_MAX)) return write_error(err, err_len, "too many channels");
         if (!fill) return write_error(err, err_len, "no source of pixels");
-        size_t total;
-        if (!pixel_count(width, height, channel_count, &total)) return write_error(err, err_len, "image too large");
-        if (attribute_count && !attributes) return write_error(err, err_len, "attributes missing");
-        if (window.x < 0 || window.y < 0 || window.full_width > uint32_t(INT_MAX) ||
-            window.full_height > uint32_t(INT_MAX) || uint64_t(window.x) + width > window.full_width ||
-            uint64_t(window.y) + height > window.full_height)
-            return write_error(err, err_len, "the data window does not lie inside the display window");
-
-        OIIO::ImageSpec spec(int(width), int(height), int(channel_count),
-                             half_float ? OIIO::TypeDesc::HALF : OIIO::TypeDesc::FLOAT);
-        // A part of a larger image: its pixels sit at (x, y) of the full display window.
-        spec.x = window.x;
-        spec.y = window.y;
-        spec.full_x = 0;
-        spec.full_y = 0;
-        spec.full_width = int(window.full_width);
-        spec.full_height = int(window.full_height);
-        spec.channelnames.clear();
-        spec.alpha_channel = -1;
-        spec.z_channel = -1;
-        for (size_t c = 0; c < channel_count; ++c) {
-            if (!channels[c].name || !*channels[c].name)
-                return write_error(err, err_len, "channel " + std::to_string(c) + " has no name");
-            // OpenEXR keeps channels in a map by name, so a duplicate would silently replace
-            // the earlier plane.
-            if (std::find(spec.channelnames.begin(), spec.channelnames.end(), channels[c].name) !=
-                spec.channelnames.end())
-                return write_error(err, err_len, std::string("duplicate channel name ") + channels[c].name);
-            spec.channelnames.emplace_back(channels[c].name);
-            // The ImageSpec constructor guesses alpha from the channel count; only a channel
-            // really named A (or Z) should be treated specially.
-            if (spec.channelnames.back() == "A") spec.alpha_channel = int(c);
-            if (spec.channelnames.back() == "Z") spec.z_channel = int(c);
-        }
-        // Per-channel formats only when they differ: a file of one format keeps spec.format.
-        if (half_float && std::any_of(channels, channels + channel_count, [](const icr_channel &ch) {
-                return ch.full_float != 0;
-            })) {
-            for (size_t c = 0; c < channel_count; ++c)
-                spec.channelformats.push_back(channels[c].full_float ? OIIO::TypeDesc::FLOAT : OIIO::TypeDesc::HALF);
-        }
-        spec.attribute("compression", compression && *compression ? compression : "zip");
-        for (size_t i = 0; i < attribute_count; ++i) {
-            if (!attributes[i].name || !*attributes[i].name)
-                return write_error(err, err_len, "attribute " + std::to_string(i) + " has no name");
-            const std::string name = attributes[i].name, value = attributes[i].value ? attributes[i].value : "";
-            if (name == "PixelAspectRatio") {
-                // OpenEXR's standard attribute is a float; every other attribute here is text.
-                char *end = nullptr;
-                const float ratio = std::strtof(value.c_str(), &end);
-                if (value.empty() || *end != '\0' || !(ratio > 0.0f) || !std::isfinite(ratio))
-                    return write_error(err, err_len, "PixelAspectRatio " + value + " is not a positive number");
-                spec.attribute("PixelAspectRatio", ratio);
-            } else {
-                spec.attribute(name, value);
-            }
-        }
+        OIIO::ImageSpec spec;
+        std::string bad = exr_spec(width, height, window, channels, channel_count, half_float, compression, spec);
+        if (bad.empty())
+            bad = each_attribute(
+                attributes, attribute_count,
+                [&](const std::string &name, const std::string &value) { spec.attribute(name, value); },
+                [&](float ratio) { spec.attribute("PixelAspectRatio", ratio); });
+        if (!bad.empty()) return write_error(err, err_len, bad);
 
         // OpenEXR compresses the line blocks of one write on its own thread pool: as many
         // threads as the machine has.
@@ -186,6 +207,129 @@ extern "C" int icr_exr_write_rows(const char *path, uint32_t width, uint32_t hei
         return write_error(err, err_len, std::string("EXR write failed: ") + e.what());
     } catch (...) {
         return write_error(err, err_len, "EXR write failed: unknown exception");
+    }
+}
+
+// A tiled EXR written a tile at a time, in any order, from any thread: OpenEXR's random tile
+// order writes each tile as it comes (in increasing order it would hold early tiles back).
+// Its header lacks what is known only at the end; `finish` writes the final file.
+struct icr_exr_stream {
+    std::unique_ptr<OIIO::ImageOutput> out;
+    std::string path;
+    OIIO::ImageSpec spec;
+    std::mutex lock;
+    // A write failed: OpenEXR's tiled writer is left in a state where the next write can wait
+    // forever for tasks that never run, so nothing more is written (and closing abandons it).
+    bool broken = false;
+};
+
+extern "C" icr_exr_stream *icr_exr_stream_open(const char *path, uint32_t width, uint32_t height, icr_window window,
+                                               const icr_channel *channels, size_t channel_count, int half_float,
+                                               const char *compression, uint32_t tile_width, uint32_t tile_height,
+                                               char *err, size_t err_len) {
+    clear_error(err, err_len);
+    try {
+        if (!path || !*path) return write_error(err, err_len, "empty path"), nullptr;
+        if (tile_width == 0 || tile_height == 0 || tile_width > 4096 || tile_height > 4096)
+            return write_error(err, err_len, "invalid tile size"), nullptr;
+        auto stream = std::make_unique<icr_exr_stream>();
+        std::string bad =
+            exr_spec(width, height, window, channels, channel_count, half_float, compression, stream->spec);
+        if (!bad.empty()) return write_error(err, err_len, bad), nullptr;
+        stream->spec.tile_width = int(tile_width);
+        stream->spec.tile_height = int(tile_height);
+        stream->spec.attribute("openexr:lineOrder", "randomY");
+        stream->out = OIIO::ImageOutput::create("openexr");
+        if (!stream->out) return write_error(err, err_len, oiio_error("OpenEXR writer unavailable", "")), nullptr;
+        if (!stream->out->open(path, stream->spec))
+            return write_error(err, err_len, oiio_error("cannot open for writing", stream->out->geterror())), nullptr;
+        stream->path = path;
+        return stream.release();
+    } catch (const std::bad_alloc &) {
+        return write_error(err, err_len, "out of memory"), nullptr;
+    } catch (const std::exception &e) {
+        return write_error(err, err_len, std::string("EXR stream failed: ") + e.what()), nullptr;
+    } catch (...) {
+        return write_error(err, err_len, "EXR stream failed: unknown exception"), nullptr;
+    }
+}
+
+extern "C" int icr_exr_stream_write(icr_exr_stream *stream, uint32_t x0, uint32_t y0, uint32_t x1, uint32_t y1,
+                                    const float *pixels, char *err, size_t err_len) {
+    clear_error(err, err_len);
+    try {
+        if (!stream || !stream->out) return write_error(err, err_len, "the stream is closed");
+        const OIIO::ImageSpec &spec = stream->spec;
+        const uint32_t tw = uint32_t(spec.tile_width), th = uint32_t(spec.tile_height);
+        const uint32_t w = uint32_t(spec.width), h = uint32_t(spec.height);
+        if (!pixels || x0 >= x1 || y0 >= y1 || x1 > w || y1 > h || x0 % tw || y0 % th ||
+            (x1 % tw && x1 != w) || (y1 % th && y1 != h))
+            return write_error(err, err_len, "the rectangle does not lie on the tile grid");
+        std::lock_guard<std::mutex> held(stream->lock);
+        if (stream->broken) return write_error(err, err_len, "an earlier write to the stream failed");
+        // Tiles are numbered in the display window's coordinates.
+        if (!stream->out->write_tiles(spec.x + int(x0), spec.x + int(x1), spec.y + int(y0), spec.y + int(y1), 0, 1,
+                                      OIIO::TypeDesc::FLOAT, pixels)) {
+            stream->broken = true;
+            return write_error(err, err_len, oiio_error("write failed", stream->out->geterror()));
+        }
+        return 0;
+    } catch (const std::bad_alloc &) {
+        return write_error(err, err_len, "out of memory");
+    } catch (const std::exception &e) {
+        return write_error(err, err_len, std::string("EXR write failed: ") + e.what());
+    } catch (...) {
+        return write_error(err, err_len, "EXR write failed: unknown exception");
+    }
+}
+
+extern "C" int icr_exr_stream_finish(icr_exr_stream *stream, const char *path, const icr_attribute *attributes,
+                                     size_t attribute_count, char *err, size_t err_len) {
+    clear_error(err, err_len);
+    std::unique_ptr<icr_exr_stream> owned(stream);
+    try {
+        if (!owned || !owned->out) return write_error(err, err_len, "the stream is closed");
+        if (!path || !*path) return write_error(err, err_len, "empty path");
+        bool closed = owned->out->close();
+        std::string close_error = closed ? "" : owned->out->geterror();
+        owned->out.reset();
+        if (!closed) return write_error(err, err_len, oiio_error("close failed", close_error));
+        // The stream's header and tiles, the attributes added: the compressed tiles are copied
+        // as they are (OpenImageIO's copy decompresses and compresses them again).
+        Imf::TiledInputFile in(owned->path.c_str());
+        Imf::Header header = in.header();
+        std::string bad = each_attribute(
+            attributes, attribute_count,
+            [&](const std::string &name, const std::string &value) {
+                header.insert(name, Imf::StringAttribute(value));
+            },
+            [&](float ratio) { header.pixelAspectRatio() = ratio; });
+        if (!bad.empty()) return write_error(err, err_len, bad);
+        Imf::TiledOutputFile out(path, header);
+        out.copyPixels(in);
+        return 0;
+    } catch (const std::bad_alloc &) {
+        return write_error(err, err_len, "out of memory");
+    } catch (const std::exception &e) {
+        return write_error(err, err_len, std::string("EXR write failed: ") + e.what());
+    } catch (...) {
+        return write_error(err, err_len, "EXR write failed: unknown exception");
+    }
+}
+
+extern "C" void icr_exr_stream_close(icr_exr_stream *stream) {
+    try {
+        std::unique_ptr<icr_exr_stream> owned(stream);
+        if (!owned || !owned->out) return;
+        if (owned->broken) {
+            // Closing would finish the file through the writer that failed: its file (unnamed,
+            // or removed by the caller) is abandoned with the writer, which holds it open
+            // until the process ends.
+            owned->out.release();
+            return;
+        }
+        owned->out->close();
+    } catch (...) {
     }
 }
 

@@ -60,6 +60,30 @@ int icr_exr_write_rows(const char *path, uint32_t width, uint32_t height, icr_wi
                        int half_float, const char *compression, icr_fill_rows fill, void *context,
                        char *err, size_t err_len);
 
+/*
+ * A tiled EXR written as its tiles finish: open it (tile_width x tile_height tiles, channels,
+ * window, half_float and compression as for icr_exr_write_rows, no attributes yet), write
+ * rectangles of whole tiles in any order and from any thread, then finish: `path` is written
+ * with the stream's header, the attributes added (known only at the end: the statistics), and
+ * the stream's compressed tiles copied as they are. The stream's own file stays for the caller
+ * to remove. finish and close free the stream; close abandons it.
+ */
+typedef struct icr_exr_stream icr_exr_stream;
+icr_exr_stream *icr_exr_stream_open(const char *path, uint32_t width, uint32_t height, icr_window window,
+                                    const icr_channel *channels, size_t channel_count, int half_float,
+                                    const char *compression, uint32_t tile_width, uint32_t tile_height,
+                                    char *err, size_t err_len);
+/*
+ * Writes the pixels [x0, x1) x [y0, y1) of the data window (0 is its first row and column):
+ * x0 and y0 on the tile grid, x1 and y1 on it or at the window's edge; `pixels` interleaved,
+ * row by row, every channel in the order given at open.
+ */
+int icr_exr_stream_write(icr_exr_stream *stream, uint32_t x0, uint32_t y0, uint32_t x1, uint32_t y1,
+                         const float *pixels, char *err, size_t err_len);
+int icr_exr_stream_finish(icr_exr_stream *stream, const char *path, const icr_attribute *attributes,
+                          size_t attribute_count, char *err, size_t err_len);
+void icr_exr_stream_close(icr_exr_stream *stream);
+
 /* Writes an 8-bit RGB PNG (rgb: 3 * width * height bytes) to exactly `path`. */
 int icr_png_write(const char *path, uint32_t width, uint32_t height, const uint8_t *rgb,
                   char *err, size_t err_len);

@@ -12,6 +12,8 @@ packages=(
   build-essential pkg-config
   libembree-dev
   libopenimageio-dev openimageio-tools
+  # OpenEXR's own API: a streamed EXR's tiles are copied into the final file as compressed.
+  libopenexr-dev
   libtinygltf-dev nlohmann-json3-dev libstb-dev
   libopenmpi-dev openmpi-bin
   libclang-dev clang

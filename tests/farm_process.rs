@@ -136,7 +136,12 @@ fn start_render(dir: &Path, extra: &[&str]) -> Child {
 
 /// Reads progress lines until one in `phase` at `fraction` or more, then sends SIGTERM; returns
 /// the exit status, stderr and the time from the signal to the exit.
-fn terminate_at(mut child: Child, phase: &str, fraction: f64) -> (Option<i32>, String, Duration) {
+fn terminate_at(child: Child, phase: &str, fraction: f64) -> (Option<i32>, String, Duration) {
+    signal_at(child, phase, fraction, "-TERM")
+}
+
+/// As `terminate_at`, with the signal `kill` is given (`-KILL` ...).
+fn signal_at(mut child: Child, phase: &str, fraction: f64, signal: &str) -> (Option<i32>, String, Duration) {
     let stdout = child.stdout.take().unwrap();
     let mut seen = false;
     for line in BufReader::new(stdout).lines() {
@@ -150,7 +155,7 @@ fn terminate_at(mut child: Child, phase: &str, fraction: f64) -> (Option<i32>, S
     assert!(seen, "no progress line in {phase} at {fraction}");
     let signalled = Instant::now();
     let kill = Command::new("kill")
-        .args(["-TERM", &child.id().to_string()])
+        .args([signal, &child.id().to_string()])
         .status()
         .unwrap();
     assert!(kill.success());
@@ -209,6 +214,15 @@ fn sigterm_ends_a_checkpointed_render_cleanly_and_the_same_command_resumes_it() 
         rgb(&b, ""),
         "the resumed render differs from an uninterrupted one"
     );
+    // Every channel: the restored tiles were streamed into the file before the new ones.
+    assert_eq!(a.channels.len(), b.channels.len());
+    for (name, values) in &a.channels {
+        assert_eq!(
+            Some(values.as_slice()),
+            b.channel(name),
+            "{name} differs after the resume"
+        );
+    }
 }
 
 #[test]
@@ -219,4 +233,24 @@ fn sigterm_in_the_prepass_without_a_checkpoint_leaves_nothing_behind() {
     assert!(took < Duration::from_secs(30), "stopping took {took:?}");
     assert!(err.contains("stopped by SIGTERM: no image written"), "{err}");
     assert!(leftovers(dir.path()).is_empty(), "{:?}", leftovers(dir.path()));
+}
+
+/// The EXR is written while the tiles render (each one compressed as it finishes) into a file
+/// with no name: a render killed outright, with no chance to clean up, leaves the file that was
+/// there before and nothing else, whether killed before its first tile or in the middle.
+#[test]
+fn sigkill_mid_render_leaves_the_previous_file_and_no_temporary() {
+    for (phase, fraction) in [("prepass", 0.1), ("render", 0.3), ("render", 0.8)] {
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::write(dir.path().join("c.exr"), b"the previous render").unwrap();
+        let child = start_render(dir.path(), &["--overwrite"]);
+        let (code, err, _) = signal_at(child, phase, fraction, "-KILL");
+        assert_eq!(code, None, "killed by a signal: {err}");
+        assert_eq!(leftovers(dir.path()), ["c.exr"], "{phase} {fraction}");
+        assert_eq!(
+            std::fs::read(dir.path().join("c.exr")).unwrap(),
+            b"the previous render",
+            "{phase} {fraction}"
+        );
+    }
 }

@@ -564,3 +564,45 @@ fn a_killed_region_task_resumes_from_its_checkpoint_into_the_same_part() {
     assert!(stderr(&out).contains("another job"), "{}", stderr(&out));
     assert!(!d.join("other.exr").exists());
 }
+
+/// A region's tiles are streamed into its EXR as they finish; with --denoise the region's frame
+/// is held whole and written at the end. The raw channels of both files are the same, bit for
+/// bit, at the same place in the display window, for a region whose corner is off the tile grid
+/// (its render tiles then straddle the file's, which start at the region's corner), and the
+/// held file carries every attribute of the streamed one that does not say how it ran.
+#[test]
+fn a_streamed_region_equals_the_region_held_whole() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let common_args = ["-x", "61", "-y", "45", "--tile", "16x8"];
+    let region = [5, 3, 58, 38];
+    render_part(d, "streamed", region, &common_args);
+    let held = [&common_args[..], &["--denoise", "--denoise-quality", "fast"]].concat();
+    render_part(d, "held", region, &held);
+    let [a, b] = ["streamed", "held"].map(|name| read_image_with_header(&d.join(format!("{name}.exr"))).unwrap());
+    assert_eq!((a.width, a.height, a.window), (b.width, b.height, b.window));
+    assert_eq!((a.window.x, a.window.y, a.width, a.height), (5, 3, 53, 35));
+    for (name, values) in &a.channels {
+        let other = b.channel(name).unwrap_or_else(|| panic!("no {name} in the held file"));
+        let differing = values
+            .iter()
+            .zip(other)
+            .filter(|(x, y)| x.to_bits() != y.to_bits())
+            .count();
+        assert_eq!(differing, 0, "{name} differs at {differing} pixels");
+    }
+    assert!(b.channel("denoised.R").is_some(), "the held file is the denoised one");
+    let how_it_ran = [
+        "icrender/command",
+        "icrender/options",
+        "icrender/part_settings",
+        "icrender/render_time_s",
+        "icrender/statistics",
+        "DateTime",
+    ];
+    for (name, value) in &a.attributes {
+        if !how_it_ran.contains(&name.as_str()) {
+            assert_eq!(b.attribute(name), Some(value.as_str()), "{name}");
+        }
+    }
+}

@@ -144,6 +144,7 @@ pub fn run(args: &RenderArgs, frames: Frames) -> CommandResult {
             start: sequence_start,
         });
         let integrator = Integrator::new(&job.scene, &job.tracer, &job.shading, job.cache.as_ref());
+        let streamed = outputs.stream(args, &job)?;
         let render_start = Instant::now();
         let rendered = render_resumable(
             &integrator,
@@ -151,6 +152,7 @@ pub fn run(args: &RenderArgs, frames: Frames) -> CommandResult {
             &job.settings,
             &progress,
             journal.as_ref().zip(restored),
+            streamed.as_ref(),
         );
         let render_s = render_start.elapsed().as_secs_f64();
         // The frame's records reach the file before the next frame (a killed job keeps them).
@@ -192,7 +194,7 @@ pub fn run(args: &RenderArgs, frames: Frames) -> CommandResult {
                 stats.nonfinite_dropped
             ));
         }
-        outputs.write(args, &job, &rendered.frame, &stats)?;
+        outputs.save(args, &job, rendered.frame, streamed, &stats)?;
         if let Some(dir) = &args.checkpoint {
             // Only after the files: a frame killed while writing them is rendered again.
             std::fs::write(done_marker(dir, n), outputs.exr.as_os_str().as_encoded_bytes())

@@ -91,7 +91,7 @@ pub fn run(args: &ReferenceArgs) -> CommandResult {
         let integrator = Integrator::new(&job.scene, &job.tracer, &job.shading, None);
         let progress = Progress::new(0, true);
         let rendered = render(&integrator, &job.camera, &job.settings, &progress);
-        let frame = rendered.frame;
+        let frame = rendered.frame.expect("a render without a stream holds its frame");
         add_pass(&mut thread_stats, &rendered.threads);
         let half = (pass % 2) as usize;
         halves[half].accumulate(&frame);

@@ -152,6 +152,28 @@ impl FrameBuffer {
         self.data.iter_mut().for_each(|d| d.scale(factor));
     }
 
+    /// The pixels of `tile` (inside the window) as a rendered tile's values, row-major: what
+    /// `tiles::store_tile` stored there, with any light added since.
+    pub fn tile_values(&self, tile: &crate::tiles::Tile) -> Vec<PixelValue> {
+        let mut values = Vec::with_capacity(((tile.x1 - tile.x0) * (tile.y1 - tile.y0)) as usize);
+        for y in tile.y0..tile.y1 {
+            for x in tile.x0..tile.x1 {
+                let i = self.at(x, y);
+                values.push(PixelValue {
+                    components: Components {
+                        emission: self.layers[Layer::Emission.index()][i],
+                        direct: self.layers[Layer::Direct.index()][i],
+                        specular: self.layers[Layer::Specular.index()][i],
+                        indirect: self.layers[Layer::Indirect.index()][i],
+                    },
+                    records: self.records[i],
+                    data: self.data[i],
+                });
+            }
+        }
+        values
+    }
+
     /// Sum of all layers at the window's pixel `i` (row-major).
     pub fn composite_at(&self, i: usize) -> Vec3 {
         self.layers.iter().map(|l| l[i]).sum()

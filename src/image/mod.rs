@@ -6,6 +6,7 @@ pub mod cryptomatte;
 pub mod data;
 pub mod denoise;
 pub mod framebuffer;
+pub mod layered_exr;
 pub mod metrics;
 pub mod noisy_patches;
 pub mod output;

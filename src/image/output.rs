@@ -1,11 +1,9 @@
 //! Writing results so that a reader never sees a half-written file: everything goes to a
 //! temporary file beside the target, then is renamed over it in one step.
 
-use super::cryptomatte::{RANKS, Ranks};
-use super::data::{Aov, PixelData};
-use super::framebuffer::{FrameBuffer, Layer};
 use super::preview::tone_map_each;
-use crate::sys::image_io::{self, Window};
+use crate::sys::image_io;
+use crate::sys::unnamed_file::UnnamedFile;
 use glam::Vec3;
 use std::path::{Path, PathBuf};
 
@@ -25,14 +23,32 @@ pub fn write_atomically(path: &Path, write: impl FnOnce(&Path) -> Result<(), Str
 
 /// Runs `write` on a temporary path beside `path` and keeps the file there, staged: a failed
 /// write leaves no temporary file and says so when the file system is full.
+///
+/// The file has no name while it is written where the file system allows (`UnnamedFile`): a
+/// process killed meanwhile, even by SIGKILL, leaves nothing. It takes its temporary name only
+/// for the instant before it is renamed over the target.
 pub fn stage(path: &Path, write: impl FnOnce(&Path) -> Result<(), String>) -> Result<StagedFile, String> {
+    let dir = path.parent().unwrap_or(Path::new(""));
     let staged = StagedFile {
+        unnamed: UnnamedFile::create_in(dir).ok(),
         temporary: temporary_beside(path),
         target: path.to_path_buf(),
         placed: false,
     };
-    write(&staged.temporary).map_err(|e| staged.explain(e))?;
+    let writing = staged
+        .unnamed
+        .as_ref()
+        .map_or_else(|| staged.temporary.clone(), UnnamedFile::path);
+    write(&writing).map_err(|e| staged.explain(e))?;
     Ok(staged)
+}
+
+/// A failed write's message for `target`, with the file system's state when it is full.
+pub fn explain_failure(target: &Path, e: String) -> String {
+    match full_file_system(&temporary_beside(target)) {
+        Some(free) => format!("the file system is full ({free} bytes free): {e}"),
+        None => e,
+    }
 }
 
 /// Whether the file system holding `temporary` (a file being written, or its directory) is
@@ -60,172 +76,6 @@ pub fn check_writable(path: &Path) -> Result<(), String> {
 /// The Cryptomatte types' layer names (channels `{name}00.R` ...) and what they rank.
 pub const CRYPTO_OBJECT: &str = "CryptoObject";
 pub const CRYPTO_MATERIAL: &str = "CryptoMaterial";
-
-/// Where a channel of the file takes its values from, pixel by pixel. Data layers and
-/// Cryptomatte stay 32-bit float whatever `--half` says (a half float cannot hold an ID's bits,
-/// nor a far depth or a world position to the precision a compositor needs).
-#[derive(Clone, Copy)]
-enum Source<'a> {
-    Composite(usize),
-    Alpha,
-    /// A light layer (or a denoised one) and its component.
-    Light(&'a [Vec3], usize),
-    Records,
-    Albedo(usize),
-    Normal(usize),
-    Depth,
-    Position(usize),
-    /// A Cryptomatte type's rank: its ID's bits or its coverage.
-    Crypto {
-        object: bool,
-        rank: usize,
-        id: bool,
-    },
-}
-
-impl Source<'_> {
-    fn full_float(self) -> bool {
-        !matches!(
-            self,
-            Source::Composite(_) | Source::Alpha | Source::Light(..) | Source::Records
-        )
-    }
-
-    fn value(self, frame: &FrameBuffer, i: usize) -> f32 {
-        let data = |i: usize| -> &PixelData { &frame.data()[i] };
-        match self {
-            Source::Composite(c) => frame.composite_at(i)[c],
-            Source::Alpha => 1.0,
-            Source::Light(plane, c) => plane[i][c],
-            Source::Records => frame.records()[i],
-            Source::Albedo(c) => data(i).albedo[c],
-            Source::Normal(c) => data(i).normal[c],
-            Source::Depth => data(i).depth,
-            Source::Position(c) => data(i).position[c],
-            Source::Crypto { object, rank, id } => {
-                let ranks: &Ranks = if object { &data(i).object } else { &data(i).material };
-                let entry = ranks[rank];
-                if id { f32::from_bits(entry.id) } else { entry.coverage }
-            }
-        }
-    }
-}
-
-const RGB: [&str; 3] = ["R", "G", "B"];
-const XYZ: [&str; 3] = ["X", "Y", "Z"];
-
-/// A three-channel layer's channels, `layer.R` ... (or `R` ... for the unnamed layer), each
-/// taking its values from `source` of its component.
-fn three<'a>(layer: &str, names: [&str; 3], source: impl Fn(usize) -> Source<'a>) -> Vec<(String, Source<'a>)> {
-    (0..3)
-        .map(|c| match layer {
-            "" => (names[c].to_string(), source(c)),
-            _ => (format!("{layer}.{}", names[c]), source(c)),
-        })
-        .collect()
-}
-
-/// The channels of the data layers in `aovs`, in that order.
-fn data_channels(aovs: &[Aov]) -> Vec<(String, Source<'static>)> {
-    let crypto = |layer: &str, object: bool| {
-        let mut out = Vec::new();
-        for level in 0..RANKS / 2 {
-            for (c, channel) in ["R", "G", "B", "A"].iter().enumerate() {
-                let source = Source::Crypto {
-                    object,
-                    rank: 2 * level + c / 2,
-                    id: c % 2 == 0,
-                };
-                out.push((format!("{layer}{level:02}.{channel}"), source));
-            }
-        }
-        out
-    };
-    let mut channels = Vec::new();
-    for aov in aovs {
-        match aov {
-            Aov::Albedo => channels.extend(three("albedo", RGB, Source::Albedo)),
-            Aov::Normal => channels.extend(three("normal", XYZ, Source::Normal)),
-            Aov::Depth => channels.push(("depth.Z".to_string(), Source::Depth)),
-            Aov::Position => channels.extend(three("position", XYZ, Source::Position)),
-            Aov::CryptoObject => channels.extend(crypto(CRYPTO_OBJECT, true)),
-            Aov::CryptoMaterial => channels.extend(crypto(CRYPTO_MATERIAL, false)),
-        }
-    }
-    channels
-}
-
-/// Writes the composite as R G B A, each given layer as `layer.R/G/B`, then each of
-/// `extra_layers` (a name and a plane: the denoised layers) the same way, and the data layers
-/// of `aovs` (always 32-bit float, see `Source`). The frame's pixels lie at `window` in the
-/// whole image (a part of a --region render). The pixels go to the file a strip of rows at a
-/// time, made from the frame as they go: no planar copy of the image is held (at 3840x2160 with
-/// every default layer such a copy took 1.5 GB, and making it a pass over the frame per channel).
-#[allow(clippy::too_many_arguments)]
-pub fn write_exr(
-    path: &Path,
-    frame: &FrameBuffer,
-    window: Window,
-    layers: &[Layer],
-    aovs: &[Aov],
-    extra_layers: &[(&str, &[Vec3])],
-    attributes: &[(String, String)],
-    half_float: bool,
-    compression: ExrCompression,
-    records_layer: bool,
-) -> Result<(), String> {
-    let mut channels = three("", RGB, Source::Composite);
-    channels.push(("A".to_string(), Source::Alpha));
-    for &l in layers {
-        let plane = frame.layer(l);
-        channels.extend(three(l.name(), RGB, |c| Source::Light(plane, c)));
-    }
-    for &(name, plane) in extra_layers {
-        if plane.len() != frame.width as usize * frame.height as usize {
-            return Err(format!(
-                "layer {name} has {} pixels for {}x{}",
-                plane.len(),
-                frame.width,
-                frame.height
-            ));
-        }
-        channels.extend(three(name, RGB, |c| Source::Light(plane, c)));
-    }
-    if records_layer {
-        channels.push(("ic_records.Y".to_string(), Source::Records));
-    }
-    channels.extend(data_channels(aovs));
-    let names: Vec<image_io::ChannelName<'_>> = channels
-        .iter()
-        .map(|(name, source)| image_io::ChannelName {
-            name,
-            full_float: source.full_float(),
-        })
-        .collect();
-    let sources: Vec<Source<'_>> = channels.iter().map(|(_, s)| *s).collect();
-    let width = frame.width as usize;
-    let mut fill = |y0: u32, y1: u32, strip: &mut [f32]| {
-        let rows = (y0 as usize * width)..(y1 as usize * width);
-        for (pixel, values) in rows.zip(strip.chunks_exact_mut(sources.len())) {
-            for (value, source) in values.iter_mut().zip(&sources) {
-                *value = source.value(frame, pixel);
-            }
-        }
-    };
-    write_atomically(path, |tmp| {
-        image_io::write_exr_rows(
-            tmp,
-            frame.width,
-            frame.height,
-            window,
-            &names,
-            attributes,
-            half_float,
-            compression.name(),
-            &mut fill,
-        )
-    })
-}
 
 /// The EXR's codec (`--compression`). Zip, lossless, is what Blender and Nuke write float
 /// layers with by default; piz, lossless too, packs noisy light tighter but compresses and
@@ -262,7 +112,7 @@ impl ExrCompression {
     }
 }
 
-/// Whether a channel written by `write_exr` is a data layer or Cryptomatte (always 32-bit
+/// Whether a channel of the layered EXR (`layered_exr`) is a data layer or Cryptomatte (always 32-bit
 /// float) rather than light (half with --half).
 pub fn is_data_channel(name: &str) -> bool {
     [
@@ -287,6 +137,9 @@ pub fn write_json(path: &Path, value: &impl serde::Serialize) -> Result<(), Stri
 /// it over the target; dropped unplaced, it is removed. For a file made beside another (the
 /// preview while the EXR is written) that must appear only if the other does.
 pub struct StagedFile {
+    /// The file, while it has no name (None where the file system cannot make one: then it is
+    /// written under `temporary`).
+    unnamed: Option<UnnamedFile>,
     temporary: PathBuf,
     target: PathBuf,
     placed: bool,
@@ -295,6 +148,12 @@ pub struct StagedFile {
 impl StagedFile {
     /// Renames the file over its target; on failure it is removed (on drop).
     pub fn place(mut self) -> Result<(), String> {
+        if let Some(file) = &self.unnamed {
+            // A name left by an earlier process of this number is stale.
+            let _ = std::fs::remove_file(&self.temporary);
+            file.link_as(&self.temporary)
+                .map_err(|e| self.explain(format!("cannot name the finished file: {e}")))?;
+        }
         std::fs::rename(&self.temporary, &self.target)
             .map_err(|e| self.explain(format!("cannot move the finished file into place: {e}")))?;
         self.placed = true;
@@ -304,10 +163,7 @@ impl StagedFile {
     /// A failed write's message, with the file system's state when it is full (seen before
     /// the partial file is removed).
     fn explain(&self, e: String) -> String {
-        match full_file_system(&self.temporary) {
-            Some(free) => format!("the file system is full ({free} bytes free): {e}"),
-            None => e,
-        }
+        explain_failure(&self.target, e)
     }
 }
 
@@ -341,6 +197,7 @@ mod tests {
         let target = dir.path().join("out.png");
         std::fs::write(&target, b"old").unwrap();
         let staged = |dir: &Path| StagedFile {
+            unnamed: None,
             temporary: temporary_beside(&dir.join("out.png")),
             target: dir.join("out.png"),
             placed: false,

@@ -10,18 +10,21 @@ pub mod pixel;
 pub use pixel::{RenderSettings, ThreadClock, ThreadStats, pixel_offset, pixel_strata, render_pixel, render_tile};
 
 use crate::checkpoint::{Checkpoint, Restored};
-use crate::image::framebuffer::FrameBuffer;
+use crate::image::framebuffer::{FrameBuffer, PixelValue};
+use crate::image::layered_exr::StreamedExr;
 use crate::prepass::{self, PrepassOutcome};
 use crate::progress::Progress;
 use crate::scene::view::Camera;
 use crate::shading::Integrator;
-use crate::tiles::{TileQueue, store_tile, tiles_in};
+use crate::tiles::{Tile, TileQueue, store_tile, tiles_in};
+use std::collections::HashMap;
 use std::sync::Mutex;
 
 /// What a one-process render made: the image, each thread's work (the prepass's included)
 /// and the prepass's own account, when there was one.
 pub struct Rendered {
-    pub frame: FrameBuffer,
+    /// The frame, when it was held whole (not streamed).
+    pub frame: Option<FrameBuffer>,
     pub threads: Vec<ThreadStats>,
     pub prepass: Option<PrepassOutcome>,
 }
@@ -33,21 +36,27 @@ pub fn render(
     settings: &RenderSettings,
     progress: &Progress,
 ) -> Rendered {
-    render_resumable(integrator, camera, settings, progress, None)
+    render_resumable(integrator, camera, settings, progress, None, None)
 }
 
 /// As [`render`], but with a checkpoint: the tiles an earlier run finished are taken from it
-/// and every tile finished now is journalled.
+/// and every tile finished now is journalled; and with `streamed`, each finished tile goes to
+/// the EXR's stream instead of a frame held whole (`Rendered::frame` is then None).
 pub fn render_resumable(
     integrator: &Integrator<'_>,
     camera: &Camera,
     settings: &RenderSettings,
     progress: &Progress,
     checkpoint: Option<(&Checkpoint, Restored)>,
+    streamed: Option<&StreamedExr>,
 ) -> Rendered {
     // A render stopped by SIGTERM or SIGINT (caught only in one-process renders, see
-    // sys::signals) ends after the round or the tiles in progress.
-    let stopped = || crate::sys::signals::received().is_some();
+    // sys::signals) ends after the round or the tiles in progress. One whose stream cannot be
+    // written (a full disk) ends too, as its file cannot be finished, unless a checkpoint keeps
+    // the tiles: then it renders on, so that a rerun with room to write renders nothing again.
+    let keeps_tiles = checkpoint.is_some();
+    let stopped =
+        || crate::sys::signals::received().is_some() || (!keeps_tiles && streamed.is_some_and(StreamedExr::failed));
     let watch = watch_prepass(progress);
     let prepass =
         (settings.prepass && integrator.cache.is_some()).then(|| prepass::run(integrator, camera, settings, &watch));
@@ -78,20 +87,39 @@ pub fn render_resumable(
     );
     // The frame holds the area rendered only: a region task's memory grows with its region.
     let window = settings.window(camera);
-    let (journal, todo, start) = match checkpoint {
+    let (journal, todo, start, restored_tiles) = match checkpoint {
         Some((journal, restored)) => {
             assert_eq!(
                 restored.frame.window(),
                 window,
                 "the journal was opened for another area"
             );
-            (Some(journal), restored.unfinished(), restored.frame)
+            (Some(journal), restored.unfinished(), restored.frame, restored.done)
         }
-        None => (None, (0..all.len()).collect(), FrameBuffer::windowed(window)),
+        None => (
+            None,
+            (0..all.len()).collect(),
+            FrameBuffer::windowed(window),
+            Vec::new(),
+        ),
     };
     progress.advance(all.len() - todo.len());
+    let sink = match streamed {
+        Some(stream) => {
+            let sink = Sink::Streamed {
+                stream,
+                prepass_records: prepass.as_ref().map(PrepassRecords::of),
+            };
+            // The tiles an earlier run finished go to the stream first.
+            for (tile, _) in all.iter().zip(&restored_tiles).filter(|(_, done)| **done) {
+                sink.store(tile, start.tile_values(tile));
+            }
+            drop(start);
+            sink
+        }
+        None => Sink::Held(Mutex::new(start)),
+    };
     let queue = TileQueue::new(if stopped() { Vec::new() } else { todo });
-    let frame = Mutex::new(start);
     let threads = settings.threads.max(1).min(queue.len().max(1));
     let stats: Vec<ThreadStats> = std::thread::scope(|scope| {
         let workers: Vec<_> = (0..threads)
@@ -107,7 +135,7 @@ pub fn render_resumable(
                         if let Some(journal) = journal {
                             journal.tile(index as u32, 0, &values);
                         }
-                        store_tile(&mut frame.lock().unwrap_or_else(|e| e.into_inner()), tile, &values);
+                        sink.store(tile, values);
                         stats.tiles += 1;
                         progress.advance(1);
                     }
@@ -119,15 +147,75 @@ pub fn render_resumable(
         workers.into_iter().map(|w| w.join().unwrap_or_default()).collect()
     });
     progress.finish();
-    let mut frame = frame.into_inner().unwrap_or_else(|e| e.into_inner());
     let mut stats = stats;
+    let mut frame = match sink {
+        Sink::Held(frame) => Some(frame.into_inner().unwrap_or_else(|e| e.into_inner())),
+        Sink::Streamed { .. } => None,
+    };
     if let Some(prepass) = &prepass {
-        add_prepass(&mut frame, &mut stats, prepass);
+        if let Some(frame) = &mut frame {
+            add_prepass_records(frame, prepass);
+        }
+        add_prepass_work(&mut stats, &prepass.threads);
     }
     Rendered {
         frame,
         threads: stats,
         prepass,
+    }
+}
+
+/// Where finished tiles go: a frame held whole, or the EXR's stream.
+enum Sink<'a> {
+    Held(Mutex<FrameBuffer>),
+    Streamed {
+        stream: &'a StreamedExr,
+        /// The prepass's records by pixel, for the `ic_records` layer (a held frame adds them
+        /// at the end; a streamed tile leaves before then).
+        prepass_records: Option<PrepassRecords>,
+    },
+}
+
+impl Sink<'_> {
+    fn store(&self, tile: &Tile, mut values: Vec<PixelValue>) {
+        match self {
+            Sink::Held(frame) => store_tile(&mut frame.lock().unwrap_or_else(|e| e.into_inner()), tile, &values),
+            Sink::Streamed {
+                stream,
+                prepass_records,
+            } => {
+                if let Some(records) = prepass_records {
+                    records.add_to(tile, &mut values);
+                }
+                stream.store(tile, &values);
+            }
+        }
+    }
+}
+
+/// How many records the prepass made at each pixel that has any.
+struct PrepassRecords(HashMap<(u32, u32), f32>);
+
+impl PrepassRecords {
+    fn of(prepass: &PrepassOutcome) -> PrepassRecords {
+        let mut counts = HashMap::new();
+        for pixel in prepass.records_per_pixel() {
+            *counts.entry(pixel.0).or_insert(0.0) += pixel.1 as f32;
+        }
+        PrepassRecords(counts)
+    }
+
+    /// Adds the counts to a tile's pixels (row-major over the tile).
+    fn add_to(&self, tile: &Tile, values: &mut [PixelValue]) {
+        if self.0.is_empty() {
+            return;
+        }
+        let positions = (tile.y0..tile.y1).flat_map(|y| (tile.x0..tile.x1).map(move |x| (x, y)));
+        for (value, at) in values.iter_mut().zip(positions) {
+            if let Some(count) = self.0.get(&at) {
+                value.records += count;
+            }
+        }
     }
 }
 
@@ -140,12 +228,6 @@ pub fn watch_prepass(progress: &Progress) -> impl Fn(usize, usize) -> bool + '_ 
         progress.prepass_round_done();
         crate::sys::signals::received().is_none()
     }
-}
-
-/// Counts the prepass's records in the `ic_records` layer and its work in the threads'.
-fn add_prepass(frame: &mut FrameBuffer, threads: &mut Vec<ThreadStats>, prepass: &PrepassOutcome) {
-    add_prepass_records(frame, prepass);
-    add_prepass_work(threads, &prepass.threads);
 }
 
 /// Counts the records the prepass made for each pixel in the frame's `ic_records` layer.

@@ -213,16 +213,7 @@ pub fn write_exr_rows(
     compression: &str,
     fill: &mut FillRows<'_>,
 ) -> Result<(), String> {
-    if u64::from(window.x) + u64::from(width) > u64::from(window.full_width)
-        || u64::from(window.y) + u64::from(height) > u64::from(window.full_height)
-        || window.x > i32::MAX as u32
-        || window.y > i32::MAX as u32
-    {
-        return Err(format!(
-            "the pixels {width}x{height} at ({}, {}) do not lie inside the image {}x{}",
-            window.x, window.y, window.full_width, window.full_height
-        ));
-    }
+    check_window(width, height, window)?;
     let names: Vec<CString> = channels.iter().map(|c| c_text(c.name)).collect();
     let planes: Vec<abi::icr_channel> = channels
         .iter()
@@ -233,14 +224,7 @@ pub fn write_exr_rows(
             full_float: c.full_float as i32,
         })
         .collect();
-    let attr_text: Vec<(CString, CString)> = attributes.iter().map(|(k, v)| (c_text(k), c_text(v))).collect();
-    let attrs: Vec<abi::icr_attribute> = attr_text
-        .iter()
-        .map(|(k, v)| abi::icr_attribute {
-            name: k.as_ptr(),
-            value: v.as_ptr(),
-        })
-        .collect();
+    let (_text, attrs) = c_attributes(attributes);
     let path = c_path(path)?;
     let compression = c_text(compression);
     let lib = library()?;
@@ -257,12 +241,7 @@ pub fn write_exr_rows(
             path.as_ptr(),
             width,
             height,
-            abi::icr_window {
-                x: window.x as i32,
-                y: window.y as i32,
-                full_width: window.full_width,
-                full_height: window.full_height,
-            },
+            c_window(window),
             planes.as_ptr(),
             planes.len(),
             attrs.as_ptr(),
@@ -279,6 +258,187 @@ pub fn write_exr_rows(
         std::panic::resume_unwind(panic);
     }
     if rc == 0 { Ok(()) } else { Err(buffer_message(&err)) }
+}
+
+/// A tiled EXR written as its tiles finish (any order, any thread), then finished under its
+/// final name with the attributes known only at the end (`icr_exr_stream_*` in ffi/image_io.h).
+pub struct ExrStream {
+    raw: *mut abi::icr_exr_stream,
+    lib: &'static abi::ImageLibrary,
+    width: u32,
+    height: u32,
+    tile: (u32, u32),
+    channels: usize,
+}
+
+// SAFETY: the C++ stream serialises every write behind its own lock, and open, finish and close
+// take the stream by value or are called once (Drop).
+unsafe impl Send for ExrStream {}
+unsafe impl Sync for ExrStream {}
+
+impl ExrStream {
+    /// Opens the stream's file at `path` (truncated): `width` x `height` pixels at `window`,
+    /// `tile` pixels a tile, the channels in order (half with `half_float` but those marked
+    /// `full_float`), OpenEXR's codec `compression`.
+    #[allow(clippy::too_many_arguments)]
+    pub fn open(
+        path: &Path,
+        width: u32,
+        height: u32,
+        window: Window,
+        channels: &[ChannelName<'_>],
+        half_float: bool,
+        compression: &str,
+        tile: (u32, u32),
+    ) -> Result<ExrStream, String> {
+        check_window(width, height, window)?;
+        let names: Vec<CString> = channels.iter().map(|c| c_text(c.name)).collect();
+        let planes: Vec<abi::icr_channel> = channels
+            .iter()
+            .zip(&names)
+            .map(|(c, n)| abi::icr_channel {
+                name: n.as_ptr(),
+                data: std::ptr::null(),
+                full_float: c.full_float as i32,
+            })
+            .collect();
+        let path = c_path(path)?;
+        let compression = c_text(compression);
+        let lib = library()?;
+        let mut err = vec![0 as c_char; ERR_LEN];
+        // SAFETY: every pointer refers to data alive for the call; the stream keeps copies.
+        let raw = unsafe {
+            lib.icr_exr_stream_open(
+                path.as_ptr(),
+                width,
+                height,
+                c_window(window),
+                planes.as_ptr(),
+                planes.len(),
+                half_float as i32,
+                compression.as_ptr(),
+                tile.0,
+                tile.1,
+                err.as_mut_ptr(),
+                err.len(),
+            )
+        };
+        if raw.is_null() {
+            return Err(buffer_message(&err));
+        }
+        Ok(ExrStream {
+            raw,
+            lib,
+            width,
+            height,
+            tile,
+            channels: channels.len(),
+        })
+    }
+
+    /// Writes the pixels `x0..x1` x `y0..y1` of the data window (0 its first row and column),
+    /// interleaved row by row, every channel in order: whole tiles (the rectangle starts on the
+    /// tile grid and ends on it or at the window's edge).
+    pub fn write(&self, (x0, y0): (u32, u32), (x1, y1): (u32, u32), pixels: &[f32]) -> Result<(), String> {
+        let (tw, th) = self.tile;
+        let on_grid = x0 < x1
+            && y0 < y1
+            && x1 <= self.width
+            && y1 <= self.height
+            && x0 % tw == 0
+            && y0 % th == 0
+            && (x1 % tw == 0 || x1 == self.width)
+            && (y1 % th == 0 || y1 == self.height);
+        if !on_grid {
+            return Err(format!(
+                "pixels ({x0}, {y0})..({x1}, {y1}) are not whole tiles of the stream"
+            ));
+        }
+        if pixels.len() != (x1 - x0) as usize * (y1 - y0) as usize * self.channels {
+            return Err(format!(
+                "{} values for the {}x{} pixels of a tile",
+                pixels.len(),
+                x1 - x0,
+                y1 - y0
+            ));
+        }
+        let mut err = vec![0 as c_char; ERR_LEN];
+        // SAFETY: the stream is open (finish consumes it); the buffer holds the rectangle's
+        // values, checked above.
+        let rc = unsafe {
+            self.lib
+                .icr_exr_stream_write(self.raw, x0, y0, x1, y1, pixels.as_ptr(), err.as_mut_ptr(), err.len())
+        };
+        if rc == 0 { Ok(()) } else { Err(buffer_message(&err)) }
+    }
+
+    /// Closes the stream and writes `path`: its header with `attributes` added, its tiles
+    /// copied as compressed. The stream's own file is left as it is.
+    pub fn finish(mut self, path: &Path, attributes: &[(String, String)]) -> Result<(), String> {
+        let (_text, attrs) = c_attributes(attributes);
+        let path = c_path(path)?;
+        let raw = std::mem::replace(&mut self.raw, std::ptr::null_mut());
+        let mut err = vec![0 as c_char; ERR_LEN];
+        // SAFETY: `raw` is open and given up here (finish frees it, Drop sees null); the
+        // attributes live for the call.
+        let rc = unsafe {
+            self.lib.icr_exr_stream_finish(
+                raw,
+                path.as_ptr(),
+                attrs.as_ptr(),
+                attrs.len(),
+                err.as_mut_ptr(),
+                err.len(),
+            )
+        };
+        if rc == 0 { Ok(()) } else { Err(buffer_message(&err)) }
+    }
+}
+
+impl Drop for ExrStream {
+    fn drop(&mut self) {
+        if !self.raw.is_null() {
+            // SAFETY: an open stream, closed once.
+            unsafe { self.lib.icr_exr_stream_close(self.raw) };
+        }
+    }
+}
+
+/// The C attributes (and the strings they point into, to keep alive beside them).
+fn c_attributes(attributes: &[(String, String)]) -> (Vec<(CString, CString)>, Vec<abi::icr_attribute>) {
+    let text: Vec<(CString, CString)> = attributes.iter().map(|(k, v)| (c_text(k), c_text(v))).collect();
+    let attrs = text
+        .iter()
+        .map(|(k, v)| abi::icr_attribute {
+            name: k.as_ptr(),
+            value: v.as_ptr(),
+        })
+        .collect();
+    (text, attrs)
+}
+
+fn c_window(window: Window) -> abi::icr_window {
+    abi::icr_window {
+        x: window.x as i32,
+        y: window.y as i32,
+        full_width: window.full_width,
+        full_height: window.full_height,
+    }
+}
+
+/// The pixels `width` x `height` at `window` lie inside the display window.
+fn check_window(width: u32, height: u32, window: Window) -> Result<(), String> {
+    if u64::from(window.x) + u64::from(width) > u64::from(window.full_width)
+        || u64::from(window.y) + u64::from(height) > u64::from(window.full_height)
+        || window.x > i32::MAX as u32
+        || window.y > i32::MAX as u32
+    {
+        return Err(format!(
+            "the pixels {width}x{height} at ({}, {}) do not lie inside the image {}x{}",
+            window.x, window.y, window.full_width, window.full_height
+        ));
+    }
+    Ok(())
 }
 
 /// Writes an 8-bit RGB PNG to exactly `path`.

@@ -33,6 +33,7 @@ pub mod prefetch;
 pub mod process;
 pub mod scene_io;
 pub mod signals;
+pub mod unnamed_file;
 
 use std::ffi::CStr;
 use std::os::raw::c_char;

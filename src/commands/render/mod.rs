@@ -318,8 +318,16 @@ pub fn run(args: &RenderArgs, sequence: SequenceRenderer) -> CommandResult {
     );
     // From here a SIGTERM or SIGINT stops the render cleanly (see sys::signals).
     crate::sys::signals::catch_termination().map_err(CommandError::failed)?;
+    let streamed = outputs.stream(args, &job)?;
     let render_start = Instant::now();
-    let rendered = render_resumable(&integrator, &job.camera, s, &progress, journal.as_ref().zip(restored));
+    let rendered = render_resumable(
+        &integrator,
+        &job.camera,
+        s,
+        &progress,
+        journal.as_ref().zip(restored),
+        streamed.as_ref(),
+    );
     let (frame, thread_stats) = (rendered.frame, rendered.threads);
     let render_s = render_start.elapsed().as_secs_f64();
     if let Some(cache) = &job.cache
@@ -348,7 +356,7 @@ pub fn run(args: &RenderArgs, sequence: SequenceRenderer) -> CommandResult {
     }
     stats.wall_s = wall.elapsed().as_secs_f64();
     stats.single_rank();
-    outputs.write(args, &job, &frame, &stats)?;
+    outputs.save(args, &job, frame, streamed, &stats)?;
     progress.done(&outputs.exr);
     if !args.quiet {
         eprintln!(

@@ -11,13 +11,14 @@ use crate::commands::CommandError;
 use crate::frames::FrameTag;
 use crate::image::denoise;
 use crate::image::framebuffer::{FrameBuffer, Layer};
-use crate::image::output;
+use crate::image::layered_exr::{self, ChannelPlan, ExrLayout, StreamedExr};
+use crate::image::output::{self, StagedFile};
 use crate::image::region::{REGION_ATTRIBUTE, SETTINGS_ATTRIBUTE};
+use crate::image::window::PixelWindow;
 use crate::job::Job;
 use crate::scene::SceneNeeds;
 use crate::shading::ShadingOptions;
 use crate::stats::RenderStats;
-use crate::sys::image_io::Window;
 use std::path::{Path, PathBuf};
 
 /// The layers this scene can put light in; the others are not written.
@@ -183,8 +184,117 @@ impl Outputs {
         Ok(outputs)
     }
 
-    /// Writes the EXR (with header), the preview and the statistics; with --denoise, denoises
-    /// first and writes the denoised layers too.
+    /// How this render's EXR is laid out: the layers the scene can light, `extra` layers (the
+    /// denoised ones), the data layers asked for, over `window`, in the render's tiles.
+    fn layout(&self, args: &RenderArgs, job: &Job, window: PixelWindow, extra: &[&str]) -> ExrLayout {
+        let layers = producible_layers(job.scene.needs(), &job.shading);
+        ExrLayout {
+            plan: ChannelPlan::new(&layers, extra, args.ic_records, &args.aovs()),
+            window,
+            tile: (job.settings.tile_width.max(1), job.settings.tile_height.max(1)),
+            half_float: args.half,
+            compression: args.compression,
+        }
+    }
+
+    /// The stream a one-process render writes its tiles into as they finish, or None where
+    /// the frame must be held whole: `--denoise` filters every pixel with its neighbours.
+    pub fn stream(&self, args: &RenderArgs, job: &Job) -> Result<Option<StreamedExr>, CommandError> {
+        if args.denoise {
+            return Ok(None);
+        }
+        let layout = self.layout(args, job, job.settings.window(&job.camera), &[]);
+        StreamedExr::open(&self.exr, layout, self.png.is_some())
+            .map(Some)
+            .map_err(|e| CommandError::failed(format!("{}: {e}", self.exr.display())))
+    }
+
+    /// The EXR's header: how to render it again, the settings parts of one image share, the
+    /// data layers' manifests, the statistics and the denoiser's account.
+    fn attributes(
+        &self,
+        args: &RenderArgs,
+        job: &Job,
+        stats: &RenderStats,
+        denoised: Option<&denoise::DenoisedFrame>,
+    ) -> Result<Vec<(String, String)>, CommandError> {
+        let mut attributes = vec![
+            (
+                "Software".to_string(),
+                format!("icrender {}", env!("CARGO_PKG_VERSION")),
+            ),
+            ("icrender/command".to_string(), super::rerun_command(args)),
+            ("icrender/scene".to_string(), args.scene.display().to_string()),
+            ("icrender/options".to_string(), options_line(args)),
+            ("icrender/view".to_string(), job.view.radiance_options(job.scene.origin)),
+            // OpenEXR's own attribute (a float: see cpp/image_io.cpp), for viewers and compositors.
+            ("PixelAspectRatio".to_string(), job.camera.pixel_aspect().to_string()),
+            ("icrender/mode".to_string(), stats.mode.to_string()),
+            ("icrender/ranks".to_string(), stats.ranks.to_string()),
+            ("icrender/render_time_s".to_string(), format!("{:.3}", stats.render_s)),
+            ("icrender/statistics".to_string(), serde_json::to_string(stats)?),
+        ];
+        let settings = match &self.frame {
+            Some(f) => format!("{}; frame {} at {} s", part_settings(args), f.number, f.time),
+            None => part_settings(args),
+        };
+        attributes.push((SETTINGS_ATTRIBUTE.to_string(), settings));
+        if let Some(f) = &self.frame {
+            attributes.extend(f.attributes());
+        }
+        if let Some(r) = job.settings.region {
+            attributes.push((REGION_ATTRIBUTE.to_string(), r.text()));
+        }
+        attributes.extend(data_attributes(&args.aovs(), &job.scene));
+        if let Some(d) = denoised {
+            attributes.extend(denoise_attributes(d, args));
+        }
+        Ok(attributes)
+    }
+
+    /// Writes what a one-process render made: finishes its stream, or writes the frame it held
+    /// whole.
+    pub fn save(
+        &self,
+        args: &RenderArgs,
+        job: &Job,
+        frame: Option<FrameBuffer>,
+        streamed: Option<StreamedExr>,
+        stats: &RenderStats,
+    ) -> Result<(), CommandError> {
+        match (streamed, frame) {
+            (Some(streamed), _) => self.finish_stream(args, job, streamed, stats),
+            (None, Some(frame)) => self.write(args, job, &frame, stats),
+            (None, None) => Err(CommandError::failed(format!(
+                "{}: the render held no frame and streamed none",
+                self.exr.display()
+            ))),
+        }
+    }
+
+    /// Finishes a streamed render: the EXR with its header, the preview from the stream's
+    /// reduced copy, the statistics.
+    pub fn finish_stream(
+        &self,
+        args: &RenderArgs,
+        job: &Job,
+        streamed: StreamedExr,
+        stats: &RenderStats,
+    ) -> Result<(), CommandError> {
+        let attributes = self.attributes(args, job, stats, None)?;
+        let (exr, preview) = streamed.finish(&attributes).map_err(|e| self.exr_failed(args, e))?;
+        let png = match (&self.png, preview) {
+            (Some(png), Some(kept)) => Some(
+                output::stage_preview(png, kept.width, kept.height, |i| kept.get(i))
+                    .map_err(|e| CommandError::failed(format!("{}: {e}", png.display()))),
+            ),
+            _ => None,
+        };
+        self.place(exr, png, stats)
+    }
+
+    /// Writes a frame held whole: with --denoise, denoises first and writes the denoised layers
+    /// too; the EXR (with header), the preview and the statistics.
     pub fn write(
         &self,
         args: &RenderArgs,
@@ -193,16 +303,6 @@ impl Outputs {
         stats: &RenderStats,
     ) -> Result<(), CommandError> {
         let layers = producible_layers(job.scene.needs(), &job.shading);
-        // The frame holds the pixels rendered: a part (--region) its region's only, written as
-        // the data window inside the whole image's display window.
-        let region = job.settings.region;
-        let held = frame.window();
-        let window = Window {
-            x: held.area.x0,
-            y: held.area.y0,
-            full_width: held.full_width,
-            full_height: held.full_height,
-        };
         let denoised = if args.denoise {
             let quality = denoise_quality(args);
             Some(
@@ -233,40 +333,7 @@ impl Outputs {
             stats.denoise_s = Some(d.seconds);
             stats.denoise_filtered_pixels = Some(d.filtered_pixels);
         }
-        let stats_json = serde_json::to_string(&stats)?;
-        let attributes = vec![
-            (
-                "Software".to_string(),
-                format!("icrender {}", env!("CARGO_PKG_VERSION")),
-            ),
-            ("icrender/command".to_string(), super::rerun_command(args)),
-            ("icrender/scene".to_string(), args.scene.display().to_string()),
-            ("icrender/options".to_string(), options_line(args)),
-            ("icrender/view".to_string(), job.view.radiance_options(job.scene.origin)),
-            // OpenEXR's own attribute (a float: see cpp/image_io.cpp), for viewers and compositors.
-            ("PixelAspectRatio".to_string(), job.camera.pixel_aspect().to_string()),
-            ("icrender/mode".to_string(), stats.mode.to_string()),
-            ("icrender/ranks".to_string(), stats.ranks.to_string()),
-            ("icrender/render_time_s".to_string(), format!("{:.3}", stats.render_s)),
-            ("icrender/statistics".to_string(), stats_json),
-        ];
-        let aovs = args.aovs();
-        let mut attributes = attributes;
-        let settings = match &self.frame {
-            Some(f) => format!("{}; frame {} at {} s", part_settings(args), f.number, f.time),
-            None => part_settings(args),
-        };
-        attributes.push((SETTINGS_ATTRIBUTE.to_string(), settings));
-        if let Some(f) = &self.frame {
-            attributes.extend(f.attributes());
-        }
-        if let Some(r) = region {
-            attributes.push((REGION_ATTRIBUTE.to_string(), r.text()));
-        }
-        attributes.extend(data_attributes(&aovs, &job.scene));
-        if let Some(d) = &denoised {
-            attributes.extend(denoise_attributes(d, args));
-        }
+        let attributes = self.attributes(args, job, &stats, denoised.as_ref())?;
         let extra: Vec<(String, &[glam::Vec3])> = denoised.as_ref().map_or_else(Vec::new, |d| {
             d.layers
                 .iter()
@@ -277,7 +344,9 @@ impl Outputs {
                 )))
                 .collect()
         });
-        let extra: Vec<(&str, &[glam::Vec3])> = extra.iter().map(|(n, p)| (n.as_str(), *p)).collect();
+        let names: Vec<&str> = extra.iter().map(|(n, _)| n.as_str()).collect();
+        let planes: Vec<&[glam::Vec3]> = extra.iter().map(|(_, p)| *p).collect();
+        let layout = self.layout(args, job, frame.window(), &names);
         // The preview is made beside the EXR, on a thread of its own, and put in place only
         // once the EXR is: 0.5 s of a 1080p frame's writing no longer comes after it.
         let preview = |png: &std::path::PathBuf| {
@@ -290,31 +359,11 @@ impl Outputs {
         };
         let (exr, png) = std::thread::scope(|scope| {
             let png = self.png.as_ref().map(|png| scope.spawn(move || preview(png)));
-            let exr = output::write_exr(
-                &self.exr,
-                frame,
-                window,
-                &layers,
-                &aovs,
-                &extra,
-                &attributes,
-                args.half,
-                args.compression,
-                args.ic_records,
-            );
+            let exr = layered_exr::write_whole(&self.exr, layout, frame, &planes, &attributes);
             (exr, png.map(|p| p.join().expect("the preview's thread panicked")))
         });
-        exr.map_err(|e| {
-            CommandError::failed(format!("{}: {e}; {}", self.exr.display(), super::kept_after_stop(args)))
-        })?;
-        if let (Some(staged), Some(png)) = (png, &self.png) {
-            staged?
-                .place()
-                .map_err(|e| CommandError::failed(format!("{}: {e}", png.display())))?;
-        }
-        if let Some(path) = &self.stats {
-            output::write_json(path, &stats).map_err(|e| CommandError::failed(format!("{}: {e}", path.display())))?;
-        }
+        let exr = exr.map_err(|e| self.exr_failed(args, e))?;
+        self.place(exr, png, &stats)?;
         if let Some(d) = &denoised
             && !args.quiet
         {
@@ -336,6 +385,32 @@ impl Outputs {
                     left_raw_text(d)
                 );
             }
+        }
+        Ok(())
+    }
+
+    /// What a failed EXR says: the file, the failure and what a rerun resumes.
+    fn exr_failed(&self, args: &RenderArgs, e: String) -> CommandError {
+        CommandError::failed(format!("{}: {e}; {}", self.exr.display(), super::kept_after_stop(args)))
+    }
+
+    /// Puts the finished EXR in place, then the preview (only once the EXR is), then writes the
+    /// statistics.
+    fn place(
+        &self,
+        exr: StagedFile,
+        png: Option<Result<StagedFile, CommandError>>,
+        stats: &RenderStats,
+    ) -> Result<(), CommandError> {
+        exr.place()
+            .map_err(|e| CommandError::failed(format!("{}: {e}", self.exr.display())))?;
+        if let (Some(staged), Some(png)) = (png, &self.png) {
+            staged?
+                .place()
+                .map_err(|e| CommandError::failed(format!("{}: {e}", png.display())))?;
+        }
+        if let Some(path) = &self.stats {
+            output::write_json(path, stats).map_err(|e| CommandError::failed(format!("{}: {e}", path.display())))?;
         }
         Ok(())
     }

@@ -1,0 +1,432 @@
+//! The layered EXR a render writes: which channels, where each takes its values, and how the
+//! pixels reach the file. A one-process render streams them (`StreamedExr`): each finished tile
+//! is made into the file's channels and compressed while the render goes on, and only the
+//! reduced preview stays in memory, so memory no longer grows by 200 bytes a pixel and the
+//! compression no longer follows the last tile. A frame held whole (`--denoise`, which needs
+//! every pixel's neighbours; an MPI master) goes through the same stream at the end
+//! (`write_whole`). Either way the file is tiled, the render's own tiles in random order, and
+//! appears under its name only once finished.
+
+use super::cryptomatte::{RANKS, Ranks};
+use super::data::{Aov, PixelData};
+use super::framebuffer::{FrameBuffer, Layer, PixelValue};
+use super::output::{self, CRYPTO_MATERIAL, CRYPTO_OBJECT, ExrCompression, StagedFile};
+use super::preview::PreviewBuffer;
+use super::region::Region;
+use super::window::PixelWindow;
+use crate::sys::image_io::{ChannelName, ExrStream, Window};
+use crate::sys::unnamed_file::UnnamedFile;
+use crate::tiles::{Tile, store_tile};
+use glam::Vec3;
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+
+/// Where a channel of the file takes its values from, pixel by pixel. Data layers and
+/// Cryptomatte stay 32-bit float whatever `--half` says (a half float cannot hold an ID's bits,
+/// nor a far depth or a world position to the precision a compositor needs).
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Source {
+    Composite(usize),
+    Alpha,
+    /// A light layer and its component.
+    Light(Layer, usize),
+    /// A layer made after the render (a denoised one), by its place in `extra_layers`.
+    Extra(usize, usize),
+    Records,
+    Albedo(usize),
+    Normal(usize),
+    Depth,
+    Position(usize),
+    /// A Cryptomatte type's rank: its ID's bits or its coverage.
+    Crypto {
+        object: bool,
+        rank: usize,
+        id: bool,
+    },
+}
+
+impl Source {
+    fn full_float(self) -> bool {
+        !matches!(
+            self,
+            Source::Composite(_) | Source::Alpha | Source::Light(..) | Source::Extra(..) | Source::Records
+        )
+    }
+
+    fn value(self, frame: &FrameBuffer, extra: &[&[Vec3]], i: usize) -> f32 {
+        let data = |i: usize| -> &PixelData { &frame.data()[i] };
+        match self {
+            Source::Composite(c) => frame.composite_at(i)[c],
+            Source::Alpha => 1.0,
+            Source::Light(layer, c) => frame.layer(layer)[i][c],
+            Source::Extra(k, c) => extra[k][i][c],
+            Source::Records => frame.records()[i],
+            Source::Albedo(c) => data(i).albedo[c],
+            Source::Normal(c) => data(i).normal[c],
+            Source::Depth => data(i).depth,
+            Source::Position(c) => data(i).position[c],
+            Source::Crypto { object, rank, id } => {
+                let ranks: &Ranks = if object { &data(i).object } else { &data(i).material };
+                let entry = ranks[rank];
+                if id { f32::from_bits(entry.id) } else { entry.coverage }
+            }
+        }
+    }
+}
+
+const RGB: [&str; 3] = ["R", "G", "B"];
+const XYZ: [&str; 3] = ["X", "Y", "Z"];
+
+/// The channels of the file, in order, and where each takes its values.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ChannelPlan {
+    channels: Vec<(String, Source)>,
+}
+
+impl ChannelPlan {
+    /// The composite as R G B A, each light layer as `layer.R/G/B`, each of `extra_layers` (the
+    /// denoised ones) the same way, the records layer when asked, and the data layers of `aovs`.
+    pub fn new(layers: &[Layer], extra_layers: &[&str], records_layer: bool, aovs: &[Aov]) -> ChannelPlan {
+        let mut channels = three("", RGB, Source::Composite);
+        channels.push(("A".to_string(), Source::Alpha));
+        for &l in layers {
+            channels.extend(three(l.name(), RGB, |c| Source::Light(l, c)));
+        }
+        for (k, name) in extra_layers.iter().enumerate() {
+            channels.extend(three(name, RGB, |c| Source::Extra(k, c)));
+        }
+        if records_layer {
+            channels.push(("ic_records.Y".to_string(), Source::Records));
+        }
+        channels.extend(data_channels(aovs));
+        ChannelPlan { channels }
+    }
+
+    fn names(&self) -> Vec<ChannelName<'_>> {
+        self.channels
+            .iter()
+            .map(|(name, source)| ChannelName {
+                name,
+                full_float: source.full_float(),
+            })
+            .collect()
+    }
+
+    fn extra_layers(&self) -> usize {
+        self.channels
+            .iter()
+            .filter_map(|(_, s)| match s {
+                Source::Extra(k, _) => Some(k + 1),
+                _ => None,
+            })
+            .max()
+            .unwrap_or(0)
+    }
+
+    /// The values of `frame`'s pixel `i`, channel by channel, into `out`.
+    fn fill(&self, frame: &FrameBuffer, extra: &[&[Vec3]], i: usize, out: &mut [f32]) {
+        for (value, (_, source)) in out.iter_mut().zip(&self.channels) {
+            *value = source.value(frame, extra, i);
+        }
+    }
+}
+
+/// A three-channel layer's channels, `layer.R` ... (or `R` ... for the unnamed layer), each
+/// taking its values from `source` of its component.
+fn three(layer: &str, names: [&str; 3], source: impl Fn(usize) -> Source) -> Vec<(String, Source)> {
+    (0..3)
+        .map(|c| match layer {
+            "" => (names[c].to_string(), source(c)),
+            _ => (format!("{layer}.{}", names[c]), source(c)),
+        })
+        .collect()
+}
+
+/// The channels of the data layers in `aovs`, in that order.
+fn data_channels(aovs: &[Aov]) -> Vec<(String, Source)> {
+    let crypto = |layer: &str, object: bool| {
+        let mut out = Vec::new();
+        for level in 0..RANKS / 2 {
+            for (c, channel) in ["R", "G", "B", "A"].iter().enumerate() {
+                let source = Source::Crypto {
+                    object,
+                    rank: 2 * level + c / 2,
+                    id: c % 2 == 0,
+                };
+                out.push((format!("{layer}{level:02}.{channel}"), source));
+            }
+        }
+        out
+    };
+    let mut channels = Vec::new();
+    for aov in aovs {
+        match aov {
+            Aov::Albedo => channels.extend(three("albedo", RGB, Source::Albedo)),
+            Aov::Normal => channels.extend(three("normal", XYZ, Source::Normal)),
+            Aov::Depth => channels.push(("depth.Z".to_string(), Source::Depth)),
+            Aov::Position => channels.extend(three("position", XYZ, Source::Position)),
+            Aov::CryptoObject => channels.extend(crypto(CRYPTO_OBJECT, true)),
+            Aov::CryptoMaterial => channels.extend(crypto(CRYPTO_MATERIAL, false)),
+        }
+    }
+    channels
+}
+
+/// How the file is laid out: its channels, the pixels it holds, the tile size (the render's
+/// own, so that a render tile is a file tile), the sample format and the codec.
+#[derive(Clone, Debug)]
+pub struct ExrLayout {
+    pub plan: ChannelPlan,
+    pub window: PixelWindow,
+    pub tile: (u32, u32),
+    pub half_float: bool,
+    pub compression: ExrCompression,
+}
+
+impl ExrLayout {
+    fn exr_window(&self) -> Window {
+        Window {
+            x: self.window.area.x0,
+            y: self.window.area.y0,
+            full_width: self.window.full_width,
+            full_height: self.window.full_height,
+        }
+    }
+}
+
+/// The file the stream writes into until it is finished: without a name where the file system
+/// allows (a killed render leaves nothing), else a hidden name beside the target, removed on drop.
+enum Scratch {
+    Unnamed(UnnamedFile),
+    Named(PathBuf),
+}
+
+impl Scratch {
+    fn beside(target: &Path) -> Scratch {
+        let dir = target.parent().unwrap_or(Path::new(""));
+        match UnnamedFile::create_in(dir) {
+            Ok(file) => Scratch::Unnamed(file),
+            Err(_) => {
+                let name = target
+                    .file_name()
+                    .map(|n| n.to_string_lossy().into_owned())
+                    .unwrap_or_else(|| "output".into());
+                Scratch::Named(target.with_file_name(format!(".{name}.stream-{}", std::process::id())))
+            }
+        }
+    }
+
+    fn path(&self) -> PathBuf {
+        match self {
+            Scratch::Unnamed(file) => file.path(),
+            Scratch::Named(path) => path.clone(),
+        }
+    }
+}
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        if let Scratch::Named(path) = self {
+            let _ = std::fs::remove_file(path);
+        }
+    }
+}
+
+/// A file tile some of whose pixels have come (a region whose corner is off the render's tile
+/// grid: a render tile then covers parts of up to four file tiles).
+struct PartTile {
+    values: Vec<f32>,
+    missing: usize,
+}
+
+/// A layered EXR written as the render's tiles finish, and the preview's reduced copy.
+pub struct StreamedExr {
+    layout: ExrLayout,
+    target: PathBuf,
+    // Declared before the scratch file: dropped (closed) first.
+    stream: ExrStream,
+    scratch: Scratch,
+    parts: Mutex<HashMap<(u32, u32), PartTile>>,
+    preview: Option<Mutex<PreviewBuffer>>,
+    /// The first write that failed: the render stops, and `finish` reports it.
+    failure: Mutex<Option<String>>,
+}
+
+impl StreamedExr {
+    /// Opens the stream for `target` (written by `finish`); with `preview`, keeps the reduced
+    /// copy the preview is made from.
+    pub fn open(target: &Path, layout: ExrLayout, preview: bool) -> Result<StreamedExr, String> {
+        let scratch = Scratch::beside(target);
+        let stream = ExrStream::open(
+            &scratch.path(),
+            layout.window.width(),
+            layout.window.height(),
+            layout.exr_window(),
+            &layout.plan.names(),
+            layout.half_float,
+            layout.compression.name(),
+            layout.tile,
+        )
+        .map_err(|e| output::explain_failure(target, e))?;
+        let (w, h) = (layout.window.width(), layout.window.height());
+        Ok(StreamedExr {
+            preview: preview.then(|| Mutex::new(PreviewBuffer::new(w, h))),
+            layout,
+            target: target.to_path_buf(),
+            stream,
+            scratch,
+            parts: Mutex::new(HashMap::new()),
+            failure: Mutex::new(None),
+        })
+    }
+
+    /// Whether a write failed (the render had better stop: the file cannot be finished).
+    pub fn failed(&self) -> bool {
+        self.failure.lock().unwrap_or_else(|e| e.into_inner()).is_some()
+    }
+
+    /// Makes a finished render tile's pixels into the file's channels and writes the file tiles
+    /// it completes. A failure is kept for `finish` (see `failed`).
+    pub fn store(&self, tile: &Tile, values: &[PixelValue]) {
+        if self.failed() {
+            return;
+        }
+        if let Err(e) = self.try_store(tile, values) {
+            let mut first = self.failure.lock().unwrap_or_else(|e| e.into_inner());
+            first.get_or_insert_with(|| output::explain_failure(&self.target, e));
+        }
+    }
+
+    fn try_store(&self, tile: &Tile, values: &[PixelValue]) -> Result<(), String> {
+        let area = Region {
+            x0: tile.x0,
+            y0: tile.y0,
+            x1: tile.x1,
+            y1: tile.y1,
+        };
+        let held = PixelWindow::new(area, self.layout.window.full_width, self.layout.window.full_height);
+        let mut frame = FrameBuffer::windowed(held);
+        store_tile(&mut frame, tile, values);
+        if let Some(preview) = &self.preview {
+            let mut preview = preview.lock().unwrap_or_else(|e| e.into_inner());
+            for (i, (x, y)) in (0..held.pixels()).map(|i| (i, held.position(i))) {
+                if let Some(at) = self.layout.window.index(x, y) {
+                    preview.set(at, frame.composite_at(i));
+                }
+            }
+        }
+        let n = self.layout.plan.channels.len();
+        let origin = (self.layout.window.area.x0, self.layout.window.area.y0);
+        // The tile in the file's coordinates (0 is the window's first row and column).
+        let (x0, y0, x1, y1) = (
+            tile.x0 - origin.0,
+            tile.y0 - origin.1,
+            tile.x1 - origin.0,
+            tile.y1 - origin.1,
+        );
+        let (tw, th) = self.layout.tile;
+        let (w, h) = (self.layout.window.width(), self.layout.window.height());
+        for ty in y0 / th..y1.div_ceil(th) {
+            for tx in x0 / tw..x1.div_ceil(tw) {
+                let file_tile = (tx * tw, ty * th, ((tx + 1) * tw).min(w), ((ty + 1) * th).min(h));
+                let (fx0, fy0, fx1, fy1) = file_tile;
+                let fw = (fx1 - fx0) as usize;
+                let overlap = (x0.max(fx0), y0.max(fy0), x1.min(fx1), y1.min(fy1));
+                let whole = overlap == file_tile;
+                let mut own = Vec::new();
+                let mut parts = None;
+                let buffer: &mut Vec<f32> = if whole {
+                    own.resize(fw * (fy1 - fy0) as usize * n, 0.0);
+                    &mut own
+                } else {
+                    let guard = parts.insert(self.parts.lock().unwrap_or_else(|e| e.into_inner()));
+                    let part = guard.entry((tx, ty)).or_insert_with(|| PartTile {
+                        values: vec![0.0; fw * (fy1 - fy0) as usize * n],
+                        missing: fw * (fy1 - fy0) as usize,
+                    });
+                    part.missing -= ((overlap.2 - overlap.0) * (overlap.3 - overlap.1)) as usize;
+                    &mut part.values
+                };
+                for y in overlap.1..overlap.3 {
+                    for x in overlap.0..overlap.2 {
+                        let i = ((y - y0) * (x1 - x0) + (x - x0)) as usize;
+                        let at = ((y - fy0) as usize * fw + (x - fx0) as usize) * n;
+                        self.layout.plan.fill(&frame, &[], i, &mut buffer[at..at + n]);
+                    }
+                }
+                let complete = match parts.as_mut() {
+                    None => Some(own),
+                    Some(guard) => match guard.get(&(tx, ty)) {
+                        Some(part) if part.missing == 0 => guard.remove(&(tx, ty)).map(|p| p.values),
+                        _ => None,
+                    },
+                };
+                drop(parts);
+                if let Some(values) = complete {
+                    self.stream.write((fx0, fy0), (fx1, fy1), &values)?;
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Writes the file, staged beside its target with `attributes` in its header (the
+    /// statistics, known only now), and the preview staged beside it; neither is in place yet.
+    pub fn finish(self, attributes: &[(String, String)]) -> Result<(StagedFile, Option<PreviewBuffer>), String> {
+        if let Some(e) = self.failure.into_inner().unwrap_or_else(|e| e.into_inner()) {
+            return Err(e);
+        }
+        let parts = self.parts.into_inner().unwrap_or_else(|e| e.into_inner());
+        if !parts.is_empty() {
+            return Err(format!("{} of the file's tiles were never complete", parts.len()));
+        }
+        let stream = self.stream;
+        let staged = output::stage(&self.target, |tmp| stream.finish(tmp, attributes))?;
+        drop(self.scratch);
+        let preview = self.preview.map(|p| p.into_inner().unwrap_or_else(|e| e.into_inner()));
+        Ok((staged, preview))
+    }
+}
+
+/// Writes a frame held whole (and `extra` layers made after the render: the denoised ones, in
+/// `layout.plan`'s order) through a stream, a row of file tiles at a time, then stages the file
+/// with `attributes` beside `target`.
+pub fn write_whole(
+    target: &Path,
+    layout: ExrLayout,
+    frame: &FrameBuffer,
+    extra: &[&[Vec3]],
+    attributes: &[(String, String)],
+) -> Result<StagedFile, String> {
+    let pixels = frame.window().pixels();
+    if extra.len() != layout.plan.extra_layers() || extra.iter().any(|plane| plane.len() != pixels) {
+        return Err(format!(
+            "the layers made after the render do not match the frame's {}x{} pixels",
+            frame.width, frame.height
+        ));
+    }
+    let streamed = StreamedExr::open(target, layout, false)?;
+    let (w, h) = (frame.width, frame.height);
+    let th = streamed.layout.tile.1;
+    let n = streamed.layout.plan.channels.len();
+    let mut band = Vec::new();
+    for y0 in (0..h).step_by(th as usize) {
+        let y1 = (y0 + th).min(h);
+        band.clear();
+        band.resize((y1 - y0) as usize * w as usize * n, 0.0);
+        for (k, values) in band.chunks_exact_mut(n).enumerate() {
+            streamed
+                .layout
+                .plan
+                .fill(frame, extra, y0 as usize * w as usize + k, values);
+        }
+        // One call a row of tiles: OpenEXR compresses them side by side on its threads.
+        streamed
+            .stream
+            .write((0, y0), (w, y1), &band)
+            .map_err(|e| output::explain_failure(target, e))?;
+    }
+    let (staged, _) = streamed.finish(attributes)?;
+    Ok(staged)
+}
