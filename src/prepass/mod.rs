@@ -39,7 +39,7 @@ use crate::tiles::Tile;
 use crate::tracer::SurfaceHit;
 pub use pool::{Alone, GridRows, PixelRows, Pool, RoundRecords, Share, Timed};
 use schedule::finest_rounds;
-pub use schedule::{rounds, rounds_in, sample_rounds};
+pub use schedule::{Lattice, sample_rounds};
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
@@ -472,7 +472,7 @@ impl<'c> RecordSet<'c> {
     /// The set for a prepass over `area`, from what `cache` holds.
     pub fn new(cache: &'c IrradianceCache, area: crate::image::region::Region) -> Self {
         let snapshot = cache.snapshot();
-        let lattice = rounds_in(area).len();
+        let lattice = Lattice::of(area).len();
         RecordSet {
             cache,
             found: snapshot.len(),
@@ -696,11 +696,11 @@ fn run_watched<P: Pool>(
         outcome.round_log.push(log);
         pool.kept(log, &kept)
     };
-    let lattice = rounds_in(area);
+    let lattice = Lattice::of(area);
     let mut total = lattice.len();
     let mut go_on = true;
-    for sites in lattice {
-        run(sites, &mut set, &mut outcome, pool)?;
+    for k in 0..lattice.len() {
+        run(lattice.sites(k), &mut set, &mut outcome, pool)?;
         go_on = watch(outcome.rounds, total);
         if !go_on {
             break;

@@ -85,39 +85,38 @@ pub fn render_resumable(
         settings.tile_height,
         settings.region,
     );
-    // The frame holds the area rendered only: a region task's memory grows with its region.
+    // The pixels rendered: the whole image, or a region task's region.
     let window = settings.window(camera);
-    let (journal, todo, start, restored_tiles) = match checkpoint {
+    // What an earlier run finished: the journal's tiles, in a frame of the area rendered.
+    let (journal, todo, restored) = match checkpoint {
         Some((journal, restored)) => {
             assert_eq!(
                 restored.frame.window(),
                 window,
                 "the journal was opened for another area"
             );
-            (Some(journal), restored.unfinished(), restored.frame, restored.done)
+            (Some(journal), restored.unfinished(), Some(restored))
         }
-        None => (
-            None,
-            (0..all.len()).collect(),
-            FrameBuffer::windowed(window),
-            Vec::new(),
-        ),
+        None => (None, (0..all.len()).collect(), None),
     };
     progress.advance(all.len() - todo.len());
-    let sink = match streamed {
-        Some(stream) => {
+    let sink = match (streamed, restored) {
+        (Some(stream), restored) => {
             let sink = Sink::Streamed {
                 stream,
                 prepass_records: prepass.as_ref().map(PrepassRecords::of),
             };
             // The tiles an earlier run finished go to the stream first.
-            for (tile, _) in all.iter().zip(&restored_tiles).filter(|(_, done)| **done) {
-                sink.store(tile, start.tile_values(tile));
+            if let Some(restored) = restored {
+                for (tile, _) in all.iter().zip(&restored.done).filter(|(_, done)| **done) {
+                    sink.store(tile, restored.frame.tile_values(tile));
+                }
             }
-            drop(start);
             sink
         }
-        None => Sink::Held(Mutex::new(start)),
+        (None, Some(restored)) => Sink::Held(Mutex::new(restored.frame)),
+        // The frame holds the area rendered only: a region task's memory grows with its region.
+        (None, None) => Sink::Held(Mutex::new(FrameBuffer::windowed(window))),
     };
     let queue = TileQueue::new(if stopped() { Vec::new() } else { todo });
     let threads = settings.threads.max(1).min(queue.len().max(1));
