@@ -12,6 +12,8 @@ use super::{ParallelError, ParallelResult};
 use super::{Setup, end_job};
 use crate::diagnostics::warn;
 use crate::image::framebuffer::FrameBuffer;
+use crate::image::layered_exr::StreamedExr;
+use crate::render::PrepassRecords;
 use crate::stats::{RankReport, RenderStats};
 use crate::tiles::{TileQueue, store_tile};
 use std::collections::{HashSet, VecDeque};
@@ -50,7 +52,10 @@ pub struct MasterCore<'a, 'c> {
     pub queue: TileQueue,
     /// Tiles each rank began during the prepass (`Setup::claims`) and has not been given yet.
     claimed: Vec<VecDeque<u32>>,
-    pub frame: FrameBuffer,
+    /// Where finished tiles go: the EXR's stream as they come (the default build: a tile comes
+    /// complete), or a frame held whole (--denoise; the progressive modes, whose indirect
+    /// light may come after its tile).
+    image: MasterImage<'a>,
     tiles_done: Vec<bool>,
     pub relay: RecordRelay<'a>,
     pub reports: Vec<Option<RankReport>>,
@@ -59,15 +64,34 @@ pub struct MasterCore<'a, 'c> {
 }
 
 impl<'a, 'c> MasterCore<'a, 'c> {
-    fn new(comm: &'a Comm<'c>, setup: &'a Setup<'a>) -> Self {
+    fn new(comm: &'a Comm<'c>, setup: &'a Setup<'a>, stream: Option<&'a StreamedExr>) -> Self {
         let (size, tiles) = (comm.size() as usize, setup.tiles.len());
-        let (frame, tiles_done, todo) = match &setup.checkpoint {
-            Some((_, restored)) => (restored.frame.clone(), restored.done.clone(), restored.unfinished()),
-            None => (
-                FrameBuffer::new(setup.job_in.width, setup.job_in.height),
-                vec![false; tiles],
-                (0..tiles).collect(),
-            ),
+        let (tiles_done, todo) = match &setup.checkpoint {
+            Some((_, restored)) => (restored.done.clone(), restored.unfinished()),
+            None => (vec![false; tiles], (0..tiles).collect()),
+        };
+        let image = match stream {
+            Some(stream) => {
+                let prepass_records = setup.prepass.as_ref().map(PrepassRecords::of);
+                // The tiles an earlier run finished go to the stream first.
+                if let Some((_, restored)) = &setup.checkpoint {
+                    for (tile, _) in setup.tiles.iter().zip(&restored.done).filter(|(_, done)| **done) {
+                        let mut values = restored.frame.tile_values(tile);
+                        if let Some(records) = &prepass_records {
+                            records.add_to(tile, &mut values);
+                        }
+                        stream.store(tile, &values);
+                    }
+                }
+                MasterImage::Streamed {
+                    stream,
+                    prepass_records,
+                }
+            }
+            None => MasterImage::Held(match &setup.checkpoint {
+                Some((_, restored)) => restored.frame.clone(),
+                None => FrameBuffer::new(setup.job_in.width, setup.job_in.height),
+            }),
         };
         // A claimed tile goes to its rank alone; one an earlier run finished (--checkpoint) to nobody.
         let unfinished: HashSet<usize> = todo.iter().copied().collect();
@@ -88,7 +112,7 @@ impl<'a, 'c> MasterCore<'a, 'c> {
             setup,
             queue: TileQueue::new(todo),
             claimed,
-            frame,
+            image,
             tiles_done,
             relay: RecordRelay::new(size, setup.cache()),
             reports: vec![None; size],
@@ -156,7 +180,19 @@ impl<'a, 'c> MasterCore<'a, 'c> {
         if let Some((journal, _)) = &self.setup.checkpoint {
             journal.tile(index, finished.requests, &pixels);
         }
-        store_tile(&mut self.frame, tile, &pixels);
+        match &mut self.image {
+            MasterImage::Held(frame) => store_tile(frame, tile, &pixels),
+            MasterImage::Streamed {
+                stream,
+                prepass_records,
+            } => {
+                let mut pixels = pixels;
+                if let Some(records) = prepass_records {
+                    records.add_to(tile, &mut pixels);
+                }
+                stream.store(tile, &pixels);
+            }
+        }
         self.tiles_done[index as usize] = true;
         Ok(())
     }
@@ -181,8 +217,13 @@ impl<'a, 'c> MasterCore<'a, 'c> {
                 }
                 // Indirect light computed elsewhere for a pixel, before or after its tile came
                 // (`store_tile` adds to what the pixel has).
+                let MasterImage::Held(frame) = &mut self.image else {
+                    return Err(format!(
+                        "rank {source} sent indirect light for pixels whose tiles went to the file as they came"
+                    ));
+                };
                 for r in results {
-                    self.frame.add(r.pixel as usize, r.layer, r.value);
+                    frame.add(r.pixel as usize, r.layer, r.value);
                 }
             }
             other => sharing.on_message(self, source, other)?,
@@ -194,8 +235,21 @@ impl<'a, 'c> MasterCore<'a, 'c> {
 /// The master's part: the one master with the mode's policy, then the image, statistics, table.
 pub fn run(comm: &Comm<'_>, setup: &Setup<'_>, sharing: &mut dyn Sharing, wall: Instant) -> ParallelResult {
     let (job_in, job) = (setup.job_in, &setup.job);
-    let (mut frame, ranks, render_s) =
-        control(comm, setup, sharing).unwrap_or_else(|e| end_job(comm, setup.cache(), &e));
+    // With the prepass every tile comes complete (its indirect light read from the finished
+    // record set), so it can go to the file as it comes.
+    let streamed = match setup.prepass.is_some() {
+        true => job_in
+            .host
+            .stream(job)
+            .unwrap_or_else(|e| end_job(comm, setup.cache(), &e)),
+        false => None,
+    };
+    let (image, ranks, render_s) =
+        control(comm, setup, sharing, streamed.as_ref()).unwrap_or_else(|e| end_job(comm, setup.cache(), &e));
+    let frame = match image {
+        MasterImage::Held(frame) => Some(frame),
+        MasterImage::Streamed { .. } => None,
+    };
     if let Some(cache) = setup.cache()
         && let Err(e) = cache.finish()
     {
@@ -207,12 +261,20 @@ pub fn run(comm: &Comm<'_>, setup: &Setup<'_>, sharing: &mut dyn Sharing, wall: 
     stats.threads = job_in.threads.unwrap_or(1);
     stats.tiles_restored = setup.checkpoint.as_ref().map_or(0, |(_, r)| r.count()) as u64;
     stats.add_ranks(ranks);
+    let mut frame = frame;
     if let Some(prepass) = &setup.prepass {
         stats.add_prepass(prepass);
-        crate::render::add_prepass_records(&mut frame, prepass);
+        if let Some(frame) = &mut frame {
+            crate::render::add_prepass_records(frame, prepass);
+        }
     }
     stats.wall_s = wall.elapsed().as_secs_f64();
-    job_in.host.write(job, &frame, &stats).map_err(ParallelError::Failed)?;
+    match (streamed, frame) {
+        (Some(streamed), _) => job_in.host.finish_stream(job, streamed, &stats),
+        (None, Some(frame)) => job_in.host.write(job, &frame, &stats),
+        (None, None) => Err("the master held no frame and streamed none".to_string()),
+    }
+    .map_err(ParallelError::Failed)?;
     if !job_in.quiet {
         print_table(&stats);
     }
@@ -220,13 +282,14 @@ pub fn run(comm: &Comm<'_>, setup: &Setup<'_>, sharing: &mut dyn Sharing, wall: 
 }
 
 /// The render under the mode's policy: the image, every rank's report and the render's seconds.
-fn control(
-    comm: &Comm<'_>,
-    setup: &Setup<'_>,
+fn control<'a>(
+    comm: &'a Comm<'_>,
+    setup: &'a Setup<'a>,
     sharing: &mut dyn Sharing,
-) -> Result<(FrameBuffer, Vec<RankReport>, f64), String> {
+    stream: Option<&'a StreamedExr>,
+) -> Result<(MasterImage<'a>, Vec<RankReport>, f64), String> {
     let start = Instant::now();
-    let mut core = MasterCore::new(comm, setup);
+    let mut core = MasterCore::new(comm, setup, stream);
     sharing.start(&mut core);
     while !sharing.finished(&core) {
         let reports = &core.reports;
@@ -251,7 +314,17 @@ fn control(
         ..super::traffic_report(0, "mc", &[comm.counters], comm.counters.idle_s())
     }];
     ranks.extend(core.reports.into_iter().skip(1).flatten());
-    Ok((core.frame, ranks, render_s))
+    Ok((core.image, ranks, render_s))
+}
+
+/// Where the master puts finished tiles (`MasterCore::image`).
+pub enum MasterImage<'a> {
+    Held(FrameBuffer),
+    Streamed {
+        stream: &'a StreamedExr,
+        /// The prepass's records by pixel, for a streamed tile's `ic_records` layer.
+        prepass_records: Option<PrepassRecords>,
+    },
 }
 
 /// The line that ends a job when a rank has fallen silent.

@@ -18,6 +18,7 @@ pub mod worker;
 
 use crate::checkpoint::{Checkpoint, Restored};
 use crate::image::framebuffer::FrameBuffer;
+use crate::image::layered_exr::StreamedExr;
 use crate::irradiance::IrradianceCache;
 use crate::job::Job;
 use crate::prepass::PrepassOutcome;
@@ -103,6 +104,11 @@ pub trait JobHost: Sync {
     fn job_stats(&self, job: &Job, mode: &'static str, ranks: usize, render_s: f64) -> RenderStats;
     /// Rank 0: writes the image, its preview and the statistics.
     fn write(&self, job: &Job, frame: &FrameBuffer, stats: &RenderStats) -> Result<(), String>;
+    /// Rank 0: the stream the tiles go into as they come, or None if the frame must be held
+    /// whole (the command's outputs need every pixel at the end: --denoise).
+    fn stream(&self, job: &Job) -> Result<Option<StreamedExr>, String>;
+    /// Rank 0: finishes the stream: the image, its preview and the statistics.
+    fn finish_stream(&self, job: &Job, streamed: StreamedExr, stats: &RenderStats) -> Result<(), String>;
 }
 
 /// A rank's report of its messages and waiting alone: the master's.

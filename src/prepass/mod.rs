@@ -39,7 +39,7 @@ use crate::tiles::Tile;
 use crate::tracer::SurfaceHit;
 pub use pool::{Alone, GridRows, PixelRows, Pool, RoundRecords, Share, Timed};
 use schedule::finest_rounds;
-pub use schedule::{Lattice, sample_rounds};
+pub use schedule::{Lattice, SampleRounds};
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
@@ -720,14 +720,20 @@ fn run_watched<P: Pool>(
             vec![false; settings.window(camera).pixels()]
         };
         let edge = |i: usize| edges.as_ref().is_some_and(|e| e[i]);
-        let needs: Vec<u32> = (needs.iter().enumerate())
-            .map(|(i, &n)| if edge(i) { settings.edge_samples } else { spp * n as u32 })
-            .collect();
-        outcome.pixels_sampled = needs.iter().filter(|&&n| n > 0).count() as u64;
-        let more = sample_rounds(settings.window(camera), &needs);
+        // How many samples of pixel i need sites: made from the two maps when asked, not kept
+        // (4 bytes a pixel).
+        let count = |i: usize| {
+            if edge(i) {
+                settings.edge_samples
+            } else {
+                spp * needs[i] as u32
+            }
+        };
+        outcome.pixels_sampled = (0..needs.len()).filter(|&i| count(i) > 0).count() as u64;
+        let more = SampleRounds::new(settings.window(camera), &count);
         total += more.len();
-        for sites in more {
-            run(sites, &mut set, &mut outcome, pool)?;
+        for k in 0..more.len() {
+            run(more.sites(k), &mut set, &mut outcome, pool)?;
             if !watch(outcome.rounds, total) {
                 break;
             }

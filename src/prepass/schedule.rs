@@ -132,28 +132,75 @@ pub(super) fn finest_rounds(width: u32, height: u32) -> usize {
 /// Neighbouring samples (of one pixel, or of adjacent pixels along an edge) would otherwise all
 /// lack a record at once and each make one (conference room 320x240 at 16 samples: 16,780
 /// duplicates of 20,450 records in one round; records made as pixels render: 4,800).
-pub fn sample_rounds(window: PixelWindow, needs: &[u32]) -> Vec<Vec<Site>> {
-    let a = window.area;
-    // The first coordinate at or after `from` whose parity is `parity`.
-    let first = |from: u32, parity: u32| from + (from % 2 != parity) as u32;
-    let mut out = Vec::new();
-    for s in 0..needs.iter().copied().max().unwrap_or(0) {
-        for (px, py) in [(0, 0), (1, 1), (1, 0), (0, 1)] {
-            let mut sites = Vec::new();
-            for y in (first(a.y0, py)..a.y1).step_by(2) {
-                for x in (first(a.x0, px)..a.x1).step_by(2) {
-                    let count = window.index(x, y).and_then(|i| needs.get(i)).copied().unwrap_or(0);
-                    if s < count {
-                        let sample = Some(PixelSample { index: s, count });
-                        sites.push(Site { x, y, sample });
-                    }
+///
+/// A round's sites are made when it comes (`sites`), as the lattice's are: all the samples'
+/// sites at once would hold 20 bytes a sample of every pixel that needs them.
+pub struct SampleRounds<'a> {
+    window: PixelWindow,
+    count: &'a (dyn Fn(usize) -> u32 + Sync),
+    /// Each round's sample number and pixel parity, the empty ones left out.
+    rounds: Vec<(u32, u32, u32)>,
+}
+
+/// The parities in the order their rounds come.
+const PARITIES: [(u32, u32); 4] = [(0, 0), (1, 1), (1, 0), (0, 1)];
+
+impl<'a> SampleRounds<'a> {
+    /// The rounds of the pixels of `window`, pixel `i` (row-major in the window) taking
+    /// `count(i)` samples whose positions need sites.
+    pub fn new(window: PixelWindow, count: &'a (dyn Fn(usize) -> u32 + Sync)) -> SampleRounds<'a> {
+        // The most samples a pixel of each parity takes: the rounds beyond are empty.
+        let mut most = [0u32; 4];
+        for i in 0..window.pixels() {
+            let (x, y) = window.position(i);
+            let parity = PARITIES.iter().position(|&p| p == (x % 2, y % 2)).unwrap_or(0);
+            most[parity] = most[parity].max(count(i));
+        }
+        let mut rounds = Vec::new();
+        for s in 0..most.iter().copied().max().unwrap_or(0) {
+            for (k, &(px, py)) in PARITIES.iter().enumerate() {
+                if s < most[k] {
+                    rounds.push((s, px, py));
                 }
             }
-            out.push(sites);
         }
+        SampleRounds { window, count, rounds }
     }
-    out.retain(|r| !r.is_empty());
-    out
+
+    pub fn len(&self) -> usize {
+        self.rounds.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.rounds.is_empty()
+    }
+
+    /// Round `k`'s sites, in the full image's coordinates.
+    pub fn sites(&self, k: usize) -> Vec<Site> {
+        let (s, px, py) = self.rounds[k];
+        let a = self.window.area;
+        // The first coordinate at or after `from` whose parity is `parity`.
+        let first = |from: u32, parity: u32| from + (from % 2 != parity) as u32;
+        let mut sites = Vec::new();
+        for y in (first(a.y0, py)..a.y1).step_by(2) {
+            for x in (first(a.x0, px)..a.x1).step_by(2) {
+                let count = self.window.index(x, y).map_or(0, |i| (self.count)(i));
+                if s < count {
+                    let sample = Some(PixelSample { index: s, count });
+                    sites.push(Site { x, y, sample });
+                }
+            }
+        }
+        sites
+    }
+}
+
+/// Every round of `SampleRounds`, made at once (tests).
+#[cfg(test)]
+pub fn sample_rounds(window: PixelWindow, needs: &[u32]) -> Vec<Vec<Site>> {
+    let count = |i: usize| needs.get(i).copied().unwrap_or(0);
+    let rounds = SampleRounds::new(window, &count);
+    (0..rounds.len()).map(|k| rounds.sites(k)).collect()
 }
 
 #[cfg(test)]

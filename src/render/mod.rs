@@ -192,11 +192,12 @@ impl Sink<'_> {
     }
 }
 
-/// How many records the prepass made at each pixel that has any.
-struct PrepassRecords(HashMap<(u32, u32), f32>);
+/// How many records the prepass made at each pixel that has any: for the `ic_records` layer of
+/// tiles that are streamed (a frame held whole adds them at the end, `add_prepass_records`).
+pub struct PrepassRecords(HashMap<(u32, u32), f32>);
 
 impl PrepassRecords {
-    fn of(prepass: &PrepassOutcome) -> PrepassRecords {
+    pub fn of(prepass: &PrepassOutcome) -> PrepassRecords {
         let mut counts = HashMap::new();
         for pixel in prepass.records_per_pixel() {
             *counts.entry(pixel.0).or_insert(0.0) += pixel.1 as f32;
@@ -205,7 +206,7 @@ impl PrepassRecords {
     }
 
     /// Adds the counts to a tile's pixels (row-major over the tile).
-    fn add_to(&self, tile: &Tile, values: &mut [PixelValue]) {
+    pub fn add_to(&self, tile: &Tile, values: &mut [PixelValue]) {
         if self.0.is_empty() {
             return;
         }

@@ -14,6 +14,7 @@ use crate::cli::{DenoiseQualityArg, ModeArg, ProgressArg};
 use crate::image::denoise;
 use crate::image::denoise::Quality;
 use crate::image::framebuffer::FrameBuffer;
+use crate::image::layered_exr::StreamedExr;
 use crate::image::metrics;
 use crate::image::region::Region;
 use crate::image::window::PixelWindow;
@@ -200,6 +201,18 @@ impl JobHost for RenderHost<'_> {
     fn write(&self, job: &Job, frame: &FrameBuffer, stats: &RenderStats) -> Result<(), String> {
         let outputs = self.outputs.get().ok_or("the outputs were not checked")?;
         outputs.write(self.args, job, frame, stats).map_err(|e| e.message)
+    }
+
+    fn stream(&self, job: &Job) -> Result<Option<StreamedExr>, String> {
+        let outputs = self.outputs.get().ok_or("the outputs were not checked")?;
+        outputs.stream(self.args, job).map_err(|e| e.message)
+    }
+
+    fn finish_stream(&self, job: &Job, streamed: StreamedExr, stats: &RenderStats) -> Result<(), String> {
+        let outputs = self.outputs.get().ok_or("the outputs were not checked")?;
+        outputs
+            .finish_stream(self.args, job, streamed, stats)
+            .map_err(|e| e.message)
     }
 }
 
