@@ -371,9 +371,17 @@ impl StreamedExr {
         Ok(())
     }
 
+    /// The reduced copy the preview is made from, once every tile is in (None without a
+    /// preview); taken, so that the preview can be made while `finish` writes the file.
+    pub fn take_preview(&self) -> Option<PreviewBuffer> {
+        let preview = self.preview.as_ref()?;
+        let mut kept = preview.lock().unwrap_or_else(|e| e.into_inner());
+        Some(std::mem::replace(&mut *kept, PreviewBuffer::new(0, 0)))
+    }
+
     /// Writes the file, staged beside its target with `attributes` in its header (the
-    /// statistics, known only now), and the preview staged beside it; neither is in place yet.
-    pub fn finish(self, attributes: &[(String, String)]) -> Result<(StagedFile, Option<PreviewBuffer>), String> {
+    /// statistics, known only now); it is not in place yet.
+    pub fn finish(self, attributes: &[(String, String)]) -> Result<StagedFile, String> {
         if let Some(e) = self.failure.into_inner().unwrap_or_else(|e| e.into_inner()) {
             return Err(e);
         }
@@ -384,8 +392,7 @@ impl StreamedExr {
         let stream = self.stream;
         let staged = output::stage(&self.target, |tmp| stream.finish(tmp, attributes))?;
         drop(self.scratch);
-        let preview = self.preview.map(|p| p.into_inner().unwrap_or_else(|e| e.into_inner()));
-        Ok((staged, preview))
+        Ok(staged)
     }
 }
 
@@ -427,6 +434,5 @@ pub fn write_whole(
             .write((0, y0), (w, y1), &band)
             .map_err(|e| output::explain_failure(target, e))?;
     }
-    let (staged, _) = streamed.finish(attributes)?;
-    Ok(staged)
+    streamed.finish(attributes)
 }

@@ -175,6 +175,12 @@ impl Drop for StagedFile {
     }
 }
 
+/// The preview made from a streamed frame's reduced copy, staged beside `path`.
+pub fn stage_kept_preview(path: &Path, kept: &super::preview::PreviewBuffer) -> Result<StagedFile, String> {
+    let rgb = kept.tone_map();
+    stage(path, |tmp| image_io::write_png(tmp, kept.width, kept.height, &rgb))
+}
+
 /// The preview: a composite (`pixel` by index, `width` x `height` of them), tone-mapped, as an
 /// 8-bit PNG under a temporary name beside `path`, to be placed later.
 pub fn stage_preview(

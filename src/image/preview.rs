@@ -12,57 +12,109 @@ pub fn tone_map(pixels: &[Vec3]) -> Vec<u8> {
 
 /// `tone_map` of the `count` pixels `pixel` gives by index, made on the fly: no copy of the
 /// image is held but the 8-bit result (a frame's composite is its layers' sum, computed twice
-/// here rather than kept: 100 MB at 4K). On every core: the preview is made after the last
-/// tile, and at 4K one thread took about 0.4 s.
+/// here rather than kept: 100 MB at 4K).
 pub fn tone_map_each(count: usize, pixel: impl Fn(usize) -> Vec3 + Sync) -> Vec<u8> {
-    let threads = std::thread::available_parallelism().map_or(1, |n| n.get()).min(16);
-    let chunk = count.div_ceil(threads).max(1);
-    let ranges: Vec<std::ops::Range<usize>> = (0..count).step_by(chunk).map(|a| a..(a + chunk).min(count)).collect();
-    let (log_sum, lit) = std::thread::scope(|scope| {
-        let parts: Vec<_> = ranges
-            .iter()
-            .map(|range| {
-                let pixel = &pixel;
-                scope.spawn(move || {
-                    let (mut log_sum, mut lit) = (0.0f64, 0usize);
-                    for i in range.clone() {
-                        let l = luminance(pixel(i));
-                        if l.is_finite() && l > 0.0 {
-                            log_sum += (l.max(1e-8) as f64).ln();
-                            lit += 1;
-                        }
-                    }
-                    (log_sum, lit)
-                })
-            })
-            .collect();
-        // Summed in the ranges' order: the exposure does not depend on the threads' timing.
-        parts
-            .into_iter()
-            .map(|p| p.join().expect("a preview thread panicked"))
-            .fold((0.0, 0), |a, b| (a.0 + b.0, a.1 + b.1))
-    });
-    let exposure = if lit == 0 {
-        1.0
-    } else {
-        MIDDLE_GREY / ((log_sum / lit as f64).exp() as f32)
-    };
+    let log = on_every_core(count, |range| {
+        let mut log = LogLuminance::default();
+        range.for_each(|i| log.add(pixel(i)));
+        log
+    })
+    .into_iter()
+    .fold(LogLuminance::default(), LogLuminance::merged);
+    map_each(count, log.exposure(), pixel)
+}
+
+/// The sum of the pixels' log luminance (of those lit), which sets the exposure. Fixed point:
+/// the sum is the same in whatever order the pixels come (a streamed frame's tiles come in the
+/// order they finish), so the preview does not depend on the threads' timing.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct LogLuminance {
+    /// Sum of ln(luminance) * 2^32.
+    sum: i128,
+    lit: u64,
+}
+
+impl LogLuminance {
+    pub fn add(&mut self, rgb: Vec3) {
+        let l = luminance(rgb);
+        if l.is_finite() && l > 0.0 {
+            self.sum += ((l.max(1e-8) as f64).ln() * 4_294_967_296.0).round() as i128;
+            self.lit += 1;
+        }
+    }
+
+    pub fn merged(self, other: LogLuminance) -> LogLuminance {
+        LogLuminance {
+            sum: self.sum + other.sum,
+            lit: self.lit + other.lit,
+        }
+    }
+
+    /// What puts the log-average luminance at middle grey (1 when nothing is lit).
+    pub fn exposure(&self) -> f32 {
+        if self.lit == 0 {
+            return 1.0;
+        }
+        let mean = self.sum as f64 / 4_294_967_296.0 / self.lit as f64;
+        MIDDLE_GREY / (mean.exp() as f32)
+    }
+}
+
+/// The 8-bit sRGB pixels of the `count` pixels `pixel` gives, times `exposure`, compressed by
+/// Reinhard's curve, on every core.
+fn map_each(count: usize, exposure: f32, pixel: impl Fn(usize) -> Vec3 + Sync) -> Vec<u8> {
     let mut out = vec![0u8; count * 3];
+    let chunk = count.div_ceil(cores()).max(1);
     std::thread::scope(|scope| {
-        for (range, bytes) in ranges.iter().zip(out.chunks_mut(chunk * 3)) {
+        for (k, bytes) in out.chunks_mut(chunk * 3).enumerate() {
             let pixel = &pixel;
             scope.spawn(move || {
-                for (i, rgb) in range.clone().zip(bytes.chunks_exact_mut(3)) {
+                for (i, rgb) in (k * chunk..).zip(bytes.chunks_exact_mut(3)) {
                     let v = pixel(i) * exposure;
                     let mapped = if v.is_finite() { v / (Vec3::ONE + v) } else { Vec3::ZERO };
                     for (byte, c) in rgb.iter_mut().zip(mapped.to_array()) {
-                        *byte = (linear_to_srgb(c.clamp(0.0, 1.0)) * 255.0 + 0.5) as u8;
+                        *byte = srgb_byte(c);
                     }
                 }
             });
         }
     });
     out
+}
+
+fn cores() -> usize {
+    std::thread::available_parallelism().map_or(1, |n| n.get()).min(16)
+}
+
+/// `work` over the `count` indices cut into a range per core, the results in the ranges' order.
+fn on_every_core<T: Send>(count: usize, work: impl Fn(std::ops::Range<usize>) -> T + Sync) -> Vec<T> {
+    let chunk = count.div_ceil(cores()).max(1);
+    std::thread::scope(|scope| {
+        let parts: Vec<_> = (0..count)
+            .step_by(chunk)
+            .map(|a| {
+                let work = &work;
+                scope.spawn(move || work(a..(a + chunk).min(count)))
+            })
+            .collect();
+        parts
+            .into_iter()
+            .map(|p| p.join().expect("a preview thread panicked"))
+            .collect()
+    })
+}
+
+/// A value in [0, 1] (clamped) as an 8-bit sRGB byte, from a table of 2^16 steps: the curve's
+/// steepest slope (12.92 at black) moves a byte by at most 0.05 between steps, where computing
+/// the curve for each of a frame's values took most of an 8K preview's time.
+fn srgb_byte(c: f32) -> u8 {
+    static TABLE: std::sync::OnceLock<Vec<u8>> = std::sync::OnceLock::new();
+    let table = TABLE.get_or_init(|| {
+        (0..=u16::MAX)
+            .map(|k| (linear_to_srgb(k as f32 / u16::MAX as f32) * 255.0 + 0.5) as u8)
+            .collect()
+    });
+    table[(c.clamp(0.0, 1.0) * u16::MAX as f32 + 0.5) as usize]
 }
 
 /// The composite kept for the preview while the EXR is streamed: four bytes a pixel (a shared
@@ -73,6 +125,9 @@ pub struct PreviewBuffer {
     pub width: u32,
     pub height: u32,
     pixels: Vec<[u8; 4]>,
+    /// The exact pixels' log luminance, summed as they come: the exposure needs no pass over
+    /// the frame at the end.
+    log: LogLuminance,
 }
 
 impl PreviewBuffer {
@@ -81,11 +136,13 @@ impl PreviewBuffer {
             width,
             height,
             pixels: vec![[0; 4]; width as usize * height as usize],
+            log: LogLuminance::default(),
         }
     }
 
     /// Keeps pixel `i` (row-major) as `rgb` (negative, NaN and infinite parts as 0).
     pub fn set(&mut self, i: usize, rgb: Vec3) {
+        self.log.add(rgb);
         let rgb = Vec3::from_array(rgb.to_array().map(|c| if c.is_finite() { c.max(0.0) } else { 0.0 }));
         let largest = rgb.max_element();
         self.pixels[i] = if largest < 1e-32 {
@@ -113,6 +170,12 @@ impl PreviewBuffer {
         self.pixels.len()
     }
 
+    /// The preview's 8-bit pixels, exposed by the exact pixels' log luminance. Each pixel must
+    /// have been set once.
+    pub fn tone_map(&self) -> Vec<u8> {
+        map_each(self.pixels.len(), self.log.exposure(), |i| self.get(i))
+    }
+
     pub fn is_empty(&self) -> bool {
         self.pixels.is_empty()
     }
@@ -138,6 +201,29 @@ mod tests {
         assert_eq!(&out[0..3], &[0, 0, 0]);
         assert_eq!(&out[3..6], &[0, 0, 0]);
         assert!(out[6] >= 254);
+    }
+
+    #[test]
+    fn the_exposure_does_not_depend_on_the_pixels_order() {
+        let pixels: Vec<Vec3> = (0..1000)
+            .map(|i| Vec3::new(0.001 * i as f32, 0.3, 1e3 / (1 + i) as f32))
+            .collect();
+        let sum = |pixels: &mut dyn Iterator<Item = &Vec3>| {
+            pixels.fold(LogLuminance::default(), |mut l, p| {
+                l.add(*p);
+                l
+            })
+        };
+        let forward = sum(&mut pixels.iter());
+        assert_eq!(forward, sum(&mut pixels.iter().rev()));
+        let mean = pixels.iter().map(|p| (luminance(*p) as f64).ln()).sum::<f64>() / 1000.0;
+        assert!((forward.exposure() - MIDDLE_GREY / mean.exp() as f32).abs() < 1e-5);
+        // The table's bytes are the curve's, to the rounding.
+        for k in 0..=1000 {
+            let c = k as f32 / 1000.0;
+            let exact = linear_to_srgb(c) * 255.0 + 0.5;
+            assert!((srgb_byte(c) as f32 - exact).abs() <= 1.0, "{c}");
+        }
     }
 
     #[test]

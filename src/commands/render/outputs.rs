@@ -282,14 +282,19 @@ impl Outputs {
         stats: &RenderStats,
     ) -> Result<(), CommandError> {
         let attributes = self.attributes(args, job, stats, None)?;
-        let (exr, preview) = streamed.finish(&attributes).map_err(|e| self.exr_failed(args, e))?;
-        let png = match (&self.png, preview) {
-            (Some(png), Some(kept)) => Some(
-                output::stage_preview(png, kept.width, kept.height, |i| kept.get(i))
-                    .map_err(|e| CommandError::failed(format!("{}: {e}", png.display()))),
-            ),
-            _ => None,
-        };
+        // The preview is made while the EXR's tiles are copied under its header.
+        let kept = streamed.take_preview();
+        let (exr, png) = std::thread::scope(|scope| {
+            let png = self.png.as_ref().zip(kept.as_ref()).map(|(png, kept)| {
+                scope.spawn(move || {
+                    output::stage_kept_preview(png, kept)
+                        .map_err(|e| CommandError::failed(format!("{}: {e}", png.display())))
+                })
+            });
+            let exr = streamed.finish(&attributes);
+            (exr, png.map(|p| p.join().expect("the preview's thread panicked")))
+        });
+        let exr = exr.map_err(|e| self.exr_failed(args, e))?;
         self.place(exr, png, stats)
     }
 
