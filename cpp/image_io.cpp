@@ -6,7 +6,11 @@
 #include "../ffi/image_io.h"
 
 #include <OpenImageIO/imageio.h>
+#include <ImfChannelList.h>
 #include <ImfHeader.h>
+#include <ImfOpaqueAttribute.h>
+#include <ImfStdIO.h>
+#include <ImfVersion.h>
 #include <ImfStringAttribute.h>
 #include <ImfTiledInputFile.h>
 #include <ImfTiledOutputFile.h>
@@ -19,6 +23,7 @@
 #include <cstdlib>
 #include <cstring>
 #include <exception>
+#include <fstream>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -27,6 +32,9 @@
 #include <vector>
 
 namespace {
+
+// The attribute holding a streamed file's room for the header's last attributes.
+constexpr const char *kReserved = "icrender/reserved";
 
 // OIIO error text can span several lines; callers want one.
 std::string one_line(const std::string &text) {
@@ -226,7 +234,7 @@ struct icr_exr_stream {
 extern "C" icr_exr_stream *icr_exr_stream_open(const char *path, uint32_t width, uint32_t height, icr_window window,
                                                const icr_channel *channels, size_t channel_count, int half_float,
                                                const char *compression, uint32_t tile_width, uint32_t tile_height,
-                                               char *err, size_t err_len) {
+                                               size_t header_room, char *err, size_t err_len) {
     clear_error(err, err_len);
     try {
         if (!path || !*path) return write_error(err, err_len, "empty path"), nullptr;
@@ -239,6 +247,8 @@ extern "C" icr_exr_stream *icr_exr_stream_open(const char *path, uint32_t width,
         stream->spec.tile_width = int(tile_width);
         stream->spec.tile_height = int(tile_height);
         stream->spec.attribute("openexr:lineOrder", "randomY");
+        // Room in the header for what is known only at the end (icr_exr_set_header).
+        if (header_room > 0) stream->spec.attribute(kReserved, std::string(header_room, ' '));
         stream->out = OIIO::ImageOutput::create("openexr");
         if (!stream->out) return write_error(err, err_len, oiio_error("OpenEXR writer unavailable", "")), nullptr;
         if (!stream->out->open(path, stream->spec))
@@ -283,29 +293,113 @@ extern "C" int icr_exr_stream_write(icr_exr_stream *stream, uint32_t x0, uint32_
     }
 }
 
-extern "C" int icr_exr_stream_finish(icr_exr_stream *stream, const char *path, const icr_attribute *attributes,
-                                     size_t attribute_count, char *err, size_t err_len) {
+extern "C" int icr_exr_stream_end(icr_exr_stream *stream, char *err, size_t err_len) {
     clear_error(err, err_len);
     std::unique_ptr<icr_exr_stream> owned(stream);
     try {
         if (!owned || !owned->out) return write_error(err, err_len, "the stream is closed");
-        if (!path || !*path) return write_error(err, err_len, "empty path");
+        if (owned->broken) return write_error(err, err_len, "an earlier write to the stream failed");
         bool closed = owned->out->close();
         std::string close_error = closed ? "" : owned->out->geterror();
         owned->out.reset();
         if (!closed) return write_error(err, err_len, oiio_error("close failed", close_error));
-        // The stream's header and tiles, the attributes added: the compressed tiles are copied
-        // as they are (OpenImageIO's copy decompresses and compresses them again).
-        Imf::TiledInputFile in(owned->path.c_str());
-        Imf::Header header = in.header();
-        std::string bad = each_attribute(
-            attributes, attribute_count,
-            [&](const std::string &name, const std::string &value) {
-                header.insert(name, Imf::StringAttribute(value));
-            },
-            [&](float ratio) { header.pixelAspectRatio() = ratio; });
+        return 0;
+    } catch (const std::exception &e) {
+        return write_error(err, err_len, std::string("EXR write failed: ") + e.what());
+    } catch (...) {
+        return write_error(err, err_len, "EXR write failed: unknown exception");
+    }
+}
+
+namespace {
+
+// `header` with the attributes added and the reserved room taken out, or the reason it cannot be.
+std::string with_attributes(Imf::Header &header, const icr_attribute *attributes, size_t attribute_count) {
+    if (header.find(kReserved) != header.end()) header.erase(kReserved);
+    return each_attribute(
+        attributes, attribute_count,
+        [&](const std::string &name, const std::string &value) { header.insert(name, Imf::StringAttribute(value)); },
+        [&](float ratio) { header.pixelAspectRatio() = ratio; });
+}
+
+// The bytes `header` takes in a tiled file.
+std::string header_bytes(const Imf::Header &header) {
+    Imf::StdOSStream os;
+    header.writeTo(os, true);
+    return os.str();
+}
+
+// Whether a file without OpenEXR's long-names flag can hold `header` (names of 31 bytes at most).
+bool short_names(const Imf::Header &header) {
+    for (auto it = header.begin(); it != header.end(); ++it)
+        if (std::strlen(it.name()) > 31 || std::strlen(it.attribute().typeName()) > 31) return false;
+    for (auto it = header.channels().begin(); it != header.channels().end(); ++it)
+        if (std::strlen(it.name()) > 31) return false;
+    return true;
+}
+
+}  // namespace
+
+extern "C" int icr_exr_set_header(const char *path, const icr_attribute *attributes, size_t attribute_count,
+                                  char *err, size_t err_len) {
+    clear_error(err, err_len);
+    try {
+        if (!path || !*path) return write_error(err, err_len, "empty path");
+        // The header as it lies in the file, and where it ends (the chunk offsets follow it).
+        Imf::Header header;
+        int version = 0;
+        uint64_t end = 0;
+        {
+            Imf::StdIFStream in(path);
+            char start[8];
+            in.read(start, 8);
+            std::memcpy(&version, start + 4, 4);
+            header.readFrom(in, version);
+            end = in.tellg();
+        }
+        std::string bad = with_attributes(header, attributes, attribute_count);
         if (!bad.empty()) return write_error(err, err_len, bad);
-        Imf::TiledOutputFile out(path, header);
+        const size_t room = end - 8, needed = header_bytes(header).size();
+        // The room left is filled by an attribute of a type no reader knows (they skip it): its
+        // name, its type's name, its size, then its bytes.
+        const std::string filler_type = "icrpadding";
+        const size_t overhead = std::strlen(kReserved) + 1 + filler_type.size() + 1 + 4;
+        if (needed + overhead > room || !((version & Imf::LONG_NAMES_FLAG) || short_names(header))) return 2;
+        const int fill = int(room - needed - overhead);
+        Imf::OpaqueAttribute filler(filler_type.c_str());
+        Imf::StdISStream zeros;
+        zeros.str(std::string(size_t(fill), '\0'));
+        filler.readValueFrom(zeros, fill, version);
+        header.insert(kReserved, filler);
+        const std::string bytes = header_bytes(header);
+        if (bytes.size() != room) return write_error(err, err_len, "the new header does not fit its room");
+        std::fstream file(path, std::ios::in | std::ios::out | std::ios::binary);
+        file.seekp(8);
+        file.write(bytes.data(), std::streamsize(bytes.size()));
+        file.flush();
+        if (!file) return write_error(err, err_len, "the header could not be written");
+        return 0;
+    } catch (const std::bad_alloc &) {
+        return write_error(err, err_len, "out of memory");
+    } catch (const std::exception &e) {
+        return write_error(err, err_len, std::string("EXR header failed: ") + e.what());
+    } catch (...) {
+        return write_error(err, err_len, "EXR header failed: unknown exception");
+    }
+}
+
+extern "C" int icr_exr_copy_with_header(const char *from, const char *to, const icr_attribute *attributes,
+                                        size_t attribute_count, char *err, size_t err_len) {
+    clear_error(err, err_len);
+    try {
+        if (!from || !*from || !to || !*to) return write_error(err, err_len, "empty path");
+        // The compressed tiles are copied as they are (OpenImageIO's copy decompresses and
+        // compresses them again).
+        Imf::TiledInputFile in(from);
+        Imf::Header header = in.header();
+        std::string bad = with_attributes(header, attributes, attribute_count);
+        if (!bad.empty()) return write_error(err, err_len, bad);
+        Imf::TiledOutputFile out(to, header);
         out.copyPixels(in);
         return 0;
     } catch (const std::bad_alloc &) {

@@ -144,7 +144,7 @@ pub fn run(args: &RenderArgs, frames: Frames) -> CommandResult {
             start: sequence_start,
         });
         let integrator = Integrator::new(&job.scene, &job.tracer, &job.shading, job.cache.as_ref());
-        let streamed = outputs.stream(args, &job)?;
+        let streamed = outputs.stream(args, &job, 1)?;
         let render_start = Instant::now();
         let rendered = render_resumable(
             &integrator,

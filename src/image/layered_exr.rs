@@ -14,7 +14,7 @@ use super::output::{self, CRYPTO_MATERIAL, CRYPTO_OBJECT, ExrCompression, Staged
 use super::preview::PreviewBuffer;
 use super::region::Region;
 use super::window::PixelWindow;
-use crate::sys::image_io::{ChannelName, ExrStream, Window};
+use crate::sys::image_io::{self, ChannelName, ExrStream, Window};
 use crate::sys::unnamed_file::UnnamedFile;
 use crate::tiles::{Tile, store_tile};
 use glam::Vec3;
@@ -182,6 +182,9 @@ pub struct ExrLayout {
     pub tile: (u32, u32),
     pub half_float: bool,
     pub compression: ExrCompression,
+    /// Bytes kept in the streamed file's header for the attributes known only at the end (the
+    /// statistics): enough, and the file is finished in place; too few, and it is copied.
+    pub header_room: usize,
 }
 
 impl ExrLayout {
@@ -198,36 +201,47 @@ impl ExrLayout {
 /// The file the stream writes into until it is finished: without a name where the file system
 /// allows (a killed render leaves nothing), else a hidden name beside the target, removed on drop.
 enum Scratch {
-    Unnamed(UnnamedFile),
-    Named(PathBuf),
+    Unnamed(Option<UnnamedFile>),
+    Named(Option<PathBuf>),
 }
 
 impl Scratch {
     fn beside(target: &Path) -> Scratch {
         let dir = target.parent().unwrap_or(Path::new(""));
         match UnnamedFile::create_in(dir) {
-            Ok(file) => Scratch::Unnamed(file),
+            Ok(file) => Scratch::Unnamed(Some(file)),
             Err(_) => {
                 let name = target
                     .file_name()
                     .map(|n| n.to_string_lossy().into_owned())
                     .unwrap_or_else(|| "output".into());
-                Scratch::Named(target.with_file_name(format!(".{name}.stream-{}", std::process::id())))
+                Scratch::Named(Some(
+                    target.with_file_name(format!(".{name}.stream-{}", std::process::id())),
+                ))
             }
         }
     }
 
     fn path(&self) -> PathBuf {
         match self {
-            Scratch::Unnamed(file) => file.path(),
-            Scratch::Named(path) => path.clone(),
+            Scratch::Unnamed(Some(file)) => file.path(),
+            Scratch::Named(Some(path)) => path.clone(),
+            _ => PathBuf::new(),
+        }
+    }
+
+    /// The finished file, to be put in place under `target`.
+    fn into_staged(mut self, target: &Path) -> StagedFile {
+        match &mut self {
+            Scratch::Unnamed(file) => StagedFile::unnamed(file.take().expect("the scratch file"), target),
+            Scratch::Named(path) => StagedFile::named(path.take().expect("the scratch file"), target),
         }
     }
 }
 
 impl Drop for Scratch {
     fn drop(&mut self) {
-        if let Scratch::Named(path) = self {
+        if let Scratch::Named(Some(path)) = self {
             let _ = std::fs::remove_file(path);
         }
     }
@@ -267,6 +281,7 @@ impl StreamedExr {
             layout.half_float,
             layout.compression.name(),
             layout.tile,
+            layout.header_room,
         )
         .map_err(|e| output::explain_failure(target, e))?;
         let (w, h) = (layout.window.width(), layout.window.height());
@@ -389,10 +404,18 @@ impl StreamedExr {
         if !parts.is_empty() {
             return Err(format!("{} of the file's tiles were never complete", parts.len()));
         }
-        let stream = self.stream;
-        let staged = output::stage(&self.target, |tmp| stream.finish(tmp, attributes))?;
-        drop(self.scratch);
-        Ok(staged)
+        let scratch = self.scratch.path();
+        self.stream
+            .end()
+            .map_err(|e| output::explain_failure(&self.target, e))?;
+        // The header rewritten in place, in the room kept for it: nothing copied. Without room
+        // enough, a copy with the new header (the tiles copied as compressed).
+        if image_io::set_exr_header(&scratch, attributes).map_err(|e| output::explain_failure(&self.target, e))? {
+            return Ok(self.scratch.into_staged(&self.target));
+        }
+        output::stage(&self.target, |tmp| {
+            image_io::copy_exr_with_header(&scratch, tmp, attributes)
+        })
     }
 }
 
@@ -435,4 +458,81 @@ pub fn write_whole(
             .map_err(|e| output::explain_failure(target, e))?;
     }
     streamed.finish(attributes)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::image::components::Components;
+    use crate::sys::image_io::read_image_with_header;
+
+    /// A 37x21 region of a 50x30 image, its corner off the 16x8 tile grid, its tiles stored in
+    /// reverse order: the file holds every pixel where it belongs, and the header its last
+    /// attributes, whether they fit the room kept for them (the header rewritten in place) or
+    /// not (the file copied under a new header).
+    #[test]
+    fn tiles_in_any_order_make_the_file_with_its_header_in_place_or_copied() {
+        let window = PixelWindow::new(
+            Region {
+                x0: 5,
+                y0: 3,
+                x1: 42,
+                y1: 24,
+            },
+            50,
+            30,
+        );
+        let value = |x: u32, y: u32| Vec3::new(x as f32, y as f32, 0.25);
+        let tiles = crate::tiles::tiles_in(50, 30, 16, 8, Some(window.area));
+        for (room, statistics) in [(64 << 10, 2000), (0, 200_000)] {
+            let dir = tempfile::tempdir().unwrap();
+            let target = dir.path().join("out.exr");
+            let layout = ExrLayout {
+                plan: ChannelPlan::new(&[Layer::Direct], &[], false, &[]),
+                window,
+                tile: (16, 8),
+                half_float: false,
+                compression: ExrCompression::Zip,
+                header_room: room,
+            };
+            let streamed = StreamedExr::open(&target, layout, false).unwrap();
+            for tile in tiles.iter().rev() {
+                let values: Vec<PixelValue> = (tile.y0..tile.y1)
+                    .flat_map(|y| (tile.x0..tile.x1).map(move |x| (x, y)))
+                    .map(|(x, y)| PixelValue {
+                        components: Components {
+                            direct: value(x, y),
+                            ..Default::default()
+                        },
+                        ..Default::default()
+                    })
+                    .collect();
+                streamed.store(tile, &values);
+            }
+            assert_eq!(
+                std::fs::read_dir(dir.path()).unwrap().count(),
+                0,
+                "nothing named before the end"
+            );
+            let attributes = vec![("icrender/statistics".to_string(), "s".repeat(statistics))];
+            streamed.finish(&attributes).unwrap().place().unwrap();
+            let image = read_image_with_header(&target).unwrap();
+            assert_eq!(
+                (image.width, image.height, image.window.x, image.window.y),
+                (37, 21, 5, 3)
+            );
+            assert_eq!(image.attribute("icrender/statistics").map(str::len), Some(statistics));
+            let direct = image.channel("direct.G").unwrap();
+            for (i, v) in direct.iter().enumerate() {
+                let (x, y) = window.position(i);
+                assert_eq!(*v, value(x, y).y, "pixel ({x}, {y}) with room {room}");
+            }
+            assert_eq!(image.channel("R").unwrap()[0], 5.0);
+            let names: Vec<_> = std::fs::read_dir(dir.path())
+                .unwrap()
+                .map(|e| e.unwrap().file_name())
+                .collect();
+            assert_eq!(names, vec![std::ffi::OsString::from("out.exr")]);
+        }
+    }
 }

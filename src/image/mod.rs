@@ -10,6 +10,7 @@ pub mod layered_exr;
 pub mod metrics;
 pub mod noisy_patches;
 pub mod output;
+pub mod pixel_map;
 pub mod preview;
 pub mod region;
 pub mod seams;

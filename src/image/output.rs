@@ -146,6 +146,26 @@ pub struct StagedFile {
 }
 
 impl StagedFile {
+    /// A finished file with no name, to be put in place under `target`.
+    pub fn unnamed(file: UnnamedFile, target: &Path) -> StagedFile {
+        StagedFile {
+            unnamed: Some(file),
+            temporary: temporary_beside(target),
+            target: target.to_path_buf(),
+            placed: false,
+        }
+    }
+
+    /// A finished file under the temporary name `temporary`, to be renamed to `target`.
+    pub fn named(temporary: PathBuf, target: &Path) -> StagedFile {
+        StagedFile {
+            unnamed: None,
+            temporary,
+            target: target.to_path_buf(),
+            placed: false,
+        }
+    }
+
     /// Renames the file over its target; on failure it is removed (on drop).
     pub fn place(mut self) -> Result<(), String> {
         if let Some(file) = &self.unnamed {

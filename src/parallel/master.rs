@@ -240,7 +240,7 @@ pub fn run(comm: &Comm<'_>, setup: &Setup<'_>, sharing: &mut dyn Sharing, wall: 
     let streamed = match setup.prepass.is_some() {
         true => job_in
             .host
-            .stream(job)
+            .stream(job, comm.size() as usize)
             .unwrap_or_else(|e| end_job(comm, setup.cache(), &e)),
         false => None,
     };

@@ -106,7 +106,7 @@ pub trait JobHost: Sync {
     fn write(&self, job: &Job, frame: &FrameBuffer, stats: &RenderStats) -> Result<(), String>;
     /// Rank 0: the stream the tiles go into as they come, or None if the frame must be held
     /// whole (the command's outputs need every pixel at the end: --denoise).
-    fn stream(&self, job: &Job) -> Result<Option<StreamedExr>, String>;
+    fn stream(&self, job: &Job, ranks: usize) -> Result<Option<StreamedExr>, String>;
     /// Rank 0: finishes the stream: the image, its preview and the statistics.
     fn finish_stream(&self, job: &Job, streamed: StreamedExr, stats: &RenderStats) -> Result<(), String>;
 }

@@ -25,6 +25,7 @@ pub mod pool;
 mod pooled_tests;
 pub mod schedule;
 
+use crate::image::pixel_map::PixelMap;
 use crate::image::window::PixelWindow;
 use crate::irradiance::IrradianceCache;
 use crate::irradiance::index::FrozenIndex;
@@ -89,7 +90,7 @@ pub struct PrepassOutcome {
     /// The pixels an edge crosses (`edge_map`), when `--edge-samples` asked for them: the final
     /// pass takes them from here (`RenderSettings::edge_map`) instead of tracing the corners
     /// again.
-    pub edges: Option<std::sync::Arc<Vec<bool>>>,
+    pub edges: Option<std::sync::Arc<PixelMap>>,
     /// Each round as this process saw it, in order.
     pub round_log: Vec<RoundLog>,
     /// Seconds in the pool (every exchange, rounds and rows: see `pool::Timed`).
@@ -185,11 +186,11 @@ fn last_bounce_grid<P: Pool>(
 
 /// A pixel map of the area rendered, row-major, from its rows (or strips of rows) as the
 /// pool's processes computed them.
-fn pixel_map(window: PixelWindow, rows: PixelRows) -> Vec<bool> {
-    let mut map = vec![false; window.pixels()];
+fn pixel_map(window: PixelWindow, rows: PixelRows) -> PixelMap {
+    let mut map = PixelMap::new(window.pixels());
     for (y, flags) in rows {
         let start = window.index(window.area.x0, y).expect("a row of the area");
-        map[start..start + flags.len()].copy_from_slice(&flags);
+        map.set_run(start, &flags);
     }
     map
 }
@@ -207,7 +208,7 @@ fn pixels_needing_samples<P: Pool>(
     snapshot: &FrozenIndex,
     pool: &mut P,
     stats: &mut [ThreadStats],
-) -> Result<Vec<bool>, P::Error> {
+) -> Result<PixelMap, P::Error> {
     let Pass {
         integrator,
         cache,
@@ -270,7 +271,7 @@ const EDGE_STRIP: u32 = 8;
 /// The pixels of the area rendered an edge crosses (`render::edges::edge_pixels`), row-major
 /// as `RenderSettings::window`'s: the same corner rays as the final pass's tiles, so the same
 /// answer for every pixel. Strips of rows on every thread, shared by the pool's processes.
-fn edge_map<P: Pool>(pass: Pass<'_, '_>, pool: &mut P, stats: &mut [ThreadStats]) -> Result<Vec<bool>, P::Error> {
+fn edge_map<P: Pool>(pass: Pass<'_, '_>, pool: &mut P, stats: &mut [ThreadStats]) -> Result<PixelMap, P::Error> {
     let Pass { integrator, camera, .. } = pass;
     let window = pass.settings.window(camera);
     let area = window.area;
@@ -717,16 +718,16 @@ fn run_watched<P: Pool>(
         let needs = if spp > 1 || settings.jitter {
             pixels_needing_samples(pass, set.snapshot(), pool, &mut outcome.threads)?
         } else {
-            vec![false; settings.window(camera).pixels()]
+            PixelMap::new(settings.window(camera).pixels())
         };
-        let edge = |i: usize| edges.as_ref().is_some_and(|e| e[i]);
+        let edge = |i: usize| edges.as_ref().is_some_and(|e| e.get(i));
         // How many samples of pixel i need sites: made from the two maps when asked, not kept
         // (4 bytes a pixel).
         let count = |i: usize| {
             if edge(i) {
                 settings.edge_samples
             } else {
-                spp * needs[i] as u32
+                spp * needs.get(i) as u32
             }
         };
         outcome.pixels_sampled = (0..needs.len()).filter(|&i| count(i) > 0).count() as u64;

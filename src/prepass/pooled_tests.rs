@@ -122,7 +122,7 @@ type Made = (
 
 fn made(job: &Job, outcome: PrepassOutcome) -> Made {
     let cache = job.cache.as_ref().expect("a cache");
-    let edges = outcome.edges.map(|e| e.as_ref().clone());
+    let edges = outcome.edges.map(|e| e.to_bools());
     (cache.records(), outcome.record_pixels, edges)
 }
 

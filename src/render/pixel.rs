@@ -41,7 +41,7 @@ pub struct RenderSettings {
     pub edge_samples: u32,
     /// Those pixels of `window`, row-major, as the prepass found them (`PrepassOutcome::edges`);
     /// None: each tile finds its own from the same corner rays.
-    pub edge_map: Option<Arc<Vec<bool>>>,
+    pub edge_map: Option<Arc<crate::image::pixel_map::PixelMap>>,
     /// Spacing in pixels of the overture's grid (see `Integrator::prepare_records`); 0: none.
     pub overture: u32,
     /// Place every cache record before shading (`prepass`); the pixels then only read the
@@ -417,7 +417,7 @@ pub fn render_tile_from(
             let window = settings.window(camera);
             let pixels = (tile.y0..tile.y1).flat_map(|y| (tile.x0..tile.x1).map(move |x| (x, y)));
             pixels
-                .map(|(x, y)| window.index(x, y).is_some_and(|i| map[i]))
+                .map(|(x, y)| window.index(x, y).is_some_and(|i| map.get(i)))
                 .collect()
         }
         None => edges::edge_pixels(integrator, camera, tile, &mut Work::new(counts)),

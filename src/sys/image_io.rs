@@ -279,7 +279,8 @@ unsafe impl Sync for ExrStream {}
 impl ExrStream {
     /// Opens the stream's file at `path` (truncated): `width` x `height` pixels at `window`,
     /// `tile` pixels a tile, the channels in order (half with `half_float` but those marked
-    /// `full_float`), OpenEXR's codec `compression`.
+    /// `full_float`), OpenEXR's codec `compression`, and `header_room` bytes kept in the header
+    /// for the attributes known only at the end (`set_exr_header`).
     #[allow(clippy::too_many_arguments)]
     pub fn open(
         path: &Path,
@@ -290,6 +291,7 @@ impl ExrStream {
         half_float: bool,
         compression: &str,
         tile: (u32, u32),
+        header_room: usize,
     ) -> Result<ExrStream, String> {
         check_window(width, height, window)?;
         let names: Vec<CString> = channels.iter().map(|c| c_text(c.name)).collect();
@@ -319,6 +321,7 @@ impl ExrStream {
                 compression.as_ptr(),
                 tile.0,
                 tile.1,
+                header_room,
                 err.as_mut_ptr(),
                 err.len(),
             )
@@ -372,27 +375,52 @@ impl ExrStream {
         if rc == 0 { Ok(()) } else { Err(buffer_message(&err)) }
     }
 
-    /// Closes the stream and writes `path`: its header with `attributes` added, its tiles
-    /// copied as compressed. The stream's own file is left as it is.
-    pub fn finish(mut self, path: &Path, attributes: &[(String, String)]) -> Result<(), String> {
-        let (_text, attrs) = c_attributes(attributes);
-        let path = c_path(path)?;
+    /// Ends the stream: its file is complete (its chunk offsets written), under the header
+    /// it was opened with.
+    pub fn end(mut self) -> Result<(), String> {
         let raw = std::mem::replace(&mut self.raw, std::ptr::null_mut());
         let mut err = vec![0 as c_char; ERR_LEN];
-        // SAFETY: `raw` is open and given up here (finish frees it, Drop sees null); the
-        // attributes live for the call.
-        let rc = unsafe {
-            self.lib.icr_exr_stream_finish(
-                raw,
-                path.as_ptr(),
-                attrs.as_ptr(),
-                attrs.len(),
-                err.as_mut_ptr(),
-                err.len(),
-            )
-        };
+        // SAFETY: `raw` is open and given up here (end frees it, Drop sees null).
+        let rc = unsafe { self.lib.icr_exr_stream_end(raw, err.as_mut_ptr(), err.len()) };
         if rc == 0 { Ok(()) } else { Err(buffer_message(&err)) }
     }
+}
+
+/// Puts `attributes` into the header of the tiled EXR at `path` (written by an `ExrStream`)
+/// in place, in the room kept for them: false, with nothing changed, if they do not fit.
+pub fn set_exr_header(path: &Path, attributes: &[(String, String)]) -> Result<bool, String> {
+    let (_text, attrs) = c_attributes(attributes);
+    let path = c_path(path)?;
+    let lib = library()?;
+    let mut err = vec![0 as c_char; ERR_LEN];
+    // SAFETY: the path and the attributes live for the call.
+    let rc = unsafe { lib.icr_exr_set_header(path.as_ptr(), attrs.as_ptr(), attrs.len(), err.as_mut_ptr(), err.len()) };
+    match rc {
+        0 => Ok(true),
+        2 => Ok(false),
+        _ => Err(buffer_message(&err)),
+    }
+}
+
+/// Writes `to`: the tiled EXR `from` with `attributes` added to its header, its compressed
+/// tiles copied as they are.
+pub fn copy_exr_with_header(from: &Path, to: &Path, attributes: &[(String, String)]) -> Result<(), String> {
+    let (_text, attrs) = c_attributes(attributes);
+    let (from, to) = (c_path(from)?, c_path(to)?);
+    let lib = library()?;
+    let mut err = vec![0 as c_char; ERR_LEN];
+    // SAFETY: the paths and the attributes live for the call.
+    let rc = unsafe {
+        lib.icr_exr_copy_with_header(
+            from.as_ptr(),
+            to.as_ptr(),
+            attrs.as_ptr(),
+            attrs.len(),
+            err.as_mut_ptr(),
+            err.len(),
+        )
+    };
+    if rc == 0 { Ok(()) } else { Err(buffer_message(&err)) }
 }
 
 impl Drop for ExrStream {

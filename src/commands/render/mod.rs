@@ -203,9 +203,9 @@ impl JobHost for RenderHost<'_> {
         outputs.write(self.args, job, frame, stats).map_err(|e| e.message)
     }
 
-    fn stream(&self, job: &Job) -> Result<Option<StreamedExr>, String> {
+    fn stream(&self, job: &Job, ranks: usize) -> Result<Option<StreamedExr>, String> {
         let outputs = self.outputs.get().ok_or("the outputs were not checked")?;
-        outputs.stream(self.args, job).map_err(|e| e.message)
+        outputs.stream(self.args, job, ranks).map_err(|e| e.message)
     }
 
     fn finish_stream(&self, job: &Job, streamed: StreamedExr, stats: &RenderStats) -> Result<(), String> {
@@ -331,7 +331,7 @@ pub fn run(args: &RenderArgs, sequence: SequenceRenderer) -> CommandResult {
     );
     // From here a SIGTERM or SIGINT stops the render cleanly (see sys::signals).
     crate::sys::signals::catch_termination().map_err(CommandError::failed)?;
-    let streamed = outputs.stream(args, &job)?;
+    let streamed = outputs.stream(args, &job, 1)?;
     let render_start = Instant::now();
     let rendered = render_resumable(
         &integrator,

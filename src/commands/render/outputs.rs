@@ -186,9 +186,13 @@ impl Outputs {
 
     /// How this render's EXR is laid out: the layers the scene can light, `extra` layers (the
     /// denoised ones), the data layers asked for, over `window`, in the render's tiles.
-    fn layout(&self, args: &RenderArgs, job: &Job, window: PixelWindow, extra: &[&str]) -> ExrLayout {
+    fn layout(&self, args: &RenderArgs, job: &Job, window: PixelWindow, extra: &[&str], ranks: usize) -> ExrLayout {
         let layers = producible_layers(job.scene.needs(), &job.shading);
         ExrLayout {
+            // The statistics take about 12 KB and 1 KB more a rank; the command line, the
+            // settings and Cryptomatte's manifests a few KB (a scene with many objects more:
+            // then the file is copied under its header instead, `StreamedExr::finish`).
+            header_room: (64 << 10) + (2 << 10) * ranks,
             plan: ChannelPlan::new(&layers, extra, args.ic_records, &args.aovs()),
             window,
             tile: (job.settings.tile_width.max(1), job.settings.tile_height.max(1)),
@@ -199,11 +203,11 @@ impl Outputs {
 
     /// The stream a one-process render writes its tiles into as they finish, or None where
     /// the frame must be held whole: `--denoise` filters every pixel with its neighbours.
-    pub fn stream(&self, args: &RenderArgs, job: &Job) -> Result<Option<StreamedExr>, CommandError> {
+    pub fn stream(&self, args: &RenderArgs, job: &Job, ranks: usize) -> Result<Option<StreamedExr>, CommandError> {
         if args.denoise {
             return Ok(None);
         }
-        let layout = self.layout(args, job, job.settings.window(&job.camera), &[]);
+        let layout = self.layout(args, job, job.settings.window(&job.camera), &[], ranks);
         StreamedExr::open(&self.exr, layout, self.png.is_some())
             .map(Some)
             .map_err(|e| CommandError::failed(format!("{}: {e}", self.exr.display())))
@@ -351,7 +355,7 @@ impl Outputs {
         });
         let names: Vec<&str> = extra.iter().map(|(n, _)| n.as_str()).collect();
         let planes: Vec<&[glam::Vec3]> = extra.iter().map(|(_, p)| *p).collect();
-        let layout = self.layout(args, job, frame.window(), &names);
+        let layout = self.layout(args, job, frame.window(), &names, stats.ranks);
         // The preview is made beside the EXR, on a thread of its own, and put in place only
         // once the EXR is: 0.5 s of a 1080p frame's writing no longer comes after it.
         let preview = |png: &std::path::PathBuf| {
