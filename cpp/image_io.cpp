@@ -72,6 +72,21 @@ void clear_error(char *err, size_t err_len) {
     if (err && err_len) err[0] = '\0';
 }
 
+// Runs an entry point's body: nothing may escape across the ABI, so every exception becomes
+// the one-line error "<what> failed: ..." (or "out of memory").
+template <typename Body>
+int guarded(char *err, size_t err_len, const char *what, Body body) {
+    try {
+        return body();
+    } catch (const std::bad_alloc &) {
+        return write_error(err, err_len, "out of memory");
+    } catch (const std::exception &e) {
+        return write_error(err, err_len, std::string(what) + " failed: " + e.what());
+    } catch (...) {
+        return write_error(err, err_len, std::string(what) + " failed: unknown exception");
+    }
+}
+
 // OIIO keeps errors per thread and per object; fall back to a fixed text when both are empty.
 std::string oiio_error(const std::string &what, const std::string &detail) {
     std::string d = detail.empty() ? OIIO::geterror() : detail;
@@ -170,7 +185,7 @@ extern "C" int icr_exr_write_rows(const char *path, uint32_t width, uint32_t hei
                                   const char *compression, icr_fill_rows fill, void *context, char *err,
                                   size_t err_len) {
     clear_error(err, err_len);
-    try {
+    return guarded(err, err_len, "EXR write", [&]() -> int {
         if (!path || !*path) return write_error(err, err_len, "empty path");
         if (!fill) return write_error(err, err_len, "no source of pixels");
         OIIO::ImageSpec spec;
@@ -209,13 +224,7 @@ extern "C" int icr_exr_write_rows(const char *path, uint32_t width, uint32_t hei
         }
         if (!out->close()) return write_error(err, err_len, oiio_error("close failed", out->geterror()));
         return 0;
-    } catch (const std::bad_alloc &) {
-        return write_error(err, err_len, "out of memory");
-    } catch (const std::exception &e) {
-        return write_error(err, err_len, std::string("EXR write failed: ") + e.what());
-    } catch (...) {
-        return write_error(err, err_len, "EXR write failed: unknown exception");
-    }
+    });
 }
 
 // A tiled EXR written a tile at a time, in any order, from any thread: OpenEXR's random tile
@@ -236,38 +245,35 @@ extern "C" icr_exr_stream *icr_exr_stream_open(const char *path, uint32_t width,
                                                const char *compression, uint32_t tile_width, uint32_t tile_height,
                                                size_t header_room, char *err, size_t err_len) {
     clear_error(err, err_len);
-    try {
-        if (!path || !*path) return write_error(err, err_len, "empty path"), nullptr;
+    icr_exr_stream *opened = nullptr;
+    guarded(err, err_len, "EXR stream", [&]() -> int {
+        if (!path || !*path) return write_error(err, err_len, "empty path");
         if (tile_width == 0 || tile_height == 0 || tile_width > 4096 || tile_height > 4096)
-            return write_error(err, err_len, "invalid tile size"), nullptr;
+            return write_error(err, err_len, "invalid tile size");
         auto stream = std::make_unique<icr_exr_stream>();
         std::string bad =
             exr_spec(width, height, window, channels, channel_count, half_float, compression, stream->spec);
-        if (!bad.empty()) return write_error(err, err_len, bad), nullptr;
+        if (!bad.empty()) return write_error(err, err_len, bad);
         stream->spec.tile_width = int(tile_width);
         stream->spec.tile_height = int(tile_height);
         stream->spec.attribute("openexr:lineOrder", "randomY");
         // Room in the header for what is known only at the end (icr_exr_set_header).
         if (header_room > 0) stream->spec.attribute(kReserved, std::string(header_room, ' '));
         stream->out = OIIO::ImageOutput::create("openexr");
-        if (!stream->out) return write_error(err, err_len, oiio_error("OpenEXR writer unavailable", "")), nullptr;
+        if (!stream->out) return write_error(err, err_len, oiio_error("OpenEXR writer unavailable", ""));
         if (!stream->out->open(path, stream->spec))
-            return write_error(err, err_len, oiio_error("cannot open for writing", stream->out->geterror())), nullptr;
+            return write_error(err, err_len, oiio_error("cannot open for writing", stream->out->geterror()));
         stream->path = path;
-        return stream.release();
-    } catch (const std::bad_alloc &) {
-        return write_error(err, err_len, "out of memory"), nullptr;
-    } catch (const std::exception &e) {
-        return write_error(err, err_len, std::string("EXR stream failed: ") + e.what()), nullptr;
-    } catch (...) {
-        return write_error(err, err_len, "EXR stream failed: unknown exception"), nullptr;
-    }
+        opened = stream.release();
+        return 0;
+    });
+    return opened;
 }
 
 extern "C" int icr_exr_stream_write(icr_exr_stream *stream, uint32_t x0, uint32_t y0, uint32_t x1, uint32_t y1,
                                     const float *pixels, char *err, size_t err_len) {
     clear_error(err, err_len);
-    try {
+    return guarded(err, err_len, "EXR write", [&]() -> int {
         if (!stream || !stream->out) return write_error(err, err_len, "the stream is closed");
         const OIIO::ImageSpec &spec = stream->spec;
         const uint32_t tw = uint32_t(spec.tile_width), th = uint32_t(spec.tile_height);
@@ -284,31 +290,25 @@ extern "C" int icr_exr_stream_write(icr_exr_stream *stream, uint32_t x0, uint32_
             return write_error(err, err_len, oiio_error("write failed", stream->out->geterror()));
         }
         return 0;
-    } catch (const std::bad_alloc &) {
-        return write_error(err, err_len, "out of memory");
-    } catch (const std::exception &e) {
-        return write_error(err, err_len, std::string("EXR write failed: ") + e.what());
-    } catch (...) {
-        return write_error(err, err_len, "EXR write failed: unknown exception");
-    }
+    });
 }
 
 extern "C" int icr_exr_stream_end(icr_exr_stream *stream, char *err, size_t err_len) {
     clear_error(err, err_len);
     std::unique_ptr<icr_exr_stream> owned(stream);
-    try {
+    return guarded(err, err_len, "EXR write", [&]() -> int {
         if (!owned || !owned->out) return write_error(err, err_len, "the stream is closed");
-        if (owned->broken) return write_error(err, err_len, "an earlier write to the stream failed");
+        if (owned->broken) {
+            // As icr_exr_stream_close: the writer that failed is abandoned, not closed.
+            owned->out.release();
+            return write_error(err, err_len, "an earlier write to the stream failed");
+        }
         bool closed = owned->out->close();
         std::string close_error = closed ? "" : owned->out->geterror();
         owned->out.reset();
         if (!closed) return write_error(err, err_len, oiio_error("close failed", close_error));
         return 0;
-    } catch (const std::exception &e) {
-        return write_error(err, err_len, std::string("EXR write failed: ") + e.what());
-    } catch (...) {
-        return write_error(err, err_len, "EXR write failed: unknown exception");
-    }
+    });
 }
 
 namespace {
@@ -343,7 +343,7 @@ bool short_names(const Imf::Header &header) {
 extern "C" int icr_exr_set_header(const char *path, const icr_attribute *attributes, size_t attribute_count,
                                   char *err, size_t err_len) {
     clear_error(err, err_len);
-    try {
+    return guarded(err, err_len, "EXR header", [&]() -> int {
         if (!path || !*path) return write_error(err, err_len, "empty path");
         // The header as it lies in the file, and where it ends (the chunk offsets follow it).
         Imf::Header header;
@@ -379,19 +379,13 @@ extern "C" int icr_exr_set_header(const char *path, const icr_attribute *attribu
         file.flush();
         if (!file) return write_error(err, err_len, "the header could not be written");
         return 0;
-    } catch (const std::bad_alloc &) {
-        return write_error(err, err_len, "out of memory");
-    } catch (const std::exception &e) {
-        return write_error(err, err_len, std::string("EXR header failed: ") + e.what());
-    } catch (...) {
-        return write_error(err, err_len, "EXR header failed: unknown exception");
-    }
+    });
 }
 
 extern "C" int icr_exr_copy_with_header(const char *from, const char *to, const icr_attribute *attributes,
                                         size_t attribute_count, char *err, size_t err_len) {
     clear_error(err, err_len);
-    try {
+    return guarded(err, err_len, "EXR write", [&]() -> int {
         if (!from || !*from || !to || !*to) return write_error(err, err_len, "empty path");
         // The compressed tiles are copied as they are (OpenImageIO's copy decompresses and
         // compresses them again).
@@ -402,13 +396,7 @@ extern "C" int icr_exr_copy_with_header(const char *from, const char *to, const 
         Imf::TiledOutputFile out(to, header);
         out.copyPixels(in);
         return 0;
-    } catch (const std::bad_alloc &) {
-        return write_error(err, err_len, "out of memory");
-    } catch (const std::exception &e) {
-        return write_error(err, err_len, std::string("EXR write failed: ") + e.what());
-    } catch (...) {
-        return write_error(err, err_len, "EXR write failed: unknown exception");
-    }
+    });
 }
 
 extern "C" void icr_exr_stream_close(icr_exr_stream *stream) {
@@ -430,7 +418,7 @@ extern "C" void icr_exr_stream_close(icr_exr_stream *stream) {
 extern "C" int icr_png_write(const char *path, uint32_t width, uint32_t height, const uint8_t *rgb, char *err,
                              size_t err_len) {
     clear_error(err, err_len);
-    try {
+    return guarded(err, err_len, "PNG write", [&]() -> int {
         if (!path || !*path) return write_error(err, err_len, "empty path");
         if (width == 0 || height == 0 || width > uint32_t(INT_MAX) || height > uint32_t(INT_MAX))
             return write_error(err, err_len, "invalid image size " + std::to_string(width) + "x" + std::to_string(height));
@@ -453,13 +441,7 @@ extern "C" int icr_png_write(const char *path, uint32_t width, uint32_t height, 
         }
         if (!out->close()) return write_error(err, err_len, oiio_error("close failed", out->geterror()));
         return 0;
-    } catch (const std::bad_alloc &) {
-        return write_error(err, err_len, "out of memory");
-    } catch (const std::exception &e) {
-        return write_error(err, err_len, std::string("PNG write failed: ") + e.what());
-    } catch (...) {
-        return write_error(err, err_len, "PNG write failed: unknown exception");
-    }
+    });
 }
 
 struct icr_image {

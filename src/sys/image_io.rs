@@ -214,16 +214,7 @@ pub fn write_exr_rows(
     fill: &mut FillRows<'_>,
 ) -> Result<(), String> {
     check_window(width, height, window)?;
-    let names: Vec<CString> = channels.iter().map(|c| c_text(c.name)).collect();
-    let planes: Vec<abi::icr_channel> = channels
-        .iter()
-        .zip(&names)
-        .map(|(c, n)| abi::icr_channel {
-            name: n.as_ptr(),
-            data: std::ptr::null(),
-            full_float: c.full_float as i32,
-        })
-        .collect();
+    let (_names, planes) = c_channels(channels);
     let (_text, attrs) = c_attributes(attributes);
     let path = c_path(path)?;
     let compression = c_text(compression);
@@ -294,16 +285,7 @@ impl ExrStream {
         header_room: usize,
     ) -> Result<ExrStream, String> {
         check_window(width, height, window)?;
-        let names: Vec<CString> = channels.iter().map(|c| c_text(c.name)).collect();
-        let planes: Vec<abi::icr_channel> = channels
-            .iter()
-            .zip(&names)
-            .map(|(c, n)| abi::icr_channel {
-                name: n.as_ptr(),
-                data: std::ptr::null(),
-                full_float: c.full_float as i32,
-            })
-            .collect();
+        let (_names, planes) = c_channels(channels);
         let path = c_path(path)?;
         let compression = c_text(compression);
         let lib = library()?;
@@ -430,6 +412,22 @@ impl Drop for ExrStream {
             unsafe { self.lib.icr_exr_stream_close(self.raw) };
         }
     }
+}
+
+/// The C channels of a writer that makes its pixels itself (no planes; the names they point
+/// into, to keep alive beside them).
+fn c_channels(channels: &[ChannelName<'_>]) -> (Vec<CString>, Vec<abi::icr_channel>) {
+    let names: Vec<CString> = channels.iter().map(|c| c_text(c.name)).collect();
+    let planes = channels
+        .iter()
+        .zip(&names)
+        .map(|(c, n)| abi::icr_channel {
+            name: n.as_ptr(),
+            data: std::ptr::null(),
+            full_float: c.full_float as i32,
+        })
+        .collect();
+    (names, planes)
 }
 
 /// The C attributes (and the strings they point into, to keep alive beside them).
