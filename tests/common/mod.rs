@@ -71,6 +71,27 @@ pub fn render_to(dir: &Path, scene: &Path, name: &str, extra: &[&str]) -> (Image
     (read_exr(&out), stats)
 }
 
+/// The same image where it matters to a compositor: `a`'s every channel in `b`, bit for bit,
+/// at the same place in the display window, and `a`'s every header attribute in `b` with the
+/// same value but those named in `except` (what says how the render ran).
+pub fn assert_same_image(a: &ImageData, b: &ImageData, except: &[&str], what: &str) {
+    assert_eq!((a.width, a.height, a.window), (b.width, b.height, b.window), "{what}");
+    for (name, values) in &a.channels {
+        let theirs = b.channel(name).unwrap_or_else(|| panic!("{what}: no {name}"));
+        let differing = values
+            .iter()
+            .zip(theirs)
+            .filter(|(x, y)| x.to_bits() != y.to_bits())
+            .count();
+        assert_eq!(differing, 0, "{what}: {name} differs at {differing} pixels");
+    }
+    for (name, value) in &a.attributes {
+        if !except.contains(&name.as_str()) {
+            assert_eq!(b.attribute(name), Some(value.as_str()), "{what}: {name}");
+        }
+    }
+}
+
 pub fn read_exr(path: &Path) -> ImageData {
     read_image(path, &["icrender/options", "icrender/statistics", "icrender/command"])
         .unwrap_or_else(|e| panic!("reading {}: {e}", path.display()))
