@@ -5,7 +5,7 @@ which ends with the last pixel), the time after the render (writing the EXR and 
 preview) and its share, and the peak memory: the process's (the operating system's maximum
 resident size) and at the end of the render (`peak_memory_bytes` of --stats).
 
-    python3 bench/resolution.py            # about 10 minutes on 2 cores, up to 9 GB of memory at 8K
+    python3 bench/resolution.py            # about 8 minutes on 2 cores, under 1 GB of memory at 8K
     python3 bench/resolution.py --quick    # 720p and 1080p only: a check, not a result
 
 Writes docs/RESOLUTION.md, docs/resolution/runs.csv and docs/resolution/resolution.png. Needs

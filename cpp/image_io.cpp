@@ -229,7 +229,7 @@ extern "C" int icr_exr_write_rows(const char *path, uint32_t width, uint32_t hei
 
 // A tiled EXR written a tile at a time, in any order, from any thread: OpenEXR's random tile
 // order writes each tile as it comes (in increasing order it would hold early tiles back).
-// Its header lacks what is known only at the end; `finish` writes the final file.
+// Its header keeps room for what is known only at the end (icr_exr_set_header).
 struct icr_exr_stream {
     std::unique_ptr<OIIO::ImageOutput> out;
     std::string path;

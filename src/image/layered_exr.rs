@@ -314,76 +314,110 @@ impl StreamedExr {
     }
 
     fn try_store(&self, tile: &Tile, values: &[PixelValue]) -> Result<(), String> {
-        let area = Region {
-            x0: tile.x0,
-            y0: tile.y0,
-            x1: tile.x1,
-            y1: tile.y1,
-        };
-        let held = PixelWindow::new(area, self.layout.window.full_width, self.layout.window.full_height);
+        let held = PixelWindow::new(
+            Region {
+                x0: tile.x0,
+                y0: tile.y0,
+                x1: tile.x1,
+                y1: tile.y1,
+            },
+            self.layout.window.full_width,
+            self.layout.window.full_height,
+        );
         let mut frame = FrameBuffer::windowed(held);
         store_tile(&mut frame, tile, values);
-        if let Some(preview) = &self.preview {
-            let mut preview = preview.lock().unwrap_or_else(|e| e.into_inner());
-            for (i, (x, y)) in (0..held.pixels()).map(|i| (i, held.position(i))) {
-                if let Some(at) = self.layout.window.index(x, y) {
-                    preview.set(at, frame.composite_at(i));
-                }
-            }
-        }
-        let n = self.layout.plan.channels.len();
-        let origin = (self.layout.window.area.x0, self.layout.window.area.y0);
-        // The tile in the file's coordinates (0 is the window's first row and column).
-        let (x0, y0, x1, y1) = (
-            tile.x0 - origin.0,
-            tile.y0 - origin.1,
-            tile.x1 - origin.0,
-            tile.y1 - origin.1,
-        );
-        let (tw, th) = self.layout.tile;
-        let (w, h) = (self.layout.window.width(), self.layout.window.height());
-        for ty in y0 / th..y1.div_ceil(th) {
-            for tx in x0 / tw..x1.div_ceil(tw) {
-                let file_tile = (tx * tw, ty * th, ((tx + 1) * tw).min(w), ((ty + 1) * th).min(h));
-                let (fx0, fy0, fx1, fy1) = file_tile;
-                let fw = (fx1 - fx0) as usize;
-                let overlap = (x0.max(fx0), y0.max(fy0), x1.min(fx1), y1.min(fy1));
-                let whole = overlap == file_tile;
-                let mut own = Vec::new();
-                let mut parts = None;
-                let buffer: &mut Vec<f32> = if whole {
-                    own.resize(fw * (fy1 - fy0) as usize * n, 0.0);
-                    &mut own
-                } else {
-                    let guard = parts.insert(self.parts.lock().unwrap_or_else(|e| e.into_inner()));
-                    let part = guard.entry((tx, ty)).or_insert_with(|| PartTile {
-                        values: vec![0.0; fw * (fy1 - fy0) as usize * n],
-                        missing: fw * (fy1 - fy0) as usize,
-                    });
-                    part.missing -= ((overlap.2 - overlap.0) * (overlap.3 - overlap.1)) as usize;
-                    &mut part.values
-                };
-                for y in overlap.1..overlap.3 {
-                    for x in overlap.0..overlap.2 {
-                        let i = ((y - y0) * (x1 - x0) + (x - x0)) as usize;
-                        let at = ((y - fy0) as usize * fw + (x - fx0) as usize) * n;
-                        self.layout.plan.fill(&frame, &[], i, &mut buffer[at..at + n]);
-                    }
-                }
-                let complete = match parts.as_mut() {
-                    None => Some(own),
-                    Some(guard) => match guard.get(&(tx, ty)) {
-                        Some(part) if part.missing == 0 => guard.remove(&(tx, ty)).map(|p| p.values),
-                        _ => None,
-                    },
-                };
-                drop(parts);
-                if let Some(values) = complete {
-                    self.stream.write((fx0, fy0), (fx1, fy1), &values)?;
-                }
+        self.keep_for_preview(&frame);
+        let rendered = self.in_file(held.area);
+        for file_tile in self.file_tiles_under(rendered) {
+            let overlap = rendered.meet(file_tile);
+            let complete = if overlap == file_tile {
+                let mut values = vec![0.0; file_tile.pixels() * self.layout.plan.channels.len()];
+                self.fill(&frame, rendered, file_tile, overlap, &mut values);
+                Some(values)
+            } else {
+                self.add_part(&frame, rendered, file_tile, overlap)
+            };
+            if let Some(values) = complete {
+                let r = file_tile;
+                self.stream.write((r.x0, r.y0), (r.x1, r.y1), &values)?;
             }
         }
         Ok(())
+    }
+
+    /// Keeps the tile's composite in the preview's reduced copy.
+    fn keep_for_preview(&self, frame: &FrameBuffer) {
+        let Some(preview) = &self.preview else {
+            return;
+        };
+        let mut preview = preview.lock().unwrap_or_else(|e| e.into_inner());
+        let held = frame.window();
+        for i in 0..held.pixels() {
+            let (x, y) = held.position(i);
+            if let Some(at) = self.layout.window.index(x, y) {
+                preview.set(at, frame.composite_at(i));
+            }
+        }
+    }
+
+    /// `area` of the full image in the file's coordinates (0 is the window's first row and
+    /// column).
+    fn in_file(&self, area: Region) -> Region {
+        let (ox, oy) = (self.layout.window.area.x0, self.layout.window.area.y0);
+        Region {
+            x0: area.x0 - ox,
+            y0: area.y0 - oy,
+            x1: area.x1 - ox,
+            y1: area.y1 - oy,
+        }
+    }
+
+    /// The file tiles `rendered` (in the file's coordinates) reaches into, cut at the edge.
+    fn file_tiles_under(&self, rendered: Region) -> Vec<Region> {
+        let (tw, th) = self.layout.tile;
+        let (w, h) = (self.layout.window.width(), self.layout.window.height());
+        let mut out = Vec::new();
+        for ty in rendered.y0 / th..rendered.y1.div_ceil(th) {
+            for tx in rendered.x0 / tw..rendered.x1.div_ceil(tw) {
+                out.push(Region {
+                    x0: tx * tw,
+                    y0: ty * th,
+                    x1: ((tx + 1) * tw).min(w),
+                    y1: ((ty + 1) * th).min(h),
+                });
+            }
+        }
+        out
+    }
+
+    /// Writes the channels of `frame`'s pixels in `overlap` (the rendered tile `rendered` met
+    /// with `file_tile`) into `values`, the file tile's interleaved pixels.
+    fn fill(&self, frame: &FrameBuffer, rendered: Region, file_tile: Region, overlap: Region, values: &mut [f32]) {
+        let n = self.layout.plan.channels.len();
+        for y in overlap.y0..overlap.y1 {
+            for x in overlap.x0..overlap.x1 {
+                let i = ((y - rendered.y0) * rendered.width() + (x - rendered.x0)) as usize;
+                let at = ((y - file_tile.y0) * file_tile.width() + (x - file_tile.x0)) as usize * n;
+                self.layout.plan.fill(frame, &[], i, &mut values[at..at + n]);
+            }
+        }
+    }
+
+    /// Adds the part `overlap` of a file tile the rendered tile covers only in part; returns the
+    /// file tile's pixels once every part has come.
+    fn add_part(&self, frame: &FrameBuffer, rendered: Region, file_tile: Region, overlap: Region) -> Option<Vec<f32>> {
+        let key = (file_tile.x0, file_tile.y0);
+        let mut parts = self.parts.lock().unwrap_or_else(|e| e.into_inner());
+        let part = parts.entry(key).or_insert_with(|| PartTile {
+            values: vec![0.0; file_tile.pixels() * self.layout.plan.channels.len()],
+            missing: file_tile.pixels(),
+        });
+        self.fill(frame, rendered, file_tile, overlap, &mut part.values);
+        part.missing -= overlap.pixels();
+        if part.missing > 0 {
+            return None;
+        }
+        parts.remove(&key).map(|p| p.values)
     }
 
     /// The reduced copy the preview is made from, once every tile is in (None without a

@@ -41,6 +41,16 @@ impl Region {
         self.x0 < other.x1 && other.x0 < self.x1 && self.y0 < other.y1 && other.y0 < self.y1
     }
 
+    /// The pixels in both (empty, with x1 <= x0 or y1 <= y0, where they do not overlap).
+    pub fn meet(&self, other: Region) -> Region {
+        Region {
+            x0: self.x0.max(other.x0),
+            y0: self.y0.max(other.y0),
+            x1: self.x1.min(other.x1),
+            y1: self.y1.min(other.y1),
+        }
+    }
+
     /// `x0 y0 x1 y1`, as the option takes it and the header stores it.
     pub fn text(&self) -> String {
         format!("{} {} {} {}", self.x0, self.y0, self.x1, self.y1)
