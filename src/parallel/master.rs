@@ -13,9 +13,9 @@ use super::{Setup, end_job};
 use crate::diagnostics::warn;
 use crate::image::framebuffer::FrameBuffer;
 use crate::image::layered_exr::StreamedExr;
-use crate::render::PrepassRecords;
+use crate::render::sink::TileSink;
 use crate::stats::{RankReport, RenderStats};
-use crate::tiles::{TileQueue, store_tile};
+use crate::tiles::TileQueue;
 use std::collections::{HashSet, VecDeque};
 use std::convert::Infallible;
 use std::time::Instant;
@@ -55,7 +55,7 @@ pub struct MasterCore<'a, 'c> {
     /// Where finished tiles go: the EXR's stream as they come (the default build: a tile comes
     /// complete), or a frame held whole (--denoise; the progressive modes, whose indirect
     /// light may come after its tile).
-    image: MasterImage<'a>,
+    image: TileSink<'a>,
     tiles_done: Vec<bool>,
     pub relay: RecordRelay<'a>,
     pub reports: Vec<Option<RankReport>>,
@@ -70,28 +70,13 @@ impl<'a, 'c> MasterCore<'a, 'c> {
             Some((_, restored)) => (restored.done.clone(), restored.unfinished()),
             None => (vec![false; tiles], (0..tiles).collect()),
         };
+        let restored = setup.checkpoint.as_ref().map(|(_, restored)| restored);
         let image = match stream {
-            Some(stream) => {
-                let prepass_records = setup.prepass.as_ref().map(PrepassRecords::of);
-                // The tiles an earlier run finished go to the stream first.
-                if let Some((_, restored)) = &setup.checkpoint {
-                    for (tile, _) in setup.tiles.iter().zip(&restored.done).filter(|(_, done)| **done) {
-                        let mut values = restored.frame.tile_values(tile);
-                        if let Some(records) = &prepass_records {
-                            records.add_to(tile, &mut values);
-                        }
-                        stream.store(tile, &values);
-                    }
-                }
-                MasterImage::Streamed {
-                    stream,
-                    prepass_records,
-                }
-            }
-            None => MasterImage::Held(match &setup.checkpoint {
-                Some((_, restored)) => restored.frame.clone(),
-                None => FrameBuffer::new(setup.job_in.width, setup.job_in.height),
-            }),
+            Some(stream) => TileSink::streamed(stream, setup.prepass.as_ref(), restored.map(|r| (&setup.tiles[..], r))),
+            None => TileSink::held(restored.map_or_else(
+                || FrameBuffer::new(setup.job_in.width, setup.job_in.height),
+                |r| r.frame.clone(),
+            )),
         };
         // A claimed tile goes to its rank alone; one an earlier run finished (--checkpoint) to nobody.
         let unfinished: HashSet<usize> = todo.iter().copied().collect();
@@ -180,19 +165,7 @@ impl<'a, 'c> MasterCore<'a, 'c> {
         if let Some((journal, _)) = &self.setup.checkpoint {
             journal.tile(index, finished.requests, &pixels);
         }
-        match &mut self.image {
-            MasterImage::Held(frame) => store_tile(frame, tile, &pixels),
-            MasterImage::Streamed {
-                stream,
-                prepass_records,
-            } => {
-                let mut pixels = pixels;
-                if let Some(records) = prepass_records {
-                    records.add_to(tile, &mut pixels);
-                }
-                stream.store(tile, &pixels);
-            }
-        }
+        self.image.store(tile, pixels);
         self.tiles_done[index as usize] = true;
         Ok(())
     }
@@ -216,8 +189,8 @@ impl<'a, 'c> MasterCore<'a, 'c> {
                     journal.results(&results);
                 }
                 // Indirect light computed elsewhere for a pixel, before or after its tile came
-                // (`store_tile` adds to what the pixel has).
-                let MasterImage::Held(frame) = &mut self.image else {
+                // (`tiles::store_tile` adds to what the pixel has).
+                let Some(frame) = self.image.held_mut() else {
                     return Err(format!(
                         "rank {source} sent indirect light for pixels whose tiles went to the file as they came"
                     ));
@@ -246,10 +219,7 @@ pub fn run(comm: &Comm<'_>, setup: &Setup<'_>, sharing: &mut dyn Sharing, wall: 
     };
     let (image, ranks, render_s) =
         control(comm, setup, sharing, streamed.as_ref()).unwrap_or_else(|e| end_job(comm, setup.cache(), &e));
-    let frame = match image {
-        MasterImage::Held(frame) => Some(frame),
-        MasterImage::Streamed { .. } => None,
-    };
+    let frame = image.into_frame(setup.prepass.as_ref());
     if let Some(cache) = setup.cache()
         && let Err(e) = cache.finish()
     {
@@ -261,12 +231,8 @@ pub fn run(comm: &Comm<'_>, setup: &Setup<'_>, sharing: &mut dyn Sharing, wall: 
     stats.threads = job_in.threads.unwrap_or(1);
     stats.tiles_restored = setup.checkpoint.as_ref().map_or(0, |(_, r)| r.count()) as u64;
     stats.add_ranks(ranks);
-    let mut frame = frame;
     if let Some(prepass) = &setup.prepass {
         stats.add_prepass(prepass);
-        if let Some(frame) = &mut frame {
-            crate::render::add_prepass_records(frame, prepass);
-        }
     }
     stats.wall_s = wall.elapsed().as_secs_f64();
     match (streamed, frame) {
@@ -287,7 +253,7 @@ fn control<'a>(
     setup: &'a Setup<'a>,
     sharing: &mut dyn Sharing,
     stream: Option<&'a StreamedExr>,
-) -> Result<(MasterImage<'a>, Vec<RankReport>, f64), String> {
+) -> Result<(TileSink<'a>, Vec<RankReport>, f64), String> {
     let start = Instant::now();
     let mut core = MasterCore::new(comm, setup, stream);
     sharing.start(&mut core);
@@ -315,16 +281,6 @@ fn control<'a>(
     }];
     ranks.extend(core.reports.into_iter().skip(1).flatten());
     Ok((core.image, ranks, render_s))
-}
-
-/// Where the master puts finished tiles (`MasterCore::image`).
-pub enum MasterImage<'a> {
-    Held(FrameBuffer),
-    Streamed {
-        stream: &'a StreamedExr,
-        /// The prepass's records by pixel, for a streamed tile's `ic_records` layer.
-        prepass_records: Option<PrepassRecords>,
-    },
 }
 
 /// The line that ends a job when a rank has fallen silent.

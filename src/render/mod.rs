@@ -6,19 +6,19 @@ pub mod ahead;
 pub mod edges;
 pub mod noise;
 pub mod pixel;
+pub mod sink;
 
 pub use pixel::{RenderSettings, ThreadClock, ThreadStats, pixel_offset, pixel_strata, render_pixel, render_tile};
 
 use crate::checkpoint::{Checkpoint, Restored};
-use crate::image::framebuffer::{FrameBuffer, PixelValue};
+use crate::image::framebuffer::FrameBuffer;
 use crate::image::layered_exr::StreamedExr;
 use crate::prepass::{self, PrepassOutcome};
 use crate::progress::Progress;
 use crate::scene::view::Camera;
 use crate::shading::Integrator;
-use crate::tiles::{Tile, TileQueue, store_tile, tiles_in};
-use std::collections::HashMap;
-use std::sync::Mutex;
+use crate::tiles::{TileQueue, tiles_in};
+use sink::TileSink;
 
 /// What a one-process render made: the image, each thread's work (the prepass's included)
 /// and the prepass's own account, when there was one.
@@ -100,23 +100,10 @@ pub fn render_resumable(
         None => (None, (0..all.len()).collect(), None),
     };
     progress.advance(all.len() - todo.len());
-    let sink = match (streamed, restored) {
-        (Some(stream), restored) => {
-            let sink = Sink::Streamed {
-                stream,
-                prepass_records: prepass.as_ref().map(PrepassRecords::of),
-            };
-            // The tiles an earlier run finished go to the stream first.
-            if let Some(restored) = restored {
-                for (tile, _) in all.iter().zip(&restored.done).filter(|(_, done)| **done) {
-                    sink.store(tile, restored.frame.tile_values(tile));
-                }
-            }
-            sink
-        }
-        (None, Some(restored)) => Sink::Held(Mutex::new(restored.frame)),
+    let sink = match streamed {
+        Some(stream) => TileSink::streamed(stream, prepass.as_ref(), restored.as_ref().map(|r| (&all[..], r))),
         // The frame holds the area rendered only: a region task's memory grows with its region.
-        (None, None) => Sink::Held(Mutex::new(FrameBuffer::windowed(window))),
+        None => TileSink::held(restored.map_or_else(|| FrameBuffer::windowed(window), |r| r.frame)),
     };
     let queue = TileQueue::new(if stopped() { Vec::new() } else { todo });
     let threads = settings.threads.max(1).min(queue.len().max(1));
@@ -147,75 +134,14 @@ pub fn render_resumable(
     });
     progress.finish();
     let mut stats = stats;
-    let mut frame = match sink {
-        Sink::Held(frame) => Some(frame.into_inner().unwrap_or_else(|e| e.into_inner())),
-        Sink::Streamed { .. } => None,
-    };
+    let frame = sink.into_frame(prepass.as_ref());
     if let Some(prepass) = &prepass {
-        if let Some(frame) = &mut frame {
-            add_prepass_records(frame, prepass);
-        }
         add_prepass_work(&mut stats, &prepass.threads);
     }
     Rendered {
         frame,
         threads: stats,
         prepass,
-    }
-}
-
-/// Where finished tiles go: a frame held whole, or the EXR's stream.
-enum Sink<'a> {
-    Held(Mutex<FrameBuffer>),
-    Streamed {
-        stream: &'a StreamedExr,
-        /// The prepass's records by pixel, for the `ic_records` layer (a held frame adds them
-        /// at the end; a streamed tile leaves before then).
-        prepass_records: Option<PrepassRecords>,
-    },
-}
-
-impl Sink<'_> {
-    fn store(&self, tile: &Tile, mut values: Vec<PixelValue>) {
-        match self {
-            Sink::Held(frame) => store_tile(&mut frame.lock().unwrap_or_else(|e| e.into_inner()), tile, &values),
-            Sink::Streamed {
-                stream,
-                prepass_records,
-            } => {
-                if let Some(records) = prepass_records {
-                    records.add_to(tile, &mut values);
-                }
-                stream.store(tile, &values);
-            }
-        }
-    }
-}
-
-/// How many records the prepass made at each pixel that has any: for the `ic_records` layer of
-/// tiles that are streamed (a frame held whole adds them at the end, `add_prepass_records`).
-pub struct PrepassRecords(HashMap<(u32, u32), f32>);
-
-impl PrepassRecords {
-    pub fn of(prepass: &PrepassOutcome) -> PrepassRecords {
-        let mut counts = HashMap::new();
-        for pixel in prepass.records_per_pixel() {
-            *counts.entry(pixel.0).or_insert(0.0) += pixel.1 as f32;
-        }
-        PrepassRecords(counts)
-    }
-
-    /// Adds the counts to a tile's pixels (row-major over the tile).
-    pub fn add_to(&self, tile: &Tile, values: &mut [PixelValue]) {
-        if self.0.is_empty() {
-            return;
-        }
-        let positions = (tile.y0..tile.y1).flat_map(|y| (tile.x0..tile.x1).map(move |x| (x, y)));
-        for (value, at) in values.iter_mut().zip(positions) {
-            if let Some(count) = self.0.get(&at) {
-                value.records += count;
-            }
-        }
     }
 }
 
@@ -227,13 +153,6 @@ pub fn watch_prepass(progress: &Progress) -> impl Fn(usize, usize) -> bool + '_ 
         progress.prepass_rounds(total);
         progress.prepass_round_done();
         crate::sys::signals::received().is_none()
-    }
-}
-
-/// Counts the records the prepass made for each pixel in the frame's `ic_records` layer.
-pub fn add_prepass_records(frame: &mut FrameBuffer, prepass: &PrepassOutcome) {
-    for ((x, y), count) in prepass.records_per_pixel() {
-        frame.add_records(x, y, count as f32);
     }
 }
 
