@@ -93,6 +93,7 @@ fn generate_embree_bindings(embree: &Embree, out: &Path) {
 fn generate_abi_bindings(out: &Path) {
     bindgen::Builder::default()
         .header("ffi/scene_io.h")
+        .header("ffi/exr_chunks.h")
         .allowlist_function("icr_.*")
         .allowlist_type("icr_.*")
         .allowlist_var("ICR_.*")
@@ -177,7 +178,31 @@ fn compile_cpp(out: &Path) {
         .opt_level(2);
     build.compile("icrender_cpp");
     println!("cargo:rustc-link-lib=dylib=stdc++");
+    compile_exr_chunks();
     compile_image_library(out);
+}
+
+/// The EXR tile encoder and chunk writer (cpp/exr_chunks.cpp), linked into the binary: OpenEXR's
+/// core library needs only zlib, so every rank can encode the tiles it renders without loading
+/// OpenImageIO.
+fn compile_exr_chunks() {
+    let mut build = cc::Build::new();
+    build
+        .cpp(true)
+        .std("c++17")
+        .include("ffi")
+        .file("cpp/exr_chunks.cpp")
+        .opt_level(2);
+    for dir in pkg_config("OpenEXR", "--cflags-only-I", "-I").unwrap_or_else(|| vec!["/usr/include/OpenEXR".into()]) {
+        build.include(dir);
+    }
+    build
+        .flag_if_supported("-Wno-missing-field-initializers")
+        .compile("icrender_exr_chunks");
+    let core = pkg_config("OpenEXR", "--libs-only-l", "-l")
+        .and_then(|libs| libs.into_iter().find(|l| l.starts_with("OpenEXRCore")))
+        .unwrap_or_else(|| "OpenEXRCore-3_1".into());
+    println!("cargo:rustc-link-lib=dylib={core}");
 }
 
 /// The OpenImageIO shim as a shared library of its own, `libicrender_image.so`, which the binary

@@ -235,6 +235,9 @@ pub struct RenderStats {
     pub cache_records: u64,
     /// Tiles taken from the --checkpoint journal of an earlier run instead of rendered.
     pub tiles_restored: u64,
+    /// Tiles the workers sent the master as the file's compressed chunks (under mpirun, where
+    /// the master streams the file); the others came as their pixels' values.
+    pub tiles_encoded: u64,
     pub lookups: u64,
     pub hits: u64,
     /// Records computed while another thread's new record already covered the point.

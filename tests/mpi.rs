@@ -949,4 +949,26 @@ fn a_streamed_exr_equals_the_one_written_whole() {
     assert_same_image(&a, &s, &how_it_ran, "the master streaming");
     assert_same_image(&a, &b, &how_it_ran, "the master holding the frame");
     assert_eq!(a.channels.len(), s.channels.len());
+    // Streaming, the workers encode every tile (53x41 in 16x8 tiles: 4 x 6); holding the frame,
+    // the master takes their values.
+    assert_eq!(
+        (
+            streamed.stats["tiles_encoded"].as_u64(),
+            whole.stats["tiles_encoded"].as_u64()
+        ),
+        (Some(24), Some(0))
+    );
+    // The records layer (counted on the workers before they encode) and half-float light
+    // layers beside float data layers, encoded by the workers.
+    let counted = [&extra[..], &["--ic-records", "--half"]].concat();
+    render(dir.path(), &scene, "alone_counted", None, &counted);
+    let streamed = render(dir.path(), &scene, "streamed_counted", Some(3), &counted);
+    assert_eq!(streamed.stats["tiles_encoded"].as_u64(), Some(24));
+    let [a, s] = ["alone_counted", "streamed_counted"]
+        .map(|name| icrender::sys::image_io::read_image_with_header(&dir.path().join(format!("{name}.exr"))).unwrap());
+    assert!(
+        a.channel("ic_records.Y")
+            .is_some_and(|records| records.iter().any(|&n| n > 0.0))
+    );
+    assert_same_image(&a, &s, &how_it_ran, "the workers encoding records and half floats");
 }

@@ -1,20 +1,22 @@
 //! The layered EXR a render writes: which channels, where each takes its values, and how the
 //! pixels reach the file. A one-process render streams them (`StreamedExr`): each finished tile
-//! is made into the file's channels and compressed while the render goes on, and only the
-//! reduced preview stays in memory, so memory no longer grows by 200 bytes a pixel and the
-//! compression no longer follows the last tile. A frame held whole (`--denoise`, which needs
-//! every pixel's neighbours; an MPI master) goes through the same stream at the end
-//! (`write_whole`). Either way the file is tiled, the render's own tiles in random order, and
-//! appears under its name only once finished.
+//! is made into the file's channels and compressed by the thread that rendered it
+//! (`TileChunks`), and only the reduced preview stays in memory, so memory no longer grows by
+//! 200 bytes a pixel and the compression no longer follows the last tile. Under mpirun the
+//! workers encode their tiles and the master only writes the chunks (`EncodedTile`). A frame
+//! held whole (`--denoise`, which needs every pixel's neighbours) is encoded on every core at
+//! the end (`write_whole`). Either way the file is tiled, the render's own tiles in random
+//! order, and appears under its name only once finished.
 
 use super::cryptomatte::{RANKS, Ranks};
 use super::data::{Aov, PixelData};
 use super::framebuffer::{FrameBuffer, Layer, PixelValue};
 use super::output::{self, CRYPTO_MATERIAL, CRYPTO_OBJECT, ExrCompression, StagedFile};
-use super::preview::PreviewBuffer;
+use super::preview::{LogLuminance, PreviewBuffer, rgbe};
 use super::region::Region;
 use super::window::PixelWindow;
-use crate::sys::image_io::{self, ChannelName, ExrStream, Window};
+use crate::sys::exr_chunks::{ChunkFile, ExrTiling, TileEncoder};
+use crate::sys::image_io::{self, ChannelName};
 use crate::sys::unnamed_file::UnnamedFile;
 use crate::tiles::{Tile, store_tile};
 use glam::Vec3;
@@ -103,6 +105,11 @@ impl ChannelPlan {
         ChannelPlan { channels }
     }
 
+    /// Whether the file counts the records made at each pixel (`--ic-records`).
+    pub fn counts_records(&self) -> bool {
+        self.channels.iter().any(|(_, source)| *source == Source::Records)
+    }
+
     fn names(&self) -> Vec<ChannelName<'_>> {
         self.channels
             .iter()
@@ -188,13 +195,158 @@ pub struct ExrLayout {
 }
 
 impl ExrLayout {
-    fn exr_window(&self) -> Window {
-        Window {
+    /// The file's layout for OpenEXR: its windows, channels (half but for the full-float ones
+    /// under `--half`), codec and tiles.
+    fn tiling(&self) -> ExrTiling {
+        ExrTiling {
+            width: self.window.width(),
+            height: self.window.height(),
             x: self.window.area.x0,
             y: self.window.area.y0,
             full_width: self.window.full_width,
             full_height: self.window.full_height,
+            channels: self
+                .plan
+                .names()
+                .iter()
+                .map(|c| (c.name.to_string(), self.half_float && !c.full_float))
+                .collect(),
+            compression: self.compression.name().to_string(),
+            tile: self.tile,
         }
+    }
+
+    /// `area` of the full image in the file's coordinates (0 is the window's first row and
+    /// column).
+    fn in_file(&self, area: Region) -> Region {
+        let (ox, oy) = (self.window.area.x0, self.window.area.y0);
+        Region {
+            x0: area.x0 - ox,
+            y0: area.y0 - oy,
+            x1: area.x1 - ox,
+            y1: area.y1 - oy,
+        }
+    }
+
+    /// The file tiles `rendered` (in the file's coordinates) reaches into, cut at the edge.
+    fn file_tiles_under(&self, rendered: Region) -> Vec<Region> {
+        let (tw, th) = self.tile;
+        let (w, h) = (self.window.width(), self.window.height());
+        let mut out = Vec::new();
+        for ty in rendered.y0 / th..rendered.y1.div_ceil(th) {
+            for tx in rendered.x0 / tw..rendered.x1.div_ceil(tw) {
+                out.push(Region {
+                    x0: tx * tw,
+                    y0: ty * th,
+                    x1: ((tx + 1) * tw).min(w),
+                    y1: ((ty + 1) * th).min(h),
+                });
+            }
+        }
+        out
+    }
+
+    /// A file tile's column and row in the tile grid.
+    fn grid(&self, file_tile: Region) -> (u32, u32) {
+        (file_tile.x0 / self.tile.0, file_tile.y0 / self.tile.1)
+    }
+
+    /// Writes the channels of `frame`'s pixels in `overlap` (the rendered tile `rendered` met
+    /// with `file_tile`) into `values`, the file tile's interleaved pixels.
+    fn fill(&self, frame: &FrameBuffer, rendered: Region, file_tile: Region, overlap: Region, values: &mut [f32]) {
+        let n = self.plan.channels.len();
+        for y in overlap.y0..overlap.y1 {
+            for x in overlap.x0..overlap.x1 {
+                let i = ((y - rendered.y0) * rendered.width() + (x - rendered.x0)) as usize;
+                let at = ((y - file_tile.y0) * file_tile.width() + (x - file_tile.x0)) as usize * n;
+                self.plan.fill(frame, &[], i, &mut values[at..at + n]);
+            }
+        }
+    }
+
+    /// A finished render tile's pixels as a frame of their own, and where they lie in the file.
+    fn held(&self, tile: &Tile, values: &[PixelValue]) -> (FrameBuffer, Region) {
+        let held = PixelWindow::new(
+            Region {
+                x0: tile.x0,
+                y0: tile.y0,
+                x1: tile.x1,
+                y1: tile.y1,
+            },
+            self.window.full_width,
+            self.window.full_height,
+        );
+        let mut frame = FrameBuffer::windowed(held);
+        store_tile(&mut frame, tile, values);
+        (frame, self.in_file(held.area))
+    }
+
+    /// Whether `file_tiles` cover `rendered` whole (it lies on the file's tile grid).
+    fn covered_whole(rendered: Region, file_tiles: &[Region]) -> bool {
+        file_tiles.iter().all(|t| rendered.meet(*t) == *t)
+    }
+}
+
+/// A rendered tile as the file stores it, made where it was rendered: the compressed chunks of
+/// the file tiles it covers, and its pixels for the preview. Under mpirun this is what a worker
+/// sends the master, which only writes it: about a fifth of the bytes of the pixels' values, and
+/// no compression on the master's one core.
+#[derive(Clone, Debug, PartialEq)]
+pub struct EncodedTile {
+    /// Each file tile's place in the tile grid and its chunk.
+    pub chunks: Vec<((u32, u32), Vec<u8>)>,
+    /// The composite of the tile's pixels (row by row) as the preview keeps it.
+    pub preview: Vec<[u8; 4]>,
+    /// The log luminance of the tile's exact pixels, for the preview's exposure.
+    pub log: LogLuminance,
+}
+
+/// Encodes rendered tiles into the chunks of a file laid out as `layout`, from any thread.
+pub struct TileChunks {
+    layout: ExrLayout,
+    encoder: TileEncoder,
+}
+
+impl TileChunks {
+    pub fn new(layout: ExrLayout) -> Result<TileChunks, String> {
+        let encoder = TileEncoder::new(&layout.tiling())?;
+        Ok(TileChunks { layout, encoder })
+    }
+
+    pub fn layout(&self) -> &ExrLayout {
+        &self.layout
+    }
+
+    /// The tile as the file stores it; None when it covers file tiles only in part (a region
+    /// whose corner is off the tile grid), which only the file's holder can assemble.
+    pub fn encode(&self, tile: &Tile, values: &[PixelValue]) -> Result<Option<EncodedTile>, String> {
+        let (frame, rendered) = self.layout.held(tile, values);
+        let file_tiles = self.layout.file_tiles_under(rendered);
+        if !ExrLayout::covered_whole(rendered, &file_tiles) {
+            return Ok(None);
+        }
+        let mut chunks = Vec::with_capacity(file_tiles.len());
+        for file_tile in file_tiles {
+            chunks.push((self.layout.grid(file_tile), self.chunk(&frame, rendered, file_tile)?));
+        }
+        let mut log = LogLuminance::default();
+        let preview = (0..frame.window().pixels())
+            .map(|i| {
+                let rgb = frame.composite_at(i);
+                log.add(rgb);
+                rgbe(rgb)
+            })
+            .collect();
+        Ok(Some(EncodedTile { chunks, preview, log }))
+    }
+
+    /// The compressed chunk of `file_tile`, which `rendered` (`frame`'s pixels) covers whole.
+    fn chunk(&self, frame: &FrameBuffer, rendered: Region, file_tile: Region) -> Result<Vec<u8>, String> {
+        let mut values = vec![0.0; file_tile.pixels() * self.layout.plan.channels.len()];
+        self.layout.fill(frame, rendered, file_tile, file_tile, &mut values);
+        let mut bytes = Vec::new();
+        self.encoder.encode(self.layout.grid(file_tile), &values, &mut bytes)?;
+        Ok(bytes)
     }
 }
 
@@ -256,10 +408,10 @@ struct PartTile {
 
 /// A layered EXR written as the render's tiles finish, and the preview's reduced copy.
 pub struct StreamedExr {
-    layout: ExrLayout,
+    chunks: TileChunks,
     target: PathBuf,
     // Declared before the scratch file: dropped (closed) first.
-    stream: ExrStream,
+    file: ChunkFile,
     scratch: Scratch,
     parts: Mutex<HashMap<(u32, u32), PartTile>>,
     preview: Option<Mutex<PreviewBuffer>>,
@@ -272,24 +424,14 @@ impl StreamedExr {
     /// copy the preview is made from.
     pub fn open(target: &Path, layout: ExrLayout, preview: bool) -> Result<StreamedExr, String> {
         let scratch = Scratch::beside(target);
-        let stream = ExrStream::open(
-            &scratch.path(),
-            layout.window.width(),
-            layout.window.height(),
-            layout.exr_window(),
-            &layout.plan.names(),
-            layout.half_float,
-            layout.compression.name(),
-            layout.tile,
-            layout.header_room,
-        )
-        .map_err(|e| output::explain_failure(target, e))?;
+        let file = ChunkFile::open(&scratch.path(), &layout.tiling(), layout.header_room)
+            .map_err(|e| output::explain_failure(target, e))?;
         let (w, h) = (layout.window.width(), layout.window.height());
         Ok(StreamedExr {
             preview: preview.then(|| Mutex::new(PreviewBuffer::new(w, h))),
-            layout,
+            chunks: TileChunks::new(layout).map_err(|e| output::explain_failure(target, e))?,
             target: target.to_path_buf(),
-            stream,
+            file,
             scratch,
             parts: Mutex::new(HashMap::new()),
             failure: Mutex::new(None),
@@ -304,43 +446,73 @@ impl StreamedExr {
     /// Makes a finished render tile's pixels into the file's channels and writes the file tiles
     /// it completes. A failure is kept for `finish` (see `failed`).
     pub fn store(&self, tile: &Tile, values: &[PixelValue]) {
+        self.keep_failure(|| self.try_store(tile, values));
+    }
+
+    /// Writes a tile encoded where it was rendered (`TileChunks::encode`). A failure is kept
+    /// for `finish`.
+    pub fn store_encoded(&self, tile: &Tile, encoded: &EncodedTile) {
+        self.keep_failure(|| self.try_store_encoded(tile, encoded));
+    }
+
+    /// Runs `write` unless a write failed before; keeps its failure, the first one, for `finish`.
+    fn keep_failure(&self, write: impl FnOnce() -> Result<(), String>) {
         if self.failed() {
             return;
         }
-        if let Err(e) = self.try_store(tile, values) {
+        if let Err(e) = write() {
             let mut first = self.failure.lock().unwrap_or_else(|e| e.into_inner());
             first.get_or_insert_with(|| output::explain_failure(&self.target, e));
         }
     }
 
+    pub fn layout(&self) -> &ExrLayout {
+        &self.chunks.layout
+    }
+
     fn try_store(&self, tile: &Tile, values: &[PixelValue]) -> Result<(), String> {
-        let held = PixelWindow::new(
-            Region {
-                x0: tile.x0,
-                y0: tile.y0,
-                x1: tile.x1,
-                y1: tile.y1,
-            },
-            self.layout.window.full_width,
-            self.layout.window.full_height,
-        );
-        let mut frame = FrameBuffer::windowed(held);
-        store_tile(&mut frame, tile, values);
+        let (frame, rendered) = self.layout().held(tile, values);
         self.keep_for_preview(&frame);
-        let rendered = self.in_file(held.area);
-        for file_tile in self.file_tiles_under(rendered) {
+        for file_tile in self.layout().file_tiles_under(rendered) {
             let overlap = rendered.meet(file_tile);
-            let complete = if overlap == file_tile {
-                let mut values = vec![0.0; file_tile.pixels() * self.layout.plan.channels.len()];
-                self.fill(&frame, rendered, file_tile, overlap, &mut values);
-                Some(values)
+            let bytes = if overlap == file_tile {
+                self.chunks.chunk(&frame, rendered, file_tile)?
             } else {
-                self.add_part(&frame, rendered, file_tile, overlap)
+                let Some(values) = self.add_part(&frame, rendered, file_tile, overlap) else {
+                    continue;
+                };
+                let mut bytes = Vec::new();
+                self.chunks
+                    .encoder
+                    .encode(self.layout().grid(file_tile), &values, &mut bytes)?;
+                bytes
             };
-            if let Some(values) = complete {
-                let r = file_tile;
-                self.stream.write((r.x0, r.y0), (r.x1, r.y1), &values)?;
+            self.file.write(self.layout().grid(file_tile), &bytes)?;
+        }
+        Ok(())
+    }
+
+    fn try_store_encoded(&self, tile: &Tile, encoded: &EncodedTile) -> Result<(), String> {
+        let (w, h) = (tile.x1 - tile.x0, tile.y1 - tile.y0);
+        if encoded.preview.len() != (w * h) as usize {
+            return Err(format!(
+                "an encoded tile of {} pixels for a {w}x{h} tile",
+                encoded.preview.len()
+            ));
+        }
+        for (grid, bytes) in &encoded.chunks {
+            self.file.write(*grid, bytes)?;
+        }
+        if let Some(preview) = &self.preview {
+            let mut preview = preview.lock().unwrap_or_else(|e| e.into_inner());
+            let window = self.layout().window;
+            let positions = (tile.y0..tile.y1).flat_map(|y| (tile.x0..tile.x1).map(move |x| (x, y)));
+            for (kept, (x, y)) in encoded.preview.iter().zip(positions) {
+                if let Some(at) = window.index(x, y) {
+                    preview.put(at, *kept);
+                }
             }
+            preview.add_log(encoded.log);
         }
         Ok(())
     }
@@ -354,51 +526,8 @@ impl StreamedExr {
         let held = frame.window();
         for i in 0..held.pixels() {
             let (x, y) = held.position(i);
-            if let Some(at) = self.layout.window.index(x, y) {
+            if let Some(at) = self.layout().window.index(x, y) {
                 preview.set(at, frame.composite_at(i));
-            }
-        }
-    }
-
-    /// `area` of the full image in the file's coordinates (0 is the window's first row and
-    /// column).
-    fn in_file(&self, area: Region) -> Region {
-        let (ox, oy) = (self.layout.window.area.x0, self.layout.window.area.y0);
-        Region {
-            x0: area.x0 - ox,
-            y0: area.y0 - oy,
-            x1: area.x1 - ox,
-            y1: area.y1 - oy,
-        }
-    }
-
-    /// The file tiles `rendered` (in the file's coordinates) reaches into, cut at the edge.
-    fn file_tiles_under(&self, rendered: Region) -> Vec<Region> {
-        let (tw, th) = self.layout.tile;
-        let (w, h) = (self.layout.window.width(), self.layout.window.height());
-        let mut out = Vec::new();
-        for ty in rendered.y0 / th..rendered.y1.div_ceil(th) {
-            for tx in rendered.x0 / tw..rendered.x1.div_ceil(tw) {
-                out.push(Region {
-                    x0: tx * tw,
-                    y0: ty * th,
-                    x1: ((tx + 1) * tw).min(w),
-                    y1: ((ty + 1) * th).min(h),
-                });
-            }
-        }
-        out
-    }
-
-    /// Writes the channels of `frame`'s pixels in `overlap` (the rendered tile `rendered` met
-    /// with `file_tile`) into `values`, the file tile's interleaved pixels.
-    fn fill(&self, frame: &FrameBuffer, rendered: Region, file_tile: Region, overlap: Region, values: &mut [f32]) {
-        let n = self.layout.plan.channels.len();
-        for y in overlap.y0..overlap.y1 {
-            for x in overlap.x0..overlap.x1 {
-                let i = ((y - rendered.y0) * rendered.width() + (x - rendered.x0)) as usize;
-                let at = ((y - file_tile.y0) * file_tile.width() + (x - file_tile.x0)) as usize * n;
-                self.layout.plan.fill(frame, &[], i, &mut values[at..at + n]);
             }
         }
     }
@@ -409,10 +538,12 @@ impl StreamedExr {
         let key = (file_tile.x0, file_tile.y0);
         let mut parts = self.parts.lock().unwrap_or_else(|e| e.into_inner());
         let part = parts.entry(key).or_insert_with(|| PartTile {
-            values: vec![0.0; file_tile.pixels() * self.layout.plan.channels.len()],
+            values: vec![0.0; file_tile.pixels() * self.chunks.layout.plan.channels.len()],
             missing: file_tile.pixels(),
         });
-        self.fill(frame, rendered, file_tile, overlap, &mut part.values);
+        self.chunks
+            .layout
+            .fill(frame, rendered, file_tile, overlap, &mut part.values);
         part.missing -= overlap.pixels();
         if part.missing > 0 {
             return None;
@@ -439,9 +570,7 @@ impl StreamedExr {
             return Err(format!("{} of the file's tiles were never complete", parts.len()));
         }
         let scratch = self.scratch.path();
-        self.stream
-            .end()
-            .map_err(|e| output::explain_failure(&self.target, e))?;
+        self.file.end().map_err(|e| output::explain_failure(&self.target, e))?;
         // The header rewritten in place, in the room kept for it: nothing copied. Without room
         // enough, a copy with the new header (the tiles copied as compressed).
         if image_io::set_exr_header(&scratch, attributes).map_err(|e| output::explain_failure(&self.target, e))? {
@@ -471,25 +600,55 @@ pub fn write_whole(
         ));
     }
     let streamed = StreamedExr::open(target, layout, false)?;
-    let (w, h) = (frame.width, frame.height);
-    let th = streamed.layout.tile.1;
-    let n = streamed.layout.plan.channels.len();
-    let mut band = Vec::new();
-    for y0 in (0..h).step_by(th as usize) {
-        let y1 = (y0 + th).min(h);
-        band.clear();
-        band.resize((y1 - y0) as usize * w as usize * n, 0.0);
-        for (k, values) in band.chunks_exact_mut(n).enumerate() {
+    let layout = streamed.layout();
+    let whole = Region {
+        x0: 0,
+        y0: 0,
+        x1: frame.width,
+        y1: frame.height,
+    };
+    let file_tiles = layout.file_tiles_under(whole);
+    let n = layout.plan.channels.len();
+    // The file's tiles filled and compressed on every core, each written as it is done.
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    let cores = std::thread::available_parallelism().map_or(1, |c| c.get()).min(16);
+    let write_tiles = || -> Result<(), String> {
+        let mut values = Vec::new();
+        let mut bytes = Vec::new();
+        loop {
+            let k = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            let Some(&file_tile) = file_tiles.get(k) else {
+                return Ok(());
+            };
+            values.clear();
+            values.resize(file_tile.pixels() * n, 0.0);
+            for y in file_tile.y0..file_tile.y1 {
+                for x in file_tile.x0..file_tile.x1 {
+                    let i = (y * frame.width + x) as usize;
+                    let at = ((y - file_tile.y0) * file_tile.width() + (x - file_tile.x0)) as usize * n;
+                    layout.plan.fill(frame, extra, i, &mut values[at..at + n]);
+                }
+            }
+            bytes.clear();
             streamed
-                .layout
-                .plan
-                .fill(frame, extra, y0 as usize * w as usize + k, values);
+                .chunks
+                .encoder
+                .encode(layout.grid(file_tile), &values, &mut bytes)?;
+            streamed.file.write(layout.grid(file_tile), &bytes)?;
         }
-        // One call a row of tiles: OpenEXR compresses them side by side on its threads.
-        streamed
-            .stream
-            .write((0, y0), (w, y1), &band)
-            .map_err(|e| output::explain_failure(target, e))?;
+    };
+    let outcomes: Vec<Result<(), String>> = std::thread::scope(|scope| {
+        let workers: Vec<_> = (0..cores).map(|_| scope.spawn(write_tiles)).collect();
+        workers
+            .into_iter()
+            .map(|w| {
+                w.join()
+                    .unwrap_or_else(|_| Err("a thread writing the file panicked".to_string()))
+            })
+            .collect()
+    });
+    if let Some(Err(e)) = outcomes.into_iter().find(Result::is_err) {
+        return Err(output::explain_failure(target, e));
     }
     streamed.finish(attributes)
 }

@@ -43,6 +43,15 @@ impl LogLuminance {
         }
     }
 
+    /// The sum and the count of lit pixels, as a message carries them.
+    pub fn parts(&self) -> (i128, u64) {
+        (self.sum, self.lit)
+    }
+
+    pub fn from_parts(sum: i128, lit: u64) -> LogLuminance {
+        LogLuminance { sum, lit }
+    }
+
     pub fn merged(self, other: LogLuminance) -> LogLuminance {
         LogLuminance {
             sum: self.sum + other.sum,
@@ -117,6 +126,21 @@ fn srgb_byte(c: f32) -> u8 {
     table[(c.clamp(0.0, 1.0) * u16::MAX as f32 + 0.5) as usize]
 }
 
+/// `rgb` in four bytes (negative, NaN and infinite parts as 0): a shared exponent and three
+/// 8-bit mantissas.
+pub fn rgbe(rgb: Vec3) -> [u8; 4] {
+    let rgb = Vec3::from_array(rgb.to_array().map(|c| if c.is_finite() { c.max(0.0) } else { 0.0 }));
+    let largest = rgb.max_element();
+    if largest < 1e-32 {
+        return [0; 4];
+    }
+    // largest = m * 2^e with m in [0.5, 1): the mantissas are the parts * 256 / 2^e.
+    let e = largest.log2().floor() as i32 + 1;
+    let scale = (2.0f32).powi(8 - e);
+    let m = (rgb * scale).to_array().map(|c| c.min(255.0) as u8);
+    [m[0], m[1], m[2], (e + 128).clamp(1, 255) as u8]
+}
+
 /// The composite kept for the preview while the EXR is streamed: four bytes a pixel (a shared
 /// exponent and three 8-bit mantissas, Radiance's RGBE) instead of the twelve of a float RGB, so
 /// 33 MB at 4K. About 1% of precision, below what an 8-bit preview shows.
@@ -143,17 +167,18 @@ impl PreviewBuffer {
     /// Keeps pixel `i` (row-major) as `rgb` (negative, NaN and infinite parts as 0).
     pub fn set(&mut self, i: usize, rgb: Vec3) {
         self.log.add(rgb);
-        let rgb = Vec3::from_array(rgb.to_array().map(|c| if c.is_finite() { c.max(0.0) } else { 0.0 }));
-        let largest = rgb.max_element();
-        self.pixels[i] = if largest < 1e-32 {
-            [0; 4]
-        } else {
-            // largest = m * 2^e with m in [0.5, 1): the mantissas are the parts * 256 / 2^e.
-            let e = largest.log2().floor() as i32 + 1;
-            let scale = (2.0f32).powi(8 - e);
-            let m = (rgb * scale).to_array().map(|c| c.min(255.0) as u8);
-            [m[0], m[1], m[2], (e + 128).clamp(1, 255) as u8]
-        };
+        self.pixels[i] = rgbe(rgb);
+    }
+
+    /// Keeps pixel `i` as `rgbe` made elsewhere (a tile encoded where it was rendered), whose
+    /// log luminance comes with `add_log`.
+    pub fn put(&mut self, i: usize, rgbe: [u8; 4]) {
+        self.pixels[i] = rgbe;
+    }
+
+    /// Adds the log luminance of pixels kept with `put`.
+    pub fn add_log(&mut self, log: LogLuminance) {
+        self.log = self.log.merged(log);
     }
 
     /// Pixel `i` as kept.

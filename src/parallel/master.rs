@@ -6,7 +6,7 @@
 
 use super::comm::{Comm, Hosts};
 use super::liveness::Silence;
-use super::protocol::{FinishedTile, Message, ProtocolError, Records};
+use super::protocol::{FinishedTile, Message, ProtocolError, Records, TilePixels};
 use super::relay::RecordRelay;
 use super::{ParallelError, ParallelResult};
 use super::{Setup, end_job};
@@ -61,6 +61,8 @@ pub struct MasterCore<'a, 'c> {
     pub reports: Vec<Option<RankReport>>,
     /// Work requests answered with "no tile left".
     pub turned_away: usize,
+    /// Tiles that came as the file's chunks.
+    pub tiles_encoded: u64,
 }
 
 impl<'a, 'c> MasterCore<'a, 'c> {
@@ -102,6 +104,7 @@ impl<'a, 'c> MasterCore<'a, 'c> {
             relay: RecordRelay::new(size, setup.cache()),
             reports: vec![None; size],
             turned_away: 0,
+            tiles_encoded: 0,
         }
     }
 
@@ -152,20 +155,35 @@ impl<'a, 'c> MasterCore<'a, 'c> {
 
     /// A finished tile from `source`: into the journal and the image.
     fn take_tile(&mut self, source: i32, finished: FinishedTile) -> Result<(), String> {
-        let (index, pixels) = (finished.tile, finished.pixels);
+        let index = finished.tile;
         let tile = self
             .setup
             .tiles
             .get(index as usize)
             .filter(|_| !self.tiles_done[index as usize])
             .ok_or_else(|| format!("rank {source} returned tile {index}, which it was not given"))?;
-        if pixels.len() != ((tile.x1 - tile.x0) * (tile.y1 - tile.y0)) as usize {
-            return Err(format!("rank {source} returned tile {index} with the wrong size"));
+        let pixels_in_tile = ((tile.x1 - tile.x0) * (tile.y1 - tile.y0)) as usize;
+        match finished.pixels {
+            TilePixels::Values(pixels) => {
+                if pixels.len() != pixels_in_tile {
+                    return Err(format!("rank {source} returned tile {index} with the wrong size"));
+                }
+                if let Some((journal, _)) = &self.setup.checkpoint {
+                    journal.tile(index, finished.requests, &pixels);
+                }
+                self.image.store(tile, pixels);
+            }
+            // Encoded only where the master streams and journals nothing (`JobHost::tile_layout`).
+            TilePixels::Encoded(encoded) => {
+                if encoded.preview.len() != pixels_in_tile || self.setup.checkpoint.is_some() {
+                    return Err(format!("rank {source} returned tile {index} encoded for another file"));
+                }
+                self.image
+                    .store_encoded(tile, &encoded)
+                    .map_err(|e| format!("rank {source} returned tile {index}: {e}"))?;
+                self.tiles_encoded += 1;
+            }
         }
-        if let Some((journal, _)) = &self.setup.checkpoint {
-            journal.tile(index, finished.requests, &pixels);
-        }
-        self.image.store(tile, pixels);
         self.tiles_done[index as usize] = true;
         Ok(())
     }
@@ -217,8 +235,12 @@ pub fn run(comm: &Comm<'_>, setup: &Setup<'_>, sharing: &mut dyn Sharing, wall: 
             .unwrap_or_else(|e| end_job(comm, setup.cache(), &e)),
         false => None,
     };
-    let (image, ranks, render_s) =
-        control(comm, setup, sharing, streamed.as_ref()).unwrap_or_else(|e| end_job(comm, setup.cache(), &e));
+    let MasterOutcome {
+        image,
+        ranks,
+        render_s,
+        tiles_encoded,
+    } = control(comm, setup, sharing, streamed.as_ref()).unwrap_or_else(|e| end_job(comm, setup.cache(), &e));
     let frame = image.into_frame(setup.prepass.as_ref());
     if let Some(cache) = setup.cache()
         && let Err(e) = cache.finish()
@@ -230,6 +252,7 @@ pub fn run(comm: &Comm<'_>, setup: &Setup<'_>, sharing: &mut dyn Sharing, wall: 
         .job_stats(job, job_in.mode.name(), comm.size() as usize, render_s);
     stats.threads = job_in.threads.unwrap_or(1);
     stats.tiles_restored = setup.checkpoint.as_ref().map_or(0, |(_, r)| r.count()) as u64;
+    stats.tiles_encoded = tiles_encoded;
     stats.add_ranks(ranks);
     if let Some(prepass) = &setup.prepass {
         stats.add_prepass(prepass);
@@ -247,13 +270,22 @@ pub fn run(comm: &Comm<'_>, setup: &Setup<'_>, sharing: &mut dyn Sharing, wall: 
     Ok(())
 }
 
+/// What the master's part of the render leaves: the image (streamed or held), the workers'
+/// reports, the render's seconds and how many tiles came encoded.
+struct MasterOutcome<'a> {
+    image: TileSink<'a>,
+    ranks: Vec<RankReport>,
+    render_s: f64,
+    tiles_encoded: u64,
+}
+
 /// The render under the mode's policy: the image, every rank's report and the render's seconds.
 fn control<'a>(
     comm: &'a Comm<'_>,
     setup: &'a Setup<'a>,
     sharing: &mut dyn Sharing,
     stream: Option<&'a StreamedExr>,
-) -> Result<(TileSink<'a>, Vec<RankReport>, f64), String> {
+) -> Result<MasterOutcome<'a>, String> {
     let start = Instant::now();
     let mut core = MasterCore::new(comm, setup, stream);
     sharing.start(&mut core);
@@ -280,7 +312,12 @@ fn control<'a>(
         ..super::traffic_report(0, "mc", &[comm.counters], comm.counters.idle_s())
     }];
     ranks.extend(core.reports.into_iter().skip(1).flatten());
-    Ok((core.image, ranks, render_s))
+    Ok(MasterOutcome {
+        image: core.image,
+        ranks,
+        render_s,
+        tiles_encoded: core.tiles_encoded,
+    })
 }
 
 /// The line that ends a job when a rank has fallen silent.

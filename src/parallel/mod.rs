@@ -18,11 +18,13 @@ pub mod worker;
 
 use crate::checkpoint::{Checkpoint, Restored};
 use crate::image::framebuffer::FrameBuffer;
-use crate::image::layered_exr::StreamedExr;
+use crate::image::framebuffer::PixelValue;
+use crate::image::layered_exr::{ExrLayout, StreamedExr, TileChunks};
 use crate::irradiance::IrradianceCache;
 use crate::job::Job;
 use crate::prepass::PrepassOutcome;
 use crate::render::ThreadStats;
+use crate::render::sink::PrepassRecords;
 use crate::shading::Integrator;
 use crate::stats::{RankReport, RenderStats, ThreadReport};
 use crate::tiles::{Tile, tiles};
@@ -30,7 +32,7 @@ use comm::{Comm, Counters, Hosts};
 use component::Roles;
 pub use error::{ParallelError, ParallelResult};
 use mpi::Threading;
-use protocol::{Kind, Message, Records};
+use protocol::{FinishedTile, Kind, Message, Records, TilePixels};
 use std::sync::Mutex;
 use std::sync::atomic::AtomicU64;
 use std::sync::atomic::Ordering::Relaxed;
@@ -104,6 +106,10 @@ pub trait JobHost: Sync {
     fn job_stats(&self, job: &Job, mode: &'static str, ranks: usize, render_s: f64) -> RenderStats;
     /// Rank 0: writes the image, its preview and the statistics.
     fn write(&self, job: &Job, frame: &FrameBuffer, stats: &RenderStats) -> Result<(), String>;
+    /// The layout of the file rank 0 streams, in which the workers encode their tiles (every
+    /// rank, the same answer); None where rank 0 takes the tiles' values: it holds the frame
+    /// whole (--denoise) or journals them (--checkpoint).
+    fn tile_layout(&self, job: &Job, ranks: usize) -> Option<ExrLayout>;
     /// Rank 0: the stream the tiles go into as they come, or None if the frame must be held
     /// whole (the command's outputs need every pixel at the end: --denoise).
     fn stream(&self, job: &Job, ranks: usize) -> Result<Option<StreamedExr>, String>;
@@ -212,6 +218,9 @@ pub struct Setup<'a> {
     pub traced: Mutex<ahead::TracedTiles>,
     /// What tracing ahead did on this worker.
     pub ahead: ahead::AheadReport,
+    /// A worker's encoder of the file's tiles, where the master streams the file (the prepass
+    /// build) and takes them encoded (`JobHost::tile_layout`).
+    pub chunks: Option<(TileChunks, Option<PrepassRecords>)>,
 }
 
 impl Setup<'_> {
@@ -223,6 +232,30 @@ impl Setup<'_> {
     pub fn integrator(&self) -> Integrator<'_> {
         let job = &self.job;
         Integrator::new(&job.scene, &job.tracer, &job.shading, job.cache.as_ref()).cache_frozen(job.settings.prepass)
+    }
+
+    /// A finished tile for the master: encoded into the file's chunks where the worker can (its
+    /// tile lies on the file's tile grid), else its pixels' values.
+    pub fn finished_tile(&self, tile: u32, requests: u32, pixels: Vec<PixelValue>) -> FinishedTile {
+        let encoded = self.chunks.as_ref().and_then(|(chunks, records)| {
+            let at = &self.tiles[tile as usize];
+            // The file's count of records at each pixel, which the master adds to values.
+            let counted;
+            let values = match records {
+                Some(records) => {
+                    counted = records.counted(at, pixels.clone());
+                    &counted
+                }
+                None => &pixels,
+            };
+            // A tile the encoder fails on goes as values: the master's writer says what is wrong.
+            chunks.encode(at, values).ok().flatten()
+        });
+        let pixels = match encoded {
+            Some(encoded) => TilePixels::Encoded(encoded),
+            None => TilePixels::Values(pixels),
+        };
+        FinishedTile { tile, requests, pixels }
     }
 
     /// The records of the cache file the workers do not hold yet (after a prepass they do).
@@ -450,6 +483,13 @@ pub fn run(job_in: &ParallelJob<'_>) -> ParallelResult {
     {
         cache.keep_outbox();
     }
+    // Where the master streams the file (the prepass build, `master::run`), a worker encodes
+    // its tiles into the file's chunks: the master only writes them.
+    let chunks = prepass.as_ref().filter(|_| rank != 0).and_then(|outcome| {
+        let layout = host.tile_layout(&job, size as usize)?;
+        let records = layout.plan.counts_records().then(|| PrepassRecords::of(outcome));
+        Some((TileChunks::new(layout).ok()?, records))
+    });
     let setup = Setup {
         job_in,
         job,
@@ -463,6 +503,7 @@ pub fn run(job_in: &ParallelJob<'_>) -> ParallelResult {
         claims,
         traced: Mutex::new(traced),
         ahead,
+        chunks,
     };
     match roles {
         _ if rank == 0 => {

@@ -96,11 +96,7 @@ fn render_tiles(setup: &Setup<'_>, counters: &Counters, sharer: &Sharer<'_>, thr
         let pixels = render_tile(&integrator, camera, settings, tile, &mut stats.rays, |_| {
             sharer.after_pixel(&comm, thread)
         });
-        finished = Some(FinishedTile {
-            tile: index,
-            requests: 0,
-            pixels,
-        });
+        finished = Some(setup.finished_tile(index, 0, pixels));
         stats.tiles += 1;
     }
     clock.stop(&mut stats);

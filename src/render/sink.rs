@@ -5,7 +5,7 @@
 
 use crate::checkpoint::Restored;
 use crate::image::framebuffer::{FrameBuffer, PixelValue};
-use crate::image::layered_exr::StreamedExr;
+use crate::image::layered_exr::{EncodedTile, StreamedExr};
 use crate::prepass::PrepassOutcome;
 use crate::tiles::{Tile, store_tile};
 use std::collections::HashMap;
@@ -36,7 +36,9 @@ impl<'a> TileSink<'a> {
     ) -> TileSink<'a> {
         let sink = TileSink::Streamed {
             stream,
-            prepass_records: prepass.map(PrepassRecords::of),
+            prepass_records: prepass
+                .filter(|_| stream.layout().plan.counts_records())
+                .map(PrepassRecords::of),
         };
         if let Some((tiles, restored)) = restored {
             for (tile, _) in tiles.iter().zip(&restored.done).filter(|(_, done)| **done) {
@@ -44,6 +46,17 @@ impl<'a> TileSink<'a> {
             }
         }
         sink
+    }
+
+    /// Stores a tile a worker encoded into the file's chunks (only where the tiles are streamed).
+    pub fn store_encoded(&self, tile: &Tile, encoded: &EncodedTile) -> Result<(), String> {
+        match self {
+            TileSink::Streamed { stream, .. } => {
+                stream.store_encoded(tile, encoded);
+                Ok(())
+            }
+            TileSink::Held(_) => Err("an encoded tile for a frame held whole".to_string()),
+        }
     }
 
     /// Stores a finished tile's pixels (see `tiles::store_tile` for a held frame).
@@ -104,6 +117,12 @@ impl PrepassRecords {
             *counts.entry(pixel.0).or_insert(0.0) += pixel.1 as f32;
         }
         PrepassRecords(counts)
+    }
+
+    /// A tile's pixels with the counts added.
+    pub fn counted(&self, tile: &Tile, mut values: Vec<PixelValue>) -> Vec<PixelValue> {
+        self.add_to(tile, &mut values);
+        values
     }
 
     /// Adds the counts to a tile's pixels (row-major over the tile).

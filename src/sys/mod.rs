@@ -25,8 +25,10 @@ mod generated {
 use generated::{abi as abi_bindings, embree as embree_bindings, image as image_bindings};
 
 pub mod alloc;
+pub mod clock;
 pub mod disk;
 pub mod embree;
+pub mod exr_chunks;
 pub mod image_io;
 pub mod oidn;
 pub mod prefetch;

@@ -14,6 +14,7 @@ use crate::cli::{DenoiseQualityArg, ModeArg, ProgressArg};
 use crate::image::denoise;
 use crate::image::denoise::Quality;
 use crate::image::framebuffer::FrameBuffer;
+use crate::image::layered_exr::ExrLayout;
 use crate::image::layered_exr::StreamedExr;
 use crate::image::metrics;
 use crate::image::region::Region;
@@ -201,6 +202,12 @@ impl JobHost for RenderHost<'_> {
     fn write(&self, job: &Job, frame: &FrameBuffer, stats: &RenderStats) -> Result<(), String> {
         let outputs = self.outputs.get().ok_or("the outputs were not checked")?;
         outputs.write(self.args, job, frame, stats).map_err(|e| e.message)
+    }
+
+    fn tile_layout(&self, job: &Job, ranks: usize) -> Option<ExrLayout> {
+        // --denoise holds the frame whole, and --checkpoint journals the tiles' values.
+        (!self.args.denoise && self.args.checkpoint.is_none())
+            .then(|| Outputs::layout(self.args, job, job.settings.window(&job.camera), &[], ranks))
     }
 
     fn stream(&self, job: &Job, ranks: usize) -> Result<Option<StreamedExr>, String> {

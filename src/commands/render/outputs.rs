@@ -186,7 +186,7 @@ impl Outputs {
 
     /// How this render's EXR is laid out: the layers the scene can light, `extra` layers (the
     /// denoised ones), the data layers asked for, over `window`, in the render's tiles.
-    fn layout(&self, args: &RenderArgs, job: &Job, window: PixelWindow, extra: &[&str], ranks: usize) -> ExrLayout {
+    pub fn layout(args: &RenderArgs, job: &Job, window: PixelWindow, extra: &[&str], ranks: usize) -> ExrLayout {
         let layers = producible_layers(job.scene.needs(), &job.shading);
         ExrLayout {
             // The statistics take about 12 KB and 1 KB more a rank; the command line, the
@@ -207,7 +207,7 @@ impl Outputs {
         if args.denoise {
             return Ok(None);
         }
-        let layout = self.layout(args, job, job.settings.window(&job.camera), &[], ranks);
+        let layout = Outputs::layout(args, job, job.settings.window(&job.camera), &[], ranks);
         StreamedExr::open(&self.exr, layout, self.png.is_some())
             .map(Some)
             .map_err(|e| CommandError::failed(format!("{}: {e}", self.exr.display())))
@@ -227,6 +227,7 @@ impl Outputs {
                 "Software".to_string(),
                 format!("icrender {}", env!("CARGO_PKG_VERSION")),
             ),
+            ("DateTime".to_string(), crate::sys::clock::local_date_time()),
             ("icrender/command".to_string(), super::rerun_command(args)),
             ("icrender/scene".to_string(), args.scene.display().to_string()),
             ("icrender/options".to_string(), options_line(args)),
@@ -355,7 +356,7 @@ impl Outputs {
         });
         let names: Vec<&str> = extra.iter().map(|(n, _)| n.as_str()).collect();
         let planes: Vec<&[glam::Vec3]> = extra.iter().map(|(_, p)| *p).collect();
-        let layout = self.layout(args, job, frame.window(), &names, stats.ranks);
+        let layout = Outputs::layout(args, job, frame.window(), &names, stats.ranks);
         // The preview is made beside the EXR, on a thread of its own, and put in place only
         // once the EXR is: 0.5 s of a 1080p frame's writing no longer comes after it.
         let preview = |png: &std::path::PathBuf| {

@@ -287,11 +287,7 @@ impl Pr<'_, '_> {
                 own.compute(integrator, sender.send(sink), seed);
                 // Every request of the tile, sent or computed here: the results it awaits.
                 let requests = (sender.sent - sent_before + own.computed - own_before) as u32;
-                finished = Some(FinishedTile {
-                    tile: index,
-                    requests,
-                    pixels,
-                });
+                finished = Some(self.setup.finished_tile(index, requests, pixels));
                 self.stats.tiles += 1;
             }
             // The last tile's report still has to reach the master: one more request (its

@@ -12,6 +12,8 @@ use crate::codec::pixels::{
     PIXEL_FLOATS, RESULT_BYTES, decode_pixels, encode_pixels, healthy, put_results, take_results,
 };
 use crate::image::framebuffer::{Layer, PixelValue};
+use crate::image::layered_exr::EncodedTile;
+use crate::image::preview::LogLuminance;
 use crate::irradiance::codec::{self, RECORD_BYTES};
 use crate::irradiance::last_bounce::{GridSample, Received};
 use crate::irradiance::record::Record;
@@ -24,7 +26,7 @@ use std::sync::OnceLock;
 use wire::{Put, Reader};
 
 /// The first byte of every message; a rank of another build is refused, not misread.
-pub const PROTOCOL_VERSION: u8 = 6;
+pub const PROTOCOL_VERSION: u8 = 7;
 
 /// A last bounce's grid sample on the wire: four vectors (position, normal, direct, indirect).
 const GRID_SAMPLE_BYTES: usize = 4 * 12;
@@ -146,7 +148,56 @@ impl From<Vec<AmbientRequest>> for Requests {
 pub struct FinishedTile {
     pub tile: u32,
     pub requests: u32,
-    pub pixels: Vec<PixelValue>,
+    pub pixels: TilePixels,
+}
+
+/// A finished tile's pixels: their values, or, where the master streams the file, the file's
+/// chunks made by the worker (`image::layered_exr::TileChunks`), about a fifth of the bytes
+/// and nothing for the master to compress.
+#[derive(Clone, Debug, PartialEq)]
+pub enum TilePixels {
+    Values(Vec<PixelValue>),
+    Encoded(EncodedTile),
+}
+
+/// Largest chunk a tile of the file may take: a 4096x4096 tile of 4096 float channels is the
+/// most the encoder makes (cpp/exr_chunks.cpp), but a message is checked before any of that.
+const MAX_CHUNK_BYTES: usize = i32::MAX as usize;
+
+fn put_encoded(out: &mut Vec<u8>, tile: &EncodedTile) {
+    out.put_u32(tile.chunks.len() as u32);
+    for ((x, y), bytes) in &tile.chunks {
+        out.put_u32(*x);
+        out.put_u32(*y);
+        out.put_u32(bytes.len() as u32);
+        out.extend_from_slice(bytes);
+    }
+    out.put_u32(tile.preview.len() as u32);
+    tile.preview.iter().for_each(|p| out.extend_from_slice(p));
+    let (sum, lit) = tile.log.parts();
+    out.extend_from_slice(&sum.to_le_bytes());
+    out.put_u64(lit);
+}
+
+fn take_encoded(r: &mut Reader<'_>) -> Result<EncodedTile, ProtocolError> {
+    let count = r.count(12)?;
+    let mut chunks = Vec::with_capacity(count);
+    for _ in 0..count {
+        let (x, y, len) = (r.u32()?, r.u32()?, r.u32()? as usize);
+        if len == 0 || len > MAX_CHUNK_BYTES {
+            return Err(r.error(format!("a chunk of {len} bytes")));
+        }
+        chunks.push(((x, y), r.take(len)?.to_vec()));
+    }
+    let pixels = r.count(4)?;
+    let preview = r
+        .take(pixels * 4)?
+        .chunks_exact(4)
+        .map(|p| [p[0], p[1], p[2], p[3]])
+        .collect();
+    let sum = i128::from_le_bytes(r.take(16)?.try_into().expect("16 bytes"));
+    let log = LogLuminance::from_parts(sum, r.u64()?);
+    Ok(EncodedTile { chunks, preview, log })
 }
 
 /// Every message of every mode. MC: the master (rank 0); worker: any other rank; PR and PA:
@@ -289,8 +340,17 @@ impl Message {
                 if let Some(f) = finished {
                     out.put_u32(f.tile);
                     out.put_u32(f.requests);
-                    out.put_u32(f.pixels.len() as u32);
-                    encode_pixels(&f.pixels, &mut out);
+                    match &f.pixels {
+                        TilePixels::Values(pixels) => {
+                            out.put_u8(0);
+                            out.put_u32(pixels.len() as u32);
+                            encode_pixels(pixels, &mut out);
+                        }
+                        TilePixels::Encoded(tile) => {
+                            out.put_u8(1);
+                            put_encoded(&mut out, tile);
+                        }
+                    }
                 }
             }
             Message::RecordsUp { thread, records } => {
@@ -402,11 +462,17 @@ impl Message {
             Kind::WorkRequest => {
                 let thread = r.u32()?;
                 let finished = if r.flag()? {
-                    let (tile, requests, count) = (r.u32()?, r.u32()?, r.count(PIXEL_FLOATS * 4)?);
-                    let pixels = decode_pixels(r.take(count * PIXEL_FLOATS * 4)?);
-                    if !pixels.iter().all(healthy) {
-                        return Err(r.error("a pixel is negative or not finite"));
-                    }
+                    let (tile, requests) = (r.u32()?, r.u32()?);
+                    let pixels = if r.flag()? {
+                        TilePixels::Encoded(take_encoded(&mut r)?)
+                    } else {
+                        let count = r.count(PIXEL_FLOATS * 4)?;
+                        let pixels = decode_pixels(r.take(count * PIXEL_FLOATS * 4)?);
+                        if !pixels.iter().all(healthy) {
+                            return Err(r.error("a pixel is negative or not finite"));
+                        }
+                        TilePixels::Values(pixels)
+                    };
                     Some(FinishedTile { tile, requests, pixels })
                 } else {
                     None

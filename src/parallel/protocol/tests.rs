@@ -121,7 +121,19 @@ fn every_message() -> Vec<Message> {
             finished: Some(FinishedTile {
                 tile: 7,
                 requests: 11,
-                pixels: vec![pixel(0.5), pixel(1.5)],
+                pixels: TilePixels::Values(vec![pixel(0.5), pixel(1.5)]),
+            }),
+        },
+        Message::WorkRequest {
+            thread: 1,
+            finished: Some(FinishedTile {
+                tile: 8,
+                requests: 0,
+                pixels: TilePixels::Encoded(EncodedTile {
+                    chunks: vec![((0, 1), vec![1, 2, 3]), ((1, 1), vec![9; 40])],
+                    preview: vec![[1, 2, 3, 129], [0; 4]],
+                    log: LogLuminance::from_parts(-(1 << 70), 2),
+                }),
             }),
         },
         Message::Work {
@@ -273,21 +285,30 @@ fn unhealthy_pixels_and_results_are_refused() {
         finished: Some(FinishedTile {
             tile: 1,
             requests: 0,
-            pixels: vec![pixel(v)],
+            pixels: TilePixels::Values(vec![pixel(v)]),
         }),
     };
     for bad in [f32::NAN, -1.0, f32::INFINITY] {
         assert!(Message::decode(Kind::WorkRequest.tag(), &request(bad).encode()).is_err());
         // The same in a data layer: a depth, or a coverage.
         let mut with_bad_data = request(1.0);
-        if let Message::WorkRequest { finished: Some(f), .. } = &mut with_bad_data {
-            f.pixels[0].data.depth = bad;
+        fn first_pixel(message: &mut Message) -> &mut PixelValue {
+            match message {
+                Message::WorkRequest {
+                    finished:
+                        Some(FinishedTile {
+                            pixels: TilePixels::Values(pixels),
+                            ..
+                        }),
+                    ..
+                } => &mut pixels[0],
+                _ => unreachable!("a request with values"),
+            }
         }
+        first_pixel(&mut with_bad_data).data.depth = bad;
         assert!(Message::decode(Kind::WorkRequest.tag(), &with_bad_data.encode()).is_err());
-        if let Message::WorkRequest { finished: Some(f), .. } = &mut with_bad_data {
-            f.pixels[0].data.depth = 1.0;
-            f.pixels[0].data.object[0].coverage = bad;
-        }
+        first_pixel(&mut with_bad_data).data.depth = 1.0;
+        first_pixel(&mut with_bad_data).data.object[0].coverage = bad;
         assert!(Message::decode(Kind::WorkRequest.tag(), &with_bad_data.encode()).is_err());
         // A result's light may not be NaN or infinite (it is added to a pixel as it is).
         let value = Vec3::new(1.0, bad, 1.0);
