@@ -34,9 +34,9 @@ communicator of their own, and every exchange among them is an allgather polled 
   samples    the edge pixels' sample rounds: more rounds as above.
   fit        the record set's curvature fit and freeze (serial, on every worker: the
              one-process run's `prepass_fit_s`).
-  final      tiles on demand: a worker sends the finished tile (200 bytes a pixel) with its
-             next request and waits for the master's reply; the master takes the tiles one at a
-             time, so its link carries the whole image.
+  final      tiles on demand: a worker sends the finished tile (the file's chunks it compressed,
+             and the preview's pixels) with its next request and waits for the master's reply;
+             the master takes the tiles one at a time, so its link carries the whole image.
 
 The collective. Open MPI 4.1's libnbc (what `MPI_Iallgatherv` runs here; `ompi_info --param coll
 libnbc` offers no algorithm choice for it) is linear: each rank posts a receive from and a send
@@ -82,12 +82,9 @@ import icsim
 RECORD_WIRE = 4 + icsim.RECORD_BYTES  # a round's record: its site's index and the record
 GRID_SAMPLE_BYTES = 48  # position, normal, direct and indirect light: four vec3
 ROW_HEADER = 8  # a row's y and its length (u32 each)
-PIXEL_WIRE = 4 * (13 + 13 + 4 * 6)  # PIXEL_FLOATS: 4 RGB layers, records, 13 data, 24 Cryptomatte
-HALF_PIXEL = 24  # the four RGB layers at half precision: what a what-if sends instead
-# Bytes a second the master decodes and stores a finished tile at (src/parallel/protocol
-# decode_pixels, src/tiles.rs store_tile): an assumption of about a memory copy's speed with
-# the decoding's work, not measured (at 4 workers here the master never bounds the final pass).
-MASTER_TILE_RATE = 1e9
+# A finished tile's bytes a pixel and the master's seconds a pixel storing it come from the
+# -np 2 calibration run (--stats per_rank[0] tile_bytes and tiles_s): the workers send the file's
+# compressed chunks (src/image/layered_exr.rs TileChunks) and the master only writes them.
 LENGTH_BYTES = 8  # each rank's part length in the first allgather (u64)
 EDGE_STRIP = 8  # src/prepass/mod.rs: rows of an edge map's strip
 MAX_SITE_PIXELS = 1 << 18  # src/irradiance/last_bounce.rs: the grid's sites at most
@@ -199,6 +196,10 @@ class Profile:
     # A tile's cost of going through the master (encoding, the rendezvous of a large message
     # polled with pauses, storing it) beyond its bytes on the link: from a calibration run.
     tile_overhead_s = 0.0
+    # A finished tile's bytes a pixel on the wire, and the master's seconds a pixel storing it
+    # (from the calibration run; until then the pixels' values and no cost).
+    tile_wire = 4 * (13 + 13 + 4 * 6)
+    master_pixel_s = 0.0
     # Component mode's tracing ahead (a calibration run at -np 3): the share of a worker's
     # seconds in the collectives that tracing filled, and the seconds a traced pixel took.
     ahead_fill = 0.0
@@ -468,7 +469,7 @@ def simulate(profile, ranks, net, cores=None, mode="broadcast", change=()):
                          + net.allgather(W, edge_bytes * share, edge_bytes)) if pr.edge_s and W > 1 else 0.0
     if pr.edge_s:
         res.bytes += (edge_bytes + 4 * W) * (W - 1) + LENGTH_BYTES * W * (W - 1)
-    res.bytes += pr.pixels * PIXEL_WIRE  # the final pass's tiles, to the master
+    res.bytes += pr.pixels * pr.tile_wire  # the final pass's tiles, to the master
     # The workers fit; the master only freezes its copy (for the cache file).
     part["fit"], alone["fit"] = pr.fit_s * (W / cores if cores is not None and W > cores else 1.0), pr.fit_s
     if "fit_split" in change:
@@ -498,21 +499,21 @@ def final_pass(pr, W, net, cores, mode, change=(), ahead_s=0.0):
     n = W
     tiles = math.ceil(pr.width / 32) * math.ceil(pr.height / 32)
     per_tile = max(pr.final_s - n * ahead_s, 0.0) / tiles
-    tile_bytes = pr.pixels / tiles * (HALF_PIXEL if "half_tiles" in change else PIXEL_WIRE)
+    tile_bytes = pr.pixels / tiles * pr.tile_wire
     # On shared cores the rendering ranks take turns with each other (the idle PAs sleep).
     speed = min(cores, n) / n if cores is not None and n > cores else 1.0
     trip = (2 * net.lat + 2 * net.gap + tile_bytes / net.bw + MASTER_MAX_PAUSE / 2 + wake(per_tile / speed, False)
             + pr.tile_overhead_s)
     workers = max(tiles / n, 1.0) * (per_tile / speed + trip) + 0.5 * per_tile / speed
-    # The master takes the tiles one at a time: each one's bytes on its link, and decoding and
-    # storing them at MASTER_TILE_RATE (the calibrated overhead is the worker's wait, in `trip`).
-    master = tiles * (tile_bytes / net.bw + net.gap + tile_bytes / MASTER_TILE_RATE) + per_tile / speed + trip
+    # The master takes the tiles one at a time: each one's bytes on its link, and storing them
+    # at its measured seconds a pixel (the calibrated overhead is the worker's wait, in `trip`).
+    master = tiles * (tile_bytes / net.bw + net.gap) + pr.pixels * pr.master_pixel_s + per_tile / speed + trip
     if "direct_tiles" in change:
         # The workers write their tiles themselves (a parallel file system, MPI-IO): the
         # master's link carries the requests alone.
         master = tiles * (64 / net.bw + net.gap)
     if master > workers:
-        return master, "master (its link, decoding)"
+        return master, "master (its link, storing)"
     return workers, "workers"
 
 
@@ -557,7 +558,9 @@ def read_run(stats_path, elapsed):
              "workers_pool_s": sum(r.get("prepass_pool_s", 0.0) for r in workers)}
     return {**ahead, "wall_s": s["wall_s"], "mpirun_s": elapsed, "extra_s": max(extra, 0.0), "prepass_s": s["prepass_s"], "render_s": s["render_s"],
             "load_s": s["load_s"] + s["build_s"], "bytes": s["bytes"], "records": s["prepass_records"],
-            "master_own_s": max(own, 0.0), "mode": s["mode"], "load_average": load_average()}
+            "master_own_s": max(own, 0.0), "mode": s["mode"], "load_average": load_average(),
+            "pixels": s["width"] * s["height"], "tile_bytes": master.get("tile_bytes", 0),
+            "tiles_s": master.get("tiles_s", 0.0)}
 
 
 def mpi_local(np, scene, size, options, mode, work):
@@ -661,13 +664,16 @@ def calibrate(case, work, store):
     if run is None:
         raise RuntimeError(f"calibration run failed: {error}")
     entry["mpi_extra_s"], entry["calibration_final_s"] = run["extra_s"], run["render_s"]
+    entry["tile_wire"] = run["tile_bytes"] / run["pixels"]
+    entry["master_pixel_s"] = run["tiles_s"] / run["pixels"]
     ahead, error = mpi_local(3, case["path"], case["size"], case["options"], "component", work)
     if ahead is None:
         raise RuntimeError(f"calibration run failed: {error}")
     entry["ahead_fill"] = ahead["ahead_s"] / max(ahead["workers_pool_s"], 1e-9)
     entry["ahead_pixel_s"] = ahead["ahead_s"] / max(ahead["ahead_pixels"], 1)
     print(f"calibration {case['scene']}-{case['size']}: -np 2 setup {run['extra_s']:.3f} s, final pass "
-          f"{run['render_s']:.3f} s; -np 3 component: tracing ahead filled {100 * entry['ahead_fill']:.0f}% of the "
+          f"{run['render_s']:.3f} s, tiles {entry['tile_wire']:.1f} bytes a pixel, the master "
+          f"{entry['master_pixel_s'] * 1e9:.0f} ns a pixel storing them; -np 3 component: tracing ahead filled {100 * entry['ahead_fill']:.0f}% of the "
           f"workers' waits, {entry['ahead_pixel_s'] * 1e6:.2f} us a pixel")
 
 
@@ -675,6 +681,8 @@ def profile_of(store, case, cores=True):
     e = store["profiles"][f"{case['scene']}-{case['size']}"]
     pr = Profile(e["default"], e.get("noedge"), e.get("threads2") if cores else None, None, e.get("mpi_extra_s"))
     pr.ahead_fill, pr.ahead_pixel_s = e.get("ahead_fill", 0.0), e.get("ahead_pixel_s", 0.0)
+    pr.tile_wire = e.get("tile_wire", pr.tile_wire)
+    pr.master_pixel_s = e.get("master_pixel_s", pr.master_pixel_s)
     if e.get("calibration_final_s") is not None:
         pr.tile_overhead_s = max(e["calibration_final_s"] - pr.final_s, 0.0) / pr.tiles()
     return pr
@@ -806,6 +814,7 @@ def target_profile(store):
     base = profile_of(store, LOCAL, cores=False)
     out = Profile(store["target"], mpi_extra_s=base.mpi_extra_s)
     out.tile_overhead_s = base.tile_overhead_s
+    out.tile_wire, out.master_pixel_s = base.tile_wire, base.master_pixel_s
     out.ahead_fill, out.ahead_pixel_s = base.ahead_fill, base.ahead_pixel_s
     return out
 
@@ -849,7 +858,6 @@ def predict(store, algorithms=("linear", "bruck")):
 CHANGES = [
     ("as is (component mode, linear iallgatherv)", "component", "linear", ()),
     ("no tracing ahead (as --mode broadcast renders)", "component", "linear", ("no_ahead",)),
-    ("tiles sent at 24 bytes a pixel (the four layers at half precision)", "component", "linear", ("half_tiles",)),
     ("workers write their tiles themselves (MPI-IO), not through the master", "component", "linear",
      ("direct_tiles",)),
     ("the fit shared by the workers (their shares allgathered)", "component", "linear", ("fit_split",)),
@@ -928,11 +936,12 @@ def write_docs(store, validation, check, target, prediction, ifs, log):
         "- **maps**: the edge map's strips over the workers, bit-packed rows allgathered among them; then the "
         "edge pixels' sample rounds.",
         "- **fit**: the record set's curvature fit, on every worker (the one-process run's `prepass_fit_s`).",
-        "- **final**: 32x32 tiles on demand, each a round trip through the master carrying the tile back (200 bytes "
-        "a pixel) plus a tile's overhead beyond one process (the -np 2 calibration run's final pass beyond the "
-        "one-process final pass, per tile: encoding, a large message's rendezvous polled with pauses); bound by "
-        "the rendering workers or by the master, which takes the tiles one at a time (their bytes on its link, "
-        "and decoding and storing them at an assumed 1 GB/s). Every worker renders tiles, in every mode.",
+        "- **final**: 32x32 tiles on demand, each a round trip through the master carrying the tile back (the file's "
+        "chunks, compressed by the worker, and its preview pixels: the -np 2 calibration run's bytes a pixel) plus a "
+        "tile's overhead beyond one process (that run's final pass beyond the one-process final pass, per tile: "
+        "encoding, a large message's rendezvous polled with pauses); bound by the rendering workers or by the "
+        "master, which takes the tiles one at a time (their bytes on its link, and writing them at the calibration "
+        "run's measured seconds a pixel). Every worker renders tiles, in every mode.",
         "",
         "Per-site and per-record seconds are fitted (least squares) to the one-process run's per-round compute "
         "seconds. The collective is Open MPI 4.1's libnbc `MPI_Iallgatherv`, which is linear (each rank posts a "
@@ -956,7 +965,9 @@ def write_docs(store, validation, check, target, prediction, ifs, log):
         pr = Profile(e["default"], e.get("noedge"), e.get("threads2"), None, e.get("mpi_extra_s"))
         lines.append(f"- `{name}` one process, one thread: {pr.summary()}; tracing ahead (-np 3, component) "
                      f"filled {100 * e.get('ahead_fill', 0.0):.0f}% of the workers' waits at "
-                     f"{1e6 * e.get('ahead_pixel_s', 0.0):.2f} us a pixel.")
+                     f"{1e6 * e.get('ahead_pixel_s', 0.0):.2f} us a pixel; finished tiles (-np 2) "
+                     f"{e.get('tile_wire', 0.0):.1f} bytes a pixel, the master {1e9 * e.get('master_pixel_s', 0.0):.0f} "
+                     f"ns a pixel storing them.")
     lines += ["", "Links (`icrender bench messages`: latency from the smallest message's half round trip, bandwidth "
                   "from a stream; the median of 3 measurements):", ""]
     lines += [f"- {k}: latency {v[0] * 1e6:.1f} us, bandwidth {v[1] / 1e6:.0f} MB/s" for k, v in store["links"].items()]

@@ -182,6 +182,13 @@ pub struct RankReport {
     pub last_bounce_samples: u64,
     #[serde(default)]
     pub last_bounce_rays: RayStats,
+    /// The master: the finished tiles' bytes it received (their values, or the file's chunks a
+    /// worker encoded, with their preview pixels), and the seconds it spent storing them (into
+    /// the file's stream or the frame it holds).
+    #[serde(default)]
+    pub tile_bytes: u64,
+    #[serde(default)]
+    pub tiles_s: f64,
 }
 
 #[derive(Clone, Debug, Default, Serialize)]

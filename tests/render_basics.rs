@@ -49,6 +49,28 @@ fn default_scene_renders_an_exr_and_a_png_preview() {
     assert!(mean(preview.channel("R").unwrap()) > 0.05);
 }
 
+/// A frame over the preview's budget (4.2 megapixels) gets a preview box-filtered down by the
+/// smallest whole factor that fits, whose pixels are the blocks' means of the frame's.
+#[test]
+fn a_frame_beyond_the_previews_budget_gets_a_reduced_preview() {
+    let dir = tempfile::tempdir().unwrap();
+    // 2900 x 1450 = 4,205,000 pixels: just over 2^22, so the preview is 1450 x 725.
+    let out = dir.path().join("large.exr");
+    let out_text = out.to_str().unwrap();
+    let scene = default_scene();
+    run_ok(&[
+        "render", &scene, "-o", out_text, "-q", "-x", "2900", "-y", "1450", "-ab", "0", "--aovs", "none", "--tile",
+        "64x64",
+    ]);
+    let preview = read_image(&out.with_extension("png"), &[]).unwrap();
+    assert_eq!((preview.width, preview.height), (1450, 725));
+    // Its brightest tenth of pixels is bright and its darkest dark, as the frame's are: a
+    // picture of the frame, not a black or a flat one.
+    let mut red = preview.channel("R").unwrap().to_vec();
+    red.sort_by(f32::total_cmp);
+    assert!(red[red.len() * 9 / 10] > 0.3 && red[red.len() / 10] < red[red.len() * 9 / 10] * 0.8);
+}
+
 #[test]
 fn oiiotool_lists_the_four_layers() {
     let dir = tempfile::tempdir().unwrap();

@@ -1,7 +1,7 @@
 //! Writing results so that a reader never sees a half-written file: everything goes to a
 //! temporary file beside the target, then is renamed over it in one step.
 
-use super::preview::tone_map_each;
+use super::preview::PreviewBuffer;
 use crate::sys::image_io;
 use crate::sys::unnamed_file::UnnamedFile;
 use glam::Vec3;
@@ -196,7 +196,7 @@ impl Drop for StagedFile {
 }
 
 /// The preview made from a streamed frame's reduced copy, staged beside `path`.
-pub fn stage_kept_preview(path: &Path, kept: &super::preview::PreviewBuffer) -> Result<StagedFile, String> {
+pub fn stage_kept_preview(path: &Path, kept: &PreviewBuffer) -> Result<StagedFile, String> {
     let rgb = kept.tone_map();
     stage(path, |tmp| image_io::write_png(tmp, kept.width, kept.height, &rgb))
 }
@@ -207,10 +207,12 @@ pub fn stage_preview(
     path: &Path,
     width: u32,
     height: u32,
-    pixel: impl Fn(usize) -> Vec3 + Sync,
+    pixel: impl Fn(usize) -> Vec3,
 ) -> Result<StagedFile, String> {
-    let rgb = tone_map_each(width as usize * height as usize, pixel);
-    stage(path, |tmp| image_io::write_png(tmp, width, height, &rgb))
+    // The same preview a streamed frame keeps (reduced beyond `PREVIEW_MAX_PIXELS`).
+    let mut kept = PreviewBuffer::new(width, height);
+    (0..width as usize * height as usize).for_each(|i| kept.set(i, pixel(i)));
+    stage_kept_preview(path, &kept)
 }
 
 #[cfg(test)]

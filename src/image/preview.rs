@@ -6,24 +6,6 @@ use glam::Vec3;
 
 const MIDDLE_GREY: f32 = 0.18;
 
-pub fn tone_map(pixels: &[Vec3]) -> Vec<u8> {
-    tone_map_each(pixels.len(), |i| pixels[i])
-}
-
-/// `tone_map` of the `count` pixels `pixel` gives by index, made on the fly: no copy of the
-/// image is held but the 8-bit result (a frame's composite is its layers' sum, computed twice
-/// here rather than kept: 100 MB at 4K).
-pub fn tone_map_each(count: usize, pixel: impl Fn(usize) -> Vec3 + Sync) -> Vec<u8> {
-    let log = on_every_core(count, |range| {
-        let mut log = LogLuminance::default();
-        range.for_each(|i| log.add(pixel(i)));
-        log
-    })
-    .into_iter()
-    .fold(LogLuminance::default(), LogLuminance::merged);
-    map_each(count, log.exposure(), pixel)
-}
-
 /// The sum of the pixels' log luminance (of those lit), which sets the exposure. Fixed point:
 /// the sum is the same in whatever order the pixels come (a streamed frame's tiles come in the
 /// order they finish), so the preview does not depend on the threads' timing.
@@ -95,24 +77,6 @@ fn cores() -> usize {
     std::thread::available_parallelism().map_or(1, |n| n.get()).min(16)
 }
 
-/// `work` over the `count` indices cut into a range per core, the results in the ranges' order.
-fn on_every_core<T: Send>(count: usize, work: impl Fn(std::ops::Range<usize>) -> T + Sync) -> Vec<T> {
-    let chunk = count.div_ceil(cores()).max(1);
-    std::thread::scope(|scope| {
-        let parts: Vec<_> = (0..count)
-            .step_by(chunk)
-            .map(|a| {
-                let work = &work;
-                scope.spawn(move || work(a..(a + chunk).min(count)))
-            })
-            .collect();
-        parts
-            .into_iter()
-            .map(|p| p.join().expect("a preview thread panicked"))
-            .collect()
-    })
-}
-
 /// A value in [0, 1] (clamped) as an 8-bit sRGB byte, from a table of 2^16 steps: the curve's
 /// steepest slope (12.92 at black) moves a byte by at most 0.05 between steps, where computing
 /// the curve for each of a frame's values took most of an 8K preview's time.
@@ -129,7 +93,7 @@ fn srgb_byte(c: f32) -> u8 {
 /// `rgb` in four bytes (negative, NaN and infinite parts as 0): a shared exponent and three
 /// 8-bit mantissas.
 pub fn rgbe(rgb: Vec3) -> [u8; 4] {
-    let rgb = Vec3::from_array(rgb.to_array().map(|c| if c.is_finite() { c.max(0.0) } else { 0.0 }));
+    let rgb = sanitized(rgb);
     let largest = rgb.max_element();
     if largest < 1e-32 {
         return [0; 4];
@@ -141,39 +105,87 @@ pub fn rgbe(rgb: Vec3) -> [u8; 4] {
     [m[0], m[1], m[2], (e + 128).clamp(1, 255) as u8]
 }
 
-/// The composite kept for the preview while the EXR is streamed: four bytes a pixel (a shared
-/// exponent and three 8-bit mantissas, Radiance's RGBE) instead of the twelve of a float RGB, so
-/// 33 MB at 4K. About 1% of precision, below what an 8-bit preview shows.
+/// Most pixels a preview has. A larger frame's preview is the frame box-filtered down by the
+/// smallest whole factor that fits (a 4K frame's is 1920x1080, an 8K frame's 2560x1440), so what a
+/// streamed frame keeps for it stays under 50 MB whatever the frame's size. The EXR holds every
+/// pixel; the preview is for looking.
+pub const PREVIEW_MAX_PIXELS: usize = 1 << 22;
+
+/// What the preview keeps of each of its pixels.
+#[derive(Clone, Debug)]
+enum Kept {
+    /// A frame small enough for a pixel a pixel: four bytes each (a shared exponent and three
+    /// 8-bit mantissas, Radiance's RGBE) instead of twelve, about 1% of precision, below what
+    /// an 8-bit preview shows.
+    Exact(Vec<[u8; 4]>),
+    /// A larger frame: the sum of the pixels of each factor x factor block.
+    Reduced(Vec<[f32; 3]>),
+}
+
+/// The composite kept for the preview while the EXR is streamed (or made from a frame held
+/// whole): at the frame's size up to `PREVIEW_MAX_PIXELS`, reduced beyond.
 #[derive(Clone, Debug)]
 pub struct PreviewBuffer {
+    /// The preview's size.
     pub width: u32,
     pub height: u32,
-    pixels: Vec<[u8; 4]>,
+    /// The frame's width, and how many of its pixels a preview pixel's side spans.
+    frame_width: u32,
+    frame_height: u32,
+    factor: u32,
+    kept: Kept,
     /// The exact pixels' log luminance, summed as they come: the exposure needs no pass over
     /// the frame at the end.
     log: LogLuminance,
 }
 
 impl PreviewBuffer {
+    /// The preview of a `width` x `height` frame.
     pub fn new(width: u32, height: u32) -> PreviewBuffer {
+        let factor = reduction(width, height);
+        let (pw, ph) = (width.div_ceil(factor), height.div_ceil(factor));
+        let n = pw as usize * ph as usize;
         PreviewBuffer {
-            width,
-            height,
-            pixels: vec![[0; 4]; width as usize * height as usize],
+            width: pw,
+            height: ph,
+            frame_width: width,
+            frame_height: height,
+            factor,
+            kept: if factor == 1 {
+                Kept::Exact(vec![[0; 4]; n])
+            } else {
+                Kept::Reduced(vec![[0.0; 3]; n])
+            },
             log: LogLuminance::default(),
         }
     }
 
-    /// Keeps pixel `i` (row-major) as `rgb` (negative, NaN and infinite parts as 0).
-    pub fn set(&mut self, i: usize, rgb: Vec3) {
-        self.log.add(rgb);
-        self.pixels[i] = rgbe(rgb);
+    /// The preview pixel frame pixel `i` (row-major) falls in.
+    fn cell(&self, i: usize) -> usize {
+        let w = self.frame_width as usize;
+        let (x, y) = (i % w, i / w);
+        let k = self.factor as usize;
+        (y / k) * self.width as usize + x / k
     }
 
-    /// Keeps pixel `i` as `rgbe` made elsewhere (a tile encoded where it was rendered), whose
-    /// log luminance comes with `add_log`.
+    /// Keeps frame pixel `i` (row-major) as `rgb` (negative, NaN and infinite parts as 0).
+    pub fn set(&mut self, i: usize, rgb: Vec3) {
+        self.log.add(rgb);
+        let cell = self.cell(i);
+        match &mut self.kept {
+            Kept::Exact(pixels) => pixels[cell] = rgbe(rgb),
+            Kept::Reduced(sums) => add(&mut sums[cell], sanitized(rgb)),
+        }
+    }
+
+    /// Keeps frame pixel `i` as `rgbe` made elsewhere (a tile encoded where it was rendered),
+    /// whose log luminance comes with `add_log`.
     pub fn put(&mut self, i: usize, rgbe: [u8; 4]) {
-        self.pixels[i] = rgbe;
+        let cell = self.cell(i);
+        match &mut self.kept {
+            Kept::Exact(pixels) => pixels[cell] = rgbe,
+            Kept::Reduced(sums) => add(&mut sums[cell], from_rgbe(rgbe)),
+        }
     }
 
     /// Adds the log luminance of pixels kept with `put`.
@@ -181,29 +193,63 @@ impl PreviewBuffer {
         self.log = self.log.merged(log);
     }
 
-    /// Pixel `i` as kept.
-    pub fn get(&self, i: usize) -> Vec3 {
-        let [r, g, b, e] = self.pixels[i];
-        if e == 0 {
-            return Vec3::ZERO;
+    /// Preview pixel `j`: the frame's pixel, or its block's mean.
+    pub fn get(&self, j: usize) -> Vec3 {
+        match &self.kept {
+            Kept::Exact(pixels) => from_rgbe(pixels[j]),
+            Kept::Reduced(sums) => {
+                let (px, py) = (j as u32 % self.width, j as u32 / self.width);
+                let k = self.factor;
+                // A block at the right or bottom edge is cut by the frame's.
+                let covered = (k.min(self.frame_width - px * k) * k.min(self.frame_height - py * k)) as f32;
+                Vec3::from_array(sums[j]) / covered
+            }
         }
-        let scale = (2.0f32).powi(e as i32 - 128 - 8);
-        (Vec3::new(r as f32, g as f32, b as f32) + 0.5) * scale
     }
 
+    /// The preview's pixels.
     pub fn len(&self) -> usize {
-        self.pixels.len()
+        self.width as usize * self.height as usize
     }
 
-    /// The preview's 8-bit pixels, exposed by the exact pixels' log luminance. Each pixel must
-    /// have been set once.
+    /// The preview's 8-bit pixels, exposed by the exact pixels' log luminance. Each frame pixel
+    /// must have been set once.
     pub fn tone_map(&self) -> Vec<u8> {
-        map_each(self.pixels.len(), self.log.exposure(), |i| self.get(i))
+        map_each(self.len(), self.log.exposure(), |j| self.get(j))
     }
 
     pub fn is_empty(&self) -> bool {
-        self.pixels.is_empty()
+        self.len() == 0
     }
+}
+
+/// The smallest whole factor that brings a `width` x `height` frame within `PREVIEW_MAX_PIXELS`.
+fn reduction(width: u32, height: u32) -> u32 {
+    let mut k = 1u32;
+    while width.div_ceil(k) as usize * height.div_ceil(k) as usize > PREVIEW_MAX_PIXELS {
+        k += 1;
+    }
+    k
+}
+
+/// `rgb` with negative, NaN and infinite parts as 0.
+fn sanitized(rgb: Vec3) -> Vec3 {
+    Vec3::from_array(rgb.to_array().map(|c| if c.is_finite() { c.max(0.0) } else { 0.0 }))
+}
+
+fn add(sum: &mut [f32; 3], rgb: Vec3) {
+    for (s, c) in sum.iter_mut().zip(rgb.to_array()) {
+        *s += c;
+    }
+}
+
+/// The value `rgbe` keeps (the middle of its step).
+fn from_rgbe([r, g, b, e]: [u8; 4]) -> Vec3 {
+    if e == 0 {
+        return Vec3::ZERO;
+    }
+    let scale = (2.0f32).powi(e as i32 - 128 - 8);
+    (Vec3::new(r as f32, g as f32, b as f32) + 0.5) * scale
 }
 
 fn linear_to_srgb(c: f32) -> f32 {
@@ -221,7 +267,9 @@ mod tests {
     #[test]
     fn maps_black_nan_and_bright_into_range() {
         let px = [Vec3::ZERO, Vec3::splat(f32::NAN), Vec3::splat(1e30), Vec3::splat(0.5)];
-        let out = tone_map(&px);
+        let mut kept = PreviewBuffer::new(4, 1);
+        px.iter().enumerate().for_each(|(i, p)| kept.set(i, *p));
+        let out = kept.tone_map();
         assert_eq!(out.len(), 12);
         assert_eq!(&out[0..3], &[0, 0, 0]);
         assert_eq!(&out[3..6], &[0, 0, 0]);
@@ -249,6 +297,61 @@ mod tests {
             let exact = linear_to_srgb(c) * 255.0 + 0.5;
             assert!((srgb_byte(c) as f32 - exact).abs() <= 1.0, "{c}");
         }
+    }
+
+    #[test]
+    fn a_frame_beyond_the_budget_is_reduced_by_the_smallest_whole_factor() {
+        for ((w, h), (pw, ph)) in [
+            ((1920, 1080), (1920, 1080)),
+            ((2048, 2048), (2048, 2048)),
+            ((3840, 2160), (1920, 1080)),
+            ((7680, 4320), (2560, 1440)),
+            ((4097, 1025), (2049, 513)),
+        ] {
+            let preview = PreviewBuffer::new(w, h);
+            assert_eq!((preview.width, preview.height), (pw, ph), "{w}x{h}");
+            assert!(preview.len() <= PREVIEW_MAX_PIXELS);
+        }
+    }
+
+    #[test]
+    fn a_reduced_preview_pixel_is_its_blocks_mean_and_the_exposure_the_frames() {
+        // 4100 x 1025 pixels, just over the budget, reduce by 2; the last row of blocks is cut
+        // to the frame's one last row.
+        let (w, h) = (4100u32, 1025u32);
+        let mut preview = PreviewBuffer::new(w, h);
+        assert_eq!((preview.width, preview.height, preview.factor), (2050, 513, 2));
+        let value = |x: u32, y: u32| Vec3::new(x as f32, y as f32, 1.0 + (x + y) as f32);
+        let mut exact = LogLuminance::default();
+        for y in 0..h {
+            for x in 0..w {
+                let i = (y * w + x) as usize;
+                exact.add(value(x, y));
+                // Half the pixels come as a worker sends them (RGBE, their log apart).
+                if (x + y) % 2 == 0 {
+                    preview.set(i, value(x, y));
+                } else {
+                    let mut one = LogLuminance::default();
+                    one.add(value(x, y));
+                    preview.put(i, rgbe(value(x, y)));
+                    preview.add_log(one);
+                }
+            }
+        }
+        assert_eq!(preview.log, exact, "the exposure is the full frame's");
+        // A whole block (2x2 at (10, 7)) and the last row's blocks, cut to one frame row.
+        let block = (value(20, 14) + value(21, 14) + value(20, 15) + value(21, 15)) / 4.0;
+        let got = preview.get(7 * 2050 + 10);
+        assert!(
+            (got - block).abs().max_element() <= 0.01 * block.max_element(),
+            "{got} against {block}"
+        );
+        let cut = (value(40, 1024) + value(41, 1024)) / 2.0;
+        let got = preview.get(512 * 2050 + 20);
+        assert!(
+            (got - cut).abs().max_element() <= 0.01 * cut.max_element(),
+            "{got} against {cut}"
+        );
     }
 
     #[test]

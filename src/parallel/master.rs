@@ -63,6 +63,9 @@ pub struct MasterCore<'a, 'c> {
     pub turned_away: usize,
     /// Tiles that came as the file's chunks.
     pub tiles_encoded: u64,
+    /// The finished tiles' bytes, and the seconds storing them.
+    pub tile_bytes: u64,
+    pub tiles_s: f64,
 }
 
 impl<'a, 'c> MasterCore<'a, 'c> {
@@ -105,6 +108,8 @@ impl<'a, 'c> MasterCore<'a, 'c> {
             reports: vec![None; size],
             turned_away: 0,
             tiles_encoded: 0,
+            tile_bytes: 0,
+            tiles_s: 0.0,
         }
     }
 
@@ -163,6 +168,8 @@ impl<'a, 'c> MasterCore<'a, 'c> {
             .filter(|_| !self.tiles_done[index as usize])
             .ok_or_else(|| format!("rank {source} returned tile {index}, which it was not given"))?;
         let pixels_in_tile = ((tile.x1 - tile.x0) * (tile.y1 - tile.y0)) as usize;
+        let began = Instant::now();
+        self.tile_bytes += finished.pixels.wire_bytes() as u64;
         match finished.pixels {
             TilePixels::Values(pixels) => {
                 if pixels.len() != pixels_in_tile {
@@ -184,6 +191,7 @@ impl<'a, 'c> MasterCore<'a, 'c> {
                 self.tiles_encoded += 1;
             }
         }
+        self.tiles_s += began.elapsed().as_secs_f64();
         self.tiles_done[index as usize] = true;
         Ok(())
     }
@@ -309,6 +317,8 @@ fn control<'a>(
         prepass_s: setup.prepass.as_ref().map_or(0.0, |p| p.seconds),
         prepass_pool_s: setup.prepass.as_ref().map_or(0.0, |p| p.pool_s),
         prepass_fit_s: setup.prepass.as_ref().map_or(0.0, |p| p.fit_s),
+        tile_bytes: core.tile_bytes,
+        tiles_s: core.tiles_s,
         ..super::traffic_report(0, "mc", &[comm.counters], comm.counters.idle_s())
     }];
     ranks.extend(core.reports.into_iter().skip(1).flatten());

@@ -160,6 +160,19 @@ pub enum TilePixels {
     Encoded(EncodedTile),
 }
 
+impl TilePixels {
+    /// The bytes they take in a message.
+    pub fn wire_bytes(&self) -> usize {
+        match self {
+            TilePixels::Values(pixels) => 4 + pixels.len() * PIXEL_FLOATS * 4,
+            TilePixels::Encoded(tile) => {
+                let chunks: usize = tile.chunks.iter().map(|(_, bytes)| 12 + bytes.len()).sum();
+                4 + chunks + 4 + 4 * tile.preview.len() + 24
+            }
+        }
+    }
+}
+
 /// Largest chunk a tile of the file may take: a 4096x4096 tile of 4096 float channels is the
 /// most the encoder makes (cpp/exr_chunks.cpp), but a message is checked before any of that.
 const MAX_CHUNK_BYTES: usize = i32::MAX as usize;

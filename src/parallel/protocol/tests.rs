@@ -363,3 +363,30 @@ fn a_requests_centre_ray_travels_and_a_bad_one_is_refused() {
         other => panic!("{other:?}"),
     }
 }
+
+#[test]
+fn a_finished_tile_counts_the_bytes_it_takes_in_its_message() {
+    let empty = Message::WorkRequest {
+        thread: 0,
+        finished: None,
+    }
+    .encode()
+    .len();
+    let encoded = TilePixels::Encoded(EncodedTile {
+        chunks: vec![((3, 4), vec![7; 33]), ((4, 4), vec![1; 5])],
+        preview: vec![[9; 4]; 6],
+        log: LogLuminance::from_parts(12345, 6),
+    });
+    for pixels in [TilePixels::Values(vec![pixel(0.5), pixel(2.0)]), encoded] {
+        let message = Message::WorkRequest {
+            thread: 0,
+            finished: Some(FinishedTile {
+                tile: 2,
+                requests: 0,
+                pixels: pixels.clone(),
+            }),
+        };
+        // The tile's index and requests, and the byte saying which form its pixels take.
+        assert_eq!(message.encode().len(), empty + 4 + 4 + 1 + pixels.wire_bytes());
+    }
+}
