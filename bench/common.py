@@ -99,6 +99,19 @@ def scratch():
     return tempfile.mkdtemp(prefix="icrender-bench-")
 
 
+def read_csv(path):
+    """A CSV written by `write_csv`, each value a number where it reads as one."""
+    def value(text):
+        for kind in (int, float):
+            try:
+                return kind(text)
+            except ValueError:
+                pass
+        return text
+    with open(path, newline="") as f:
+        return [{k: value(v) for k, v in row.items()} for row in csv.DictReader(f)]
+
+
 def write_csv(path, rows):
     """Rows (dicts) as a CSV whose columns are every key in order of first appearance; nothing
     is written for no rows."""
