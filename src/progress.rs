@@ -7,6 +7,7 @@
 //! phase half of the whole when there is a prepass: a coarse estimate, and the remaining time
 //! (elapsed x (1 - fraction) / fraction) is only as good as it.
 
+use crate::render::error_estimate::ErrorEstimate;
 use std::io::{IsTerminal, Write};
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -199,12 +200,12 @@ impl Progress {
     /// The outputs are written: with JSON, a last line, event `done`, naming the EXR; for a
     /// frame of a sequence, event `frame_done` with the frame and its EXR (a farm manager may
     /// pick the file up now: it is whole).
-    pub fn done(&self, output: &std::path::Path) {
+    pub fn done(&self, output: &std::path::Path, estimate: Option<&ErrorEstimate>) {
         if self.style != Style::Json {
             return;
         }
         let elapsed = (self.start.elapsed().as_secs_f64() * 1e3).round() / 1e3;
-        let line = match &self.sequence {
+        let mut line = match &self.sequence {
             Some(s) => serde_json::json!({
                 "event": "frame_done",
                 "frame": s.frame,
@@ -219,6 +220,9 @@ impl Progress {
                 "output": output.display().to_string(),
             }),
         };
+        if let Some(estimate) = estimate {
+            line["error_estimate"] = serde_json::to_value(estimate).unwrap_or_default();
+        }
         print_line(&line);
     }
 }

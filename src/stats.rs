@@ -2,6 +2,7 @@
 //! written as JSON (`--stats`) and into the EXR header. The top-level keys `records_computed`,
 //! `lookups`, `hits`, `t_amb_s`, `t_notamb_s` and `wall_s` are relied on by scripts.
 
+use crate::render::error_estimate::{ErrorEstimate, ErrorTally};
 use crate::render::pixel::ThreadStats;
 use crate::shading::RayCounts;
 use serde::Serialize;
@@ -189,6 +190,9 @@ pub struct RankReport {
     pub tile_bytes: u64,
     #[serde(default)]
     pub tiles_s: f64,
+    /// What the render's error estimate is summed from, over this rank's tiles.
+    #[serde(default)]
+    pub error: ErrorTally,
 }
 
 #[derive(Clone, Debug, Default, Serialize)]
@@ -298,6 +302,9 @@ pub struct RenderStats {
     /// (rank 0's under mpirun; Linux's VmHWM, absent where the system does not report it).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub peak_memory_bytes: Option<u64>,
+    /// The relMSE this render is estimated to have against the converged image, made without
+    /// one (`render::error_estimate`); None where no pixel was rendered.
+    pub error_estimate: Option<ErrorEstimate>,
     pub per_thread: Vec<ThreadReport>,
     pub per_rank: Vec<RankReport>,
 }
@@ -327,10 +334,13 @@ impl RenderStats {
 
     pub fn add_threads(&mut self, threads: &[ThreadStats]) {
         let mut total = RayCounts::default();
+        let mut error = ErrorTally::default();
         for t in threads {
             total.add(&t.rays);
+            error.merge(&t.error);
             self.per_thread.push(ThreadReport::from(t));
         }
+        self.error_estimate = error.estimate();
         self.records_computed = total.records_computed;
         self.lookups = total.lookups;
         self.hits = total.hits;
@@ -384,6 +394,9 @@ impl RenderStats {
         self.request_handling_s = ranks.iter().map(|r| r.request_handling_s).sum();
         self.rays = RayStats::sum(ranks.iter().map(|r| &r.rays));
         self.mrays_per_s = self.rays.total as f64 / self.render_s.max(1e-9) / 1e6;
+        let mut error = ErrorTally::default();
+        ranks.iter().for_each(|r| error.merge(&r.error));
+        self.error_estimate = error.estimate();
         self.per_rank = ranks;
     }
 }

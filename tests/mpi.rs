@@ -928,6 +928,7 @@ fn a_streamed_exr_equals_the_one_written_whole() {
         "icrender/ranks",
         "icrender/render_time_s",
         "icrender/statistics",
+        "icrender/error_estimate",
         "DateTime",
     ];
     let extra = ["-x", "53", "-y", "41", "--ic-build", "prepass", "--tile", "16x8"];

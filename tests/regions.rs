@@ -588,6 +588,7 @@ fn a_streamed_region_equals_the_region_held_whole() {
         "icrender/part_settings",
         "icrender/render_time_s",
         "icrender/statistics",
+        "icrender/error_estimate",
         "DateTime",
     ];
     assert_same_image(&a, &b, &how_it_ran, "the region held whole");

@@ -149,7 +149,7 @@ pub fn run(args: &RenderArgs) -> CommandResult {
     }
     match &frames {
         Some(f) => crate::progress::sequence_done(style, start, &f.text(), &file.display().to_string()),
-        None => last_progress.iter().for_each(|p| p.done(file)),
+        None => last_progress.iter().for_each(|p| p.done(file, None)),
     }
     if !args.quiet {
         eprintln!(

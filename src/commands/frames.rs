@@ -200,7 +200,7 @@ pub fn run(args: &RenderArgs, frames: Frames) -> CommandResult {
             std::fs::write(done_marker(dir, n), outputs.exr.as_os_str().as_encoded_bytes())
                 .map_err(|e| CommandError::failed(format!("{}: {e}", done_marker(dir, n).display())))?;
         }
-        progress.done(&outputs.exr);
+        progress.done(&outputs.exr, stats.error_estimate.as_ref());
         written.push(n);
         if !args.quiet {
             eprintln!(

@@ -31,6 +31,7 @@ fn carried_over(name: &str) -> bool {
             REGION_ATTRIBUTE,
             "icrender/command",
             "icrender/statistics",
+            "icrender/error_estimate",
             "icrender/render_time_s",
             "icrender/denoise_time_s",
         ]

@@ -342,8 +342,16 @@ pub fn lost_rank(silence: &Silence, hosts: &Hosts) -> String {
 /// The per-rank statistics as a table on stderr.
 fn print_table(stats: &RenderStats) {
     eprintln!(
-        "icrender: {} mode, {} ranks, {}x{} in {:.2} s",
-        stats.mode, stats.ranks, stats.width, stats.height, stats.render_s
+        "icrender: {} mode, {} ranks, {}x{} in {:.2} s{}",
+        stats.mode,
+        stats.ranks,
+        stats.width,
+        stats.height,
+        stats.render_s,
+        stats
+            .error_estimate
+            .as_ref()
+            .map_or_else(String::new, |e| format!(", {}", e.summary()))
     );
     eprintln!(
         "{:>4} {:>6} {:>6} {:>9} {:>9} {:>8} {:>9} {:>8} {:>8} {:>11}",

@@ -299,6 +299,10 @@ impl Setup<'_> {
                 .prepass
                 .as_ref()
                 .map_or_else(Default::default, |p| crate::stats::RayStats::from(&p.last_bounce_rays)),
+            error: threads.iter().fold(Default::default(), |mut sum, t| {
+                sum.merge(&t.error);
+                sum
+            }),
             ..traffic_report(comm.rank(), role, &[comm.counters, helper, self.traffic_before], idle_s)
         }
     }

@@ -11,6 +11,7 @@ use super::master::{MasterCore, Sharing};
 use super::protocol::{FinishedTile, Kind, Message, Records};
 use super::{Intake, Mode, Setup, send_report};
 use crate::irradiance::IrradianceCache;
+use crate::render::error_estimate::ErrorProbe;
 use crate::render::{ThreadClock, ThreadStats, render_tile};
 use std::sync::Mutex;
 
@@ -82,6 +83,7 @@ fn receive_broadcasts(counters: &Counters, cache: &IrradianceCache, peers: usize
 fn render_tiles(setup: &Setup<'_>, counters: &Counters, sharer: &Sharer<'_>, thread: u32) -> ThreadStats {
     let comm = Comm::new(counters);
     let integrator = setup.integrator();
+    let probe = ErrorProbe::new(&integrator, &setup.job.camera, &setup.job.settings);
     let mut stats = ThreadStats::default();
     let clock = ThreadClock::start();
     let mut finished: Option<FinishedTile> = None;
@@ -96,6 +98,7 @@ fn render_tiles(setup: &Setup<'_>, counters: &Counters, sharer: &Sharer<'_>, thr
         let pixels = render_tile(&integrator, camera, settings, tile, &mut stats.rays, |_| {
             sharer.after_pixel(&comm, thread)
         });
+        probe.tile(&mut stats.error, tile, &pixels, &mut stats.rays);
         finished = Some(setup.finished_tile(index, 0, pixels));
         stats.tiles += 1;
     }

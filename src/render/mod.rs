@@ -4,6 +4,7 @@
 
 pub mod ahead;
 pub mod edges;
+pub mod error_estimate;
 pub mod noise;
 pub mod pixel;
 pub mod sink;
@@ -106,6 +107,7 @@ pub fn render_resumable(
         None => TileSink::held(restored.map_or_else(|| FrameBuffer::windowed(window), |r| r.frame)),
     };
     let queue = TileQueue::new(if stopped() { Vec::new() } else { todo });
+    let probe = error_estimate::ErrorProbe::new(integrator, camera, settings);
     let threads = settings.threads.max(1).min(queue.len().max(1));
     let stats: Vec<ThreadStats> = std::thread::scope(|scope| {
         let workers: Vec<_> = (0..threads)
@@ -118,6 +120,7 @@ pub fn render_resumable(
                     {
                         let tile = &all[index];
                         let values = render_tile(integrator, camera, settings, tile, &mut stats.rays, |_| {});
+                        probe.tile(&mut stats.error, tile, &values, &mut stats.rays);
                         if let Some(journal) = journal {
                             journal.tile(index as u32, 0, &values);
                         }

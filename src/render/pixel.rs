@@ -73,14 +73,18 @@ pub struct ThreadStats {
     pub busy_s: f64,
     pub cpu_s: f64,
     pub tiles: usize,
+    /// What the render's error estimate is summed from, over this thread's tiles.
+    pub error: super::error_estimate::ErrorTally,
 }
 
 impl ThreadStats {
-    /// Adds another stretch of this thread's work (rays, counters and times; not its tiles).
+    /// Adds another stretch of this thread's work (rays, counters, times and error tally; not
+    /// its tiles).
     pub fn absorb(&mut self, other: &ThreadStats) {
         self.rays.add(&other.rays);
         self.busy_s += other.busy_s;
         self.cpu_s += other.cpu_s;
+        self.error.merge(&other.error);
     }
 }
 

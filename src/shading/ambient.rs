@@ -16,6 +16,15 @@ use crate::sys::embree::Coherence;
 use crate::tracer::SurfaceHit;
 use glam::Vec3;
 
+/// The cache's value at a held-out pixel's first surface beside two fresh records' values
+/// (`Integrator::holdout`), and the surface's diffuse colour that turns them into light.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Holdout {
+    pub diffuse: Vec3,
+    pub cached: Vec3,
+    pub fresh: [Vec3; 2],
+}
+
 impl Integrator<'_> {
     /// A PR's L_a: the local cache's value if it has one; otherwise a request for a PA, and
     /// nothing in the pixel for now (the PA adds it to its own image, which is summed in).
@@ -253,6 +262,35 @@ impl Integrator<'_> {
             counts.pixel_irradiance = Some(shared.mark_taken());
         }
         Some(shared.value())
+    }
+
+    /// What the cache's error is measured by at a pixel held out (`render::error_estimate`):
+    /// at the first diffuse surface a camera ray stops at, the surface's diffuse colour, the
+    /// value the cache gives there (what the pixel read) and two fresh records' values computed
+    /// there from independent hemisphere samples, as the prepass would have made them. None
+    /// where the ray stops at no diffuse surface, where no record may be read (a gap), or with
+    /// no cache.
+    pub fn holdout(&self, origin: Vec3, dir: Vec3, rngs: [&mut Rng; 2], counts: &mut Work<'_>) -> Option<Holdout> {
+        let cache = self.cache?;
+        if self.options.ambient_bounces == 0 {
+            return None;
+        }
+        let (hit, surface) = self.first_surface(origin, dir, Coherence::Coherent, 0.0, counts)?;
+        if surface.diffuse.max_element() <= 0.0 || surface.opacity < 1.0 {
+            return None;
+        }
+        let headroom = self.headroom(cache, &hit, counts);
+        let cached = cache.lookup(hit.position, hit.normal, headroom, 0)?;
+        let [a, b] = rngs;
+        let state = PathState::eye(false);
+        let mut fresh =
+            |rng: &mut Rng| timed_ambient(counts, |counts| self.compute_record(cache, &hit, state, rng, counts)).value;
+        let fresh = [fresh(a), fresh(b)];
+        Some(Holdout {
+            diffuse: surface.diffuse,
+            cached,
+            fresh,
+        })
     }
 
     /// Samples the hemisphere over an n x n cosine-weighted grid (n from -ad and the level's

@@ -22,6 +22,7 @@ pub mod pixel_irradiance;
 pub mod request;
 mod work;
 
+pub use ambient::Holdout;
 pub use options::ShadingOptions;
 pub use work::{RayCounts, SampleContext, SampleData, Work};
 use work::{sanitize, sanitize_value, timed_ambient};

@@ -147,6 +147,17 @@ impl RayCounts {
         self.t_amb += o.t_amb;
         self.deferred += o.deferred;
     }
+    /// Adds another's rays alone (their kinds and the dropped contributions), not its cache's
+    /// counts nor its time.
+    pub fn add_rays(&mut self, o: &RayCounts) {
+        self.primary += o.primary;
+        self.shadow += o.shadow;
+        self.specular += o.specular;
+        self.ambient += o.ambient;
+        self.continued += o.continued;
+        self.nonfinite += o.nonfinite;
+    }
+
     pub fn total(&self) -> u64 {
         self.primary + self.shadow + self.specular + self.ambient + self.continued
     }

@@ -377,10 +377,10 @@ pub fn run(args: &RenderArgs, sequence: SequenceRenderer) -> CommandResult {
     stats.wall_s = wall.elapsed().as_secs_f64();
     stats.single_rank();
     outputs.save(args, &job, frame, streamed, &stats)?;
-    progress.done(&outputs.exr);
+    progress.done(&outputs.exr, stats.error_estimate.as_ref());
     if !args.quiet {
         eprintln!(
-            "icrender: {}{}x{} in {:.2} s ({:.1} Mrays/s, {} threads, {} records, {:.0}% of lookups hit) -> {}",
+            "icrender: {}{}x{} in {:.2} s ({:.1} Mrays/s, {} threads, {} records, {:.0}% of lookups hit{}) -> {}",
             job.settings
                 .region
                 .map_or_else(String::new, |r| format!("region {} of ", r.text())),
@@ -391,6 +391,10 @@ pub fn run(args: &RenderArgs, sequence: SequenceRenderer) -> CommandResult {
             s.threads,
             stats.records_computed,
             100.0 * stats.hits as f64 / stats.lookups.max(1) as f64,
+            stats
+                .error_estimate
+                .as_ref()
+                .map_or_else(String::new, |e| format!(", {}", e.summary())),
             outputs.exr.display()
         );
     }

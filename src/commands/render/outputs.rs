@@ -238,6 +238,10 @@ impl Outputs {
             ("icrender/ranks".to_string(), stats.ranks.to_string()),
             ("icrender/render_time_s".to_string(), format!("{:.3}", stats.render_s)),
             ("icrender/statistics".to_string(), serde_json::to_string(stats)?),
+            (
+                "icrender/error_estimate".to_string(),
+                serde_json::to_string(&stats.error_estimate)?,
+            ),
         ];
         let settings = match &self.frame {
             Some(f) => format!("{}; frame {} at {} s", part_settings(args), f.number, f.time),

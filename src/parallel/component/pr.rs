@@ -10,6 +10,7 @@ use super::{Roles, compute_request, send_results};
 use crate::parallel::comm::{Comm, Counters, Envelope, Marker, kind};
 use crate::parallel::protocol::{FinishedTile, Kind, Message, Records, Requests};
 use crate::parallel::{Intake, Setup, send_report};
+use crate::render::error_estimate::ErrorProbe;
 use crate::render::pixel::render_tile_from;
 use crate::render::{ThreadClock, ThreadStats};
 use crate::shading::Integrator;
@@ -287,6 +288,13 @@ impl Pr<'_, '_> {
                 own.compute(integrator, sender.send(sink), seed);
                 // Every request of the tile, sent or computed here: the results it awaits.
                 let requests = (sender.sent - sent_before + own.computed - own_before) as u32;
+                let (job, stats) = (&self.setup.job, &mut self.stats);
+                ErrorProbe::new(&self.integrator, &job.camera, &job.settings).tile(
+                    &mut stats.error,
+                    tile,
+                    &pixels,
+                    &mut stats.rays,
+                );
                 finished = Some(self.setup.finished_tile(index, requests, pixels));
                 self.stats.tiles += 1;
             }
