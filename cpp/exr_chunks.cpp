@@ -189,6 +189,15 @@ extern "C" icr_tile_encoder *icr_tile_encoder_new(const icr_exr_tiling *tiling, 
         encoder->height = tiling->height;
         encoder->tile_width = tiling->tile_width;
         encoder->tile_height = tiling->tile_height;
+        // A library may know a codec it cannot encode (OpenEXR 3.1's core library has no DWA
+        // encoder): the first tile, of zeros, says so now rather than in the middle of a render.
+        const size_t w = std::min(tiling->tile_width, tiling->width), h = std::min(tiling->tile_height, tiling->height);
+        const std::vector<float> zeros(w * h * tiling->channel_count, 0.0f);
+        auto ignore = [](void *, const uint8_t *, size_t) {};
+        if (icr_tile_encode(encoder, 0, 0, zeros.data(), zeros.size(), ignore, nullptr, err, err_len) != 0) {
+            delete encoder;
+            return nullptr;
+        }
         return encoder;
     } catch (const std::bad_alloc &) {
         return fail(err, err_len, "out of memory"), nullptr;

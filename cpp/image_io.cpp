@@ -26,6 +26,7 @@
 #include <fstream>
 #include <map>
 #include <memory>
+#include <mutex>
 #include <new>
 #include <string>
 #include <vector>
@@ -226,6 +227,90 @@ extern "C" int icr_exr_write_rows(const char *path, uint32_t width, uint32_t hei
     });
 }
 
+// A tiled EXR written a tile at a time, in any order, from any thread: OpenEXR's random tile
+// order writes each tile as it comes (in increasing order it would hold early tiles back).
+// Its header keeps room for what is known only at the end (icr_exr_set_header).
+struct icr_exr_stream {
+    std::unique_ptr<OIIO::ImageOutput> out;
+    std::string path;
+    OIIO::ImageSpec spec;
+    std::mutex lock;
+    // A write failed: OpenEXR's tiled writer is left in a state where the next write can wait
+    // forever for tasks that never run, so nothing more is written (and closing abandons it).
+    bool broken = false;
+};
+
+extern "C" icr_exr_stream *icr_exr_stream_open(const char *path, uint32_t width, uint32_t height, icr_window window,
+                                               const icr_channel *channels, size_t channel_count, int half_float,
+                                               const char *compression, uint32_t tile_width, uint32_t tile_height,
+                                               size_t header_room, char *err, size_t err_len) {
+    clear_error(err, err_len);
+    icr_exr_stream *opened = nullptr;
+    guarded(err, err_len, "EXR stream", [&]() -> int {
+        if (!path || !*path) return write_error(err, err_len, "empty path");
+        if (tile_width == 0 || tile_height == 0 || tile_width > 4096 || tile_height > 4096)
+            return write_error(err, err_len, "invalid tile size");
+        auto stream = std::make_unique<icr_exr_stream>();
+        std::string bad =
+            exr_spec(width, height, window, channels, channel_count, half_float, compression, stream->spec);
+        if (!bad.empty()) return write_error(err, err_len, bad);
+        stream->spec.tile_width = int(tile_width);
+        stream->spec.tile_height = int(tile_height);
+        stream->spec.attribute("openexr:lineOrder", "randomY");
+        // Room in the header for what is known only at the end (icr_exr_set_header).
+        if (header_room > 0) stream->spec.attribute(kReserved, std::string(header_room, ' '));
+        stream->out = OIIO::ImageOutput::create("openexr");
+        if (!stream->out) return write_error(err, err_len, oiio_error("OpenEXR writer unavailable", ""));
+        if (!stream->out->open(path, stream->spec))
+            return write_error(err, err_len, oiio_error("cannot open for writing", stream->out->geterror()));
+        stream->path = path;
+        opened = stream.release();
+        return 0;
+    });
+    return opened;
+}
+
+extern "C" int icr_exr_stream_write(icr_exr_stream *stream, uint32_t x0, uint32_t y0, uint32_t x1, uint32_t y1,
+                                    const float *pixels, char *err, size_t err_len) {
+    clear_error(err, err_len);
+    return guarded(err, err_len, "EXR write", [&]() -> int {
+        if (!stream || !stream->out) return write_error(err, err_len, "the stream is closed");
+        const OIIO::ImageSpec &spec = stream->spec;
+        const uint32_t tw = uint32_t(spec.tile_width), th = uint32_t(spec.tile_height);
+        const uint32_t w = uint32_t(spec.width), h = uint32_t(spec.height);
+        if (!pixels || x0 >= x1 || y0 >= y1 || x1 > w || y1 > h || x0 % tw || y0 % th ||
+            (x1 % tw && x1 != w) || (y1 % th && y1 != h))
+            return write_error(err, err_len, "the rectangle does not lie on the tile grid");
+        std::lock_guard<std::mutex> held(stream->lock);
+        if (stream->broken) return write_error(err, err_len, "an earlier write to the stream failed");
+        // Tiles are numbered in the display window's coordinates.
+        if (!stream->out->write_tiles(spec.x + int(x0), spec.x + int(x1), spec.y + int(y0), spec.y + int(y1), 0, 1,
+                                      OIIO::TypeDesc::FLOAT, pixels)) {
+            stream->broken = true;
+            return write_error(err, err_len, oiio_error("write failed", stream->out->geterror()));
+        }
+        return 0;
+    });
+}
+
+extern "C" int icr_exr_stream_end(icr_exr_stream *stream, char *err, size_t err_len) {
+    clear_error(err, err_len);
+    std::unique_ptr<icr_exr_stream> owned(stream);
+    return guarded(err, err_len, "EXR write", [&]() -> int {
+        if (!owned || !owned->out) return write_error(err, err_len, "the stream is closed");
+        if (owned->broken) {
+            // As icr_exr_stream_close: the writer that failed is abandoned, not closed.
+            owned->out.release();
+            return write_error(err, err_len, "an earlier write to the stream failed");
+        }
+        bool closed = owned->out->close();
+        std::string close_error = closed ? "" : owned->out->geterror();
+        owned->out.reset();
+        if (!closed) return write_error(err, err_len, oiio_error("close failed", close_error));
+        return 0;
+    });
+}
+
 namespace {
 
 // `header` with the attributes added and the reserved room taken out, or the reason it cannot be.
@@ -312,6 +397,22 @@ extern "C" int icr_exr_copy_with_header(const char *from, const char *to, const 
         out.copyPixels(in);
         return 0;
     });
+}
+
+extern "C" void icr_exr_stream_close(icr_exr_stream *stream) {
+    try {
+        std::unique_ptr<icr_exr_stream> owned(stream);
+        if (!owned || !owned->out) return;
+        if (owned->broken) {
+            // Closing would finish the file through the writer that failed: its file (unnamed,
+            // or removed by the caller) is abandoned with the writer, which holds it open
+            // until the process ends.
+            owned->out.release();
+            return;
+        }
+        owned->out->close();
+    } catch (...) {
+    }
 }
 
 extern "C" int icr_png_write(const char *path, uint32_t width, uint32_t height, const uint8_t *rgb, char *err,

@@ -61,9 +61,28 @@ int icr_exr_write_rows(const char *path, uint32_t width, uint32_t height, icr_wi
                        char *err, size_t err_len);
 
 /*
- * The header of a tiled EXR written elsewhere (ffi/exr_chunks.h), with room kept in it as
- * attribute "icrender/reserved", gets the attributes known only at the end:
+ * A tiled EXR written as its tiles finish, for the codecs OpenEXR's core library cannot encode
+ * (ffi/exr_chunks.h does the others, DWA among them before OpenEXR 3.2): open it (tile_width x tile_height tiles, channels,
+ * window, half_float and compression as for icr_exr_write_rows, and header_room bytes kept in
+ * the header, as attribute "icrender/reserved", for what is known only at the end), write
+ * rectangles of whole tiles in any order and from any thread, then end it (which writes its
+ * chunk offsets and frees it); close abandons it. Then icr_exr_set_header puts the last
+ * attributes into the room, or icr_exr_copy_with_header writes another file with them.
  */
+typedef struct icr_exr_stream icr_exr_stream;
+icr_exr_stream *icr_exr_stream_open(const char *path, uint32_t width, uint32_t height, icr_window window,
+                                    const icr_channel *channels, size_t channel_count, int half_float,
+                                    const char *compression, uint32_t tile_width, uint32_t tile_height,
+                                    size_t header_room, char *err, size_t err_len);
+/*
+ * Writes the pixels [x0, x1) x [y0, y1) of the data window (0 is its first row and column):
+ * x0 and y0 on the tile grid, x1 and y1 on it or at the window's edge; `pixels` interleaved,
+ * row by row, every channel in the order given at open.
+ */
+int icr_exr_stream_write(icr_exr_stream *stream, uint32_t x0, uint32_t y0, uint32_t x1, uint32_t y1,
+                         const float *pixels, char *err, size_t err_len);
+int icr_exr_stream_end(icr_exr_stream *stream, char *err, size_t err_len);
+void icr_exr_stream_close(icr_exr_stream *stream);
 /*
  * Rewrites the header of the tiled EXR at `path` in place with the attributes added (the room
  * kept at open filled with an attribute of a type readers skip): 0 done, 2 no room (nothing

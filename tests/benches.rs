@@ -50,6 +50,7 @@ fn every_bench_says_what_it_needs_before_it_starts() {
         ("vs_radiance.py", "pyradiance", &["--no-build"]),
         ("bias.py", "numpy", &[]),
         ("bias.py", "OpenEXR", &[]),
+        ("error_estimate.py", "matplotlib", &[]),
     ];
     for (script, hidden, args) in cases {
         let (code, err, took) = run_without(script, hidden, args);

@@ -16,7 +16,7 @@ use super::preview::{LogLuminance, PreviewBuffer, rgbe};
 use super::region::Region;
 use super::window::PixelWindow;
 use crate::sys::exr_chunks::{ChunkFile, ExrTiling, TileEncoder};
-use crate::sys::image_io::{self, ChannelName};
+use crate::sys::image_io::{self, ChannelName, ExrStream, Window};
 use crate::sys::unnamed_file::UnnamedFile;
 use crate::tiles::{Tile, store_tile};
 use glam::Vec3;
@@ -264,6 +264,13 @@ impl ExrLayout {
         }
     }
 
+    /// The interleaved values of `file_tile`, which `rendered` (`frame`'s pixels) covers whole.
+    fn tile_values(&self, frame: &FrameBuffer, rendered: Region, file_tile: Region) -> Vec<f32> {
+        let mut values = vec![0.0; file_tile.pixels() * self.plan.channels.len()];
+        self.fill(frame, rendered, file_tile, file_tile, &mut values);
+        values
+    }
+
     /// A finished render tile's pixels as a frame of their own, and where they lie in the file.
     fn held(&self, tile: &Tile, values: &[PixelValue]) -> (FrameBuffer, Region) {
         let held = PixelWindow::new(
@@ -342,8 +349,7 @@ impl TileChunks {
 
     /// The compressed chunk of `file_tile`, which `rendered` (`frame`'s pixels) covers whole.
     fn chunk(&self, frame: &FrameBuffer, rendered: Region, file_tile: Region) -> Result<Vec<u8>, String> {
-        let mut values = vec![0.0; file_tile.pixels() * self.layout.plan.channels.len()];
-        self.layout.fill(frame, rendered, file_tile, file_tile, &mut values);
+        let values = self.layout.tile_values(frame, rendered, file_tile);
         let mut bytes = Vec::new();
         self.encoder.encode(self.layout.grid(file_tile), &values, &mut bytes)?;
         Ok(bytes)
@@ -406,12 +412,77 @@ struct PartTile {
     missing: usize,
 }
 
+/// The file the tiles go into: encoded by the tile's own thread and written as chunks
+/// (`sys::exr_chunks`), or, for a codec OpenEXR's core library cannot encode (DWA before
+/// OpenEXR 3.2), through OpenImageIO, which compresses a tile as it writes it.
+enum TileFile {
+    Chunks { encoder: TileEncoder, file: ChunkFile },
+    Stream(ExrStream),
+}
+
+impl TileFile {
+    fn open(path: &Path, layout: &ExrLayout) -> Result<TileFile, String> {
+        let tiling = layout.tiling();
+        match TileEncoder::new(&tiling) {
+            Ok(encoder) => Ok(TileFile::Chunks {
+                encoder,
+                file: ChunkFile::open(path, &tiling, layout.header_room)?,
+            }),
+            Err(_) => Ok(TileFile::Stream(ExrStream::open(
+                path,
+                tiling.width,
+                tiling.height,
+                Window {
+                    x: tiling.x,
+                    y: tiling.y,
+                    full_width: tiling.full_width,
+                    full_height: tiling.full_height,
+                },
+                &layout.plan.names(),
+                layout.half_float,
+                layout.compression.name(),
+                layout.tile,
+                layout.header_room,
+            )?)),
+        }
+    }
+
+    /// Writes `file_tile` (in the file's coordinates) from its interleaved values.
+    fn write_values(&self, layout: &ExrLayout, file_tile: Region, values: &[f32]) -> Result<(), String> {
+        match self {
+            TileFile::Chunks { encoder, file } => {
+                let mut bytes = Vec::new();
+                encoder.encode(layout.grid(file_tile), values, &mut bytes)?;
+                file.write(layout.grid(file_tile), &bytes)
+            }
+            TileFile::Stream(stream) => {
+                stream.write((file_tile.x0, file_tile.y0), (file_tile.x1, file_tile.y1), values)
+            }
+        }
+    }
+
+    /// Writes a tile's chunk encoded elsewhere (`TileChunks`).
+    fn write_chunk(&self, grid: (u32, u32), bytes: &[u8]) -> Result<(), String> {
+        match self {
+            TileFile::Chunks { file, .. } => file.write(grid, bytes),
+            TileFile::Stream(_) => Err("an encoded tile for a file its codec's library writes itself".to_string()),
+        }
+    }
+
+    fn end(self) -> Result<(), String> {
+        match self {
+            TileFile::Chunks { file, .. } => file.end(),
+            TileFile::Stream(stream) => stream.end(),
+        }
+    }
+}
+
 /// A layered EXR written as the render's tiles finish, and the preview's reduced copy.
 pub struct StreamedExr {
-    chunks: TileChunks,
+    layout: ExrLayout,
     target: PathBuf,
     // Declared before the scratch file: dropped (closed) first.
-    file: ChunkFile,
+    file: TileFile,
     scratch: Scratch,
     parts: Mutex<HashMap<(u32, u32), PartTile>>,
     preview: Option<Mutex<PreviewBuffer>>,
@@ -424,12 +495,11 @@ impl StreamedExr {
     /// copy the preview is made from.
     pub fn open(target: &Path, layout: ExrLayout, preview: bool) -> Result<StreamedExr, String> {
         let scratch = Scratch::beside(target);
-        let file = ChunkFile::open(&scratch.path(), &layout.tiling(), layout.header_room)
-            .map_err(|e| output::explain_failure(target, e))?;
+        let file = TileFile::open(&scratch.path(), &layout).map_err(|e| output::explain_failure(target, e))?;
         let (w, h) = (layout.window.width(), layout.window.height());
         Ok(StreamedExr {
             preview: preview.then(|| Mutex::new(PreviewBuffer::new(w, h))),
-            chunks: TileChunks::new(layout).map_err(|e| output::explain_failure(target, e))?,
+            layout,
             target: target.to_path_buf(),
             file,
             scratch,
@@ -467,27 +537,23 @@ impl StreamedExr {
     }
 
     pub fn layout(&self) -> &ExrLayout {
-        &self.chunks.layout
+        &self.layout
     }
 
     fn try_store(&self, tile: &Tile, values: &[PixelValue]) -> Result<(), String> {
         let (frame, rendered) = self.layout().held(tile, values);
         self.keep_for_preview(&frame);
-        for file_tile in self.layout().file_tiles_under(rendered) {
+        for file_tile in self.layout.file_tiles_under(rendered) {
             let overlap = rendered.meet(file_tile);
-            let bytes = if overlap == file_tile {
-                self.chunks.chunk(&frame, rendered, file_tile)?
+            let values = if overlap == file_tile {
+                self.layout.tile_values(&frame, rendered, file_tile)
             } else {
                 let Some(values) = self.add_part(&frame, rendered, file_tile, overlap) else {
                     continue;
                 };
-                let mut bytes = Vec::new();
-                self.chunks
-                    .encoder
-                    .encode(self.layout().grid(file_tile), &values, &mut bytes)?;
-                bytes
+                values
             };
-            self.file.write(self.layout().grid(file_tile), &bytes)?;
+            self.file.write_values(&self.layout, file_tile, &values)?;
         }
         Ok(())
     }
@@ -501,7 +567,7 @@ impl StreamedExr {
             ));
         }
         for (grid, bytes) in &encoded.chunks {
-            self.file.write(*grid, bytes)?;
+            self.file.write_chunk(*grid, bytes)?;
         }
         if let Some(preview) = &self.preview {
             let mut preview = preview.lock().unwrap_or_else(|e| e.into_inner());
@@ -538,12 +604,10 @@ impl StreamedExr {
         let key = (file_tile.x0, file_tile.y0);
         let mut parts = self.parts.lock().unwrap_or_else(|e| e.into_inner());
         let part = parts.entry(key).or_insert_with(|| PartTile {
-            values: vec![0.0; file_tile.pixels() * self.chunks.layout.plan.channels.len()],
+            values: vec![0.0; file_tile.pixels() * self.layout.plan.channels.len()],
             missing: file_tile.pixels(),
         });
-        self.chunks
-            .layout
-            .fill(frame, rendered, file_tile, overlap, &mut part.values);
+        self.layout.fill(frame, rendered, file_tile, overlap, &mut part.values);
         part.missing -= overlap.pixels();
         if part.missing > 0 {
             return None;
@@ -614,7 +678,6 @@ pub fn write_whole(
     let cores = std::thread::available_parallelism().map_or(1, |c| c.get()).min(16);
     let write_tiles = || -> Result<(), String> {
         let mut values = Vec::new();
-        let mut bytes = Vec::new();
         loop {
             let k = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
             let Some(&file_tile) = file_tiles.get(k) else {
@@ -629,12 +692,7 @@ pub fn write_whole(
                     layout.plan.fill(frame, extra, i, &mut values[at..at + n]);
                 }
             }
-            bytes.clear();
-            streamed
-                .chunks
-                .encoder
-                .encode(layout.grid(file_tile), &values, &mut bytes)?;
-            streamed.file.write(layout.grid(file_tile), &bytes)?;
+            streamed.file.write_values(layout, file_tile, &values)?;
         }
     };
     let outcomes: Vec<Result<(), String>> = std::thread::scope(|scope| {

@@ -131,12 +131,7 @@ impl std::ops::DerefMut for Work<'_> {
 
 impl RayCounts {
     pub fn add(&mut self, o: &RayCounts) {
-        self.primary += o.primary;
-        self.shadow += o.shadow;
-        self.specular += o.specular;
-        self.ambient += o.ambient;
-        self.continued += o.continued;
-        self.nonfinite += o.nonfinite;
+        self.add_rays(o);
         self.lookups += o.lookups;
         self.hits += o.hits;
         self.records_computed += o.records_computed;
@@ -147,6 +142,7 @@ impl RayCounts {
         self.t_amb += o.t_amb;
         self.deferred += o.deferred;
     }
+
     /// Adds another's rays alone (their kinds and the dropped contributions), not its cache's
     /// counts nor its time.
     pub fn add_rays(&mut self, o: &RayCounts) {

@@ -251,7 +251,125 @@ pub fn write_exr_rows(
     if rc == 0 { Ok(()) } else { Err(buffer_message(&err)) }
 }
 
-/// Puts `attributes` into the header of the tiled EXR at `path` (written by a `ChunkFile`)
+/// A tiled EXR written as its tiles finish (any order, any thread), then finished under its
+/// final name with the attributes known only at the end (`icr_exr_stream_*` in ffi/image_io.h).
+pub struct ExrStream {
+    raw: *mut abi::icr_exr_stream,
+    lib: &'static abi::ImageLibrary,
+    width: u32,
+    height: u32,
+    tile: (u32, u32),
+    channels: usize,
+}
+
+// SAFETY: the C++ stream serialises every write behind its own lock, and open, finish and close
+// take the stream by value or are called once (Drop).
+unsafe impl Send for ExrStream {}
+unsafe impl Sync for ExrStream {}
+
+impl ExrStream {
+    /// Opens the stream's file at `path` (truncated): `width` x `height` pixels at `window`,
+    /// `tile` pixels a tile, the channels in order (half with `half_float` but those marked
+    /// `full_float`), OpenEXR's codec `compression`, and `header_room` bytes kept in the header
+    /// for the attributes known only at the end (`set_exr_header`).
+    #[allow(clippy::too_many_arguments)]
+    pub fn open(
+        path: &Path,
+        width: u32,
+        height: u32,
+        window: Window,
+        channels: &[ChannelName<'_>],
+        half_float: bool,
+        compression: &str,
+        tile: (u32, u32),
+        header_room: usize,
+    ) -> Result<ExrStream, String> {
+        check_window(width, height, window)?;
+        let (_names, planes) = c_channels(channels);
+        let path = c_path(path)?;
+        let compression = c_text(compression);
+        let lib = library()?;
+        let mut err = vec![0 as c_char; ERR_LEN];
+        // SAFETY: every pointer refers to data alive for the call; the stream keeps copies.
+        let raw = unsafe {
+            lib.icr_exr_stream_open(
+                path.as_ptr(),
+                width,
+                height,
+                c_window(window),
+                planes.as_ptr(),
+                planes.len(),
+                half_float as i32,
+                compression.as_ptr(),
+                tile.0,
+                tile.1,
+                header_room,
+                err.as_mut_ptr(),
+                err.len(),
+            )
+        };
+        if raw.is_null() {
+            return Err(buffer_message(&err));
+        }
+        Ok(ExrStream {
+            raw,
+            lib,
+            width,
+            height,
+            tile,
+            channels: channels.len(),
+        })
+    }
+
+    /// Writes the pixels `x0..x1` x `y0..y1` of the data window (0 its first row and column),
+    /// interleaved row by row, every channel in order: whole tiles (the rectangle starts on the
+    /// tile grid and ends on it or at the window's edge).
+    pub fn write(&self, (x0, y0): (u32, u32), (x1, y1): (u32, u32), pixels: &[f32]) -> Result<(), String> {
+        let (tw, th) = self.tile;
+        let on_grid = x0 < x1
+            && y0 < y1
+            && x1 <= self.width
+            && y1 <= self.height
+            && x0 % tw == 0
+            && y0 % th == 0
+            && (x1 % tw == 0 || x1 == self.width)
+            && (y1 % th == 0 || y1 == self.height);
+        if !on_grid {
+            return Err(format!(
+                "pixels ({x0}, {y0})..({x1}, {y1}) are not whole tiles of the stream"
+            ));
+        }
+        if pixels.len() != (x1 - x0) as usize * (y1 - y0) as usize * self.channels {
+            return Err(format!(
+                "{} values for the {}x{} pixels of a tile",
+                pixels.len(),
+                x1 - x0,
+                y1 - y0
+            ));
+        }
+        let mut err = vec![0 as c_char; ERR_LEN];
+        // SAFETY: the stream is open (finish consumes it); the buffer holds the rectangle's
+        // values, checked above.
+        let rc = unsafe {
+            self.lib
+                .icr_exr_stream_write(self.raw, x0, y0, x1, y1, pixels.as_ptr(), err.as_mut_ptr(), err.len())
+        };
+        if rc == 0 { Ok(()) } else { Err(buffer_message(&err)) }
+    }
+
+    /// Ends the stream: its file is complete (its chunk offsets written), under the header
+    /// it was opened with.
+    pub fn end(mut self) -> Result<(), String> {
+        let raw = std::mem::replace(&mut self.raw, std::ptr::null_mut());
+        let mut err = vec![0 as c_char; ERR_LEN];
+        // SAFETY: `raw` is open and given up here (end frees it, Drop sees null).
+        let rc = unsafe { self.lib.icr_exr_stream_end(raw, err.as_mut_ptr(), err.len()) };
+        if rc == 0 { Ok(()) } else { Err(buffer_message(&err)) }
+    }
+}
+
+/// Puts `attributes` into the header of the tiled EXR at `path` (written by a `ChunkFile` or an
+/// `ExrStream`)
 /// in place, in the room kept for them: false, with nothing changed, if they do not fit.
 pub fn set_exr_header(path: &Path, attributes: &[(String, String)]) -> Result<bool, String> {
     let (_text, attrs) = c_attributes(attributes);
@@ -286,6 +404,15 @@ pub fn copy_exr_with_header(from: &Path, to: &Path, attributes: &[(String, Strin
         )
     };
     if rc == 0 { Ok(()) } else { Err(buffer_message(&err)) }
+}
+
+impl Drop for ExrStream {
+    fn drop(&mut self) {
+        if !self.raw.is_null() {
+            // SAFETY: an open stream, closed once.
+            unsafe { self.lib.icr_exr_stream_close(self.raw) };
+        }
+    }
 }
 
 /// The C channels of a writer that makes its pixels itself (no planes; the names they point

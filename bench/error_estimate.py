@@ -1,0 +1,177 @@
+#!/usr/bin/env python3
+"""The error every render estimates for itself (`error_estimate` in --stats) against the error
+a converged reference measures, on the peers bench's scenes and views.
+
+    python3 bench/error_estimate.py              # about 12 minutes on 2 cores
+    python3 bench/error_estimate.py --quick      # the Cornell box's first view: a check, not a result
+
+For each view (bench/peer_scenes.py) at a reduced size: a brute-force reference (`icrender
+reference`, to a noise target or a time limit, the same --lambertian semantics as the peers
+bench), then icrender at the fastest, a middle and the slowest of the peers bench's settings,
+each with two seeds. The true relMSE comes from `icrender compare`, the 4x4 one from both images
+box-averaged 4x4 (oiiotool) and compared; the reference's own error (its distance from a second
+reference of other seeds) is listed beside them, as it is part of every error measured. Prints
+a table and writes docs/ERROR_ESTIMATE.md, its CSV and a plot of estimated and true error
+against the render's time.
+"""
+
+import argparse
+import datetime
+import json
+import os
+import statistics
+import subprocess
+import time
+
+import common
+from peer_scenes import SCENES
+
+DOCS = os.path.join(common.ROOT, "docs")
+# A smaller image than the peers bench's (the references are the cost): the same views.
+SIZES = {"cornell": (128, 128), "conference": (160, 120), "sibenik": (160, 120)}
+REFERENCE_NOISE, REFERENCE_SECONDS = 0.004, 45
+SEEDS = [1, 2]
+TARGET_FACTOR = 2.0
+
+
+def settings_of(cfg):
+    """The fastest, a middle and the slowest of the peers bench's settings for the scene."""
+    ladder = cfg["icrender"]
+    return [ladder[0], ladder[len(ladder) // 2], ladder[-1]]
+
+
+def base_options(name, cfg, view):
+    width, height = SIZES[name]
+    return ["-x", str(width), "-y", str(height), "-ab", str(cfg["ab"]), "--lambertian"] + cfg["views"][view]
+
+
+def reference(name, cfg, view, out, seed):
+    cmd = [common.BINARY, "reference", cfg["file"], "-o", out, "-q", "--no-preview", "--overwrite",
+           "--noise", str(REFERENCE_NOISE), "--max-seconds", str(REFERENCE_SECONDS), "--seed", str(seed)]
+    subprocess.run(cmd + base_options(name, cfg, view), check=True)
+
+
+def averaged_4x4(path, out):
+    """The composite of `path` box-averaged over 4x4 pixels (the peers bench's 4x4 measure)."""
+    subprocess.run(["oiiotool", path, "--ch", "R,G,B", "--resize:filter=box", "25%", "-o", out],
+                   check=True, capture_output=True)
+    return out
+
+
+def composite_relmse(image, reference_path):
+    return common.compare(image, reference_path)["composite"][1]
+
+
+def measure(name, cfg, view, work, quick):
+    ref = os.path.join(work, f"{name}-{view}-ref.exr")
+    ref_b = os.path.join(work, f"{name}-{view}-ref-b.exr")
+    started = time.time()
+    reference(name, cfg, view, ref, 101)
+    reference(name, cfg, view, ref_b, 202)
+    # Two references of independent seeds differ by twice one's error.
+    reference_error = composite_relmse(ref_b, ref) / 2
+    ref4 = averaged_4x4(ref, os.path.join(work, "ref4.exr"))
+    reference_error_4x4 = composite_relmse(averaged_4x4(ref_b, os.path.join(work, "refb4.exr")), ref4) / 2
+    print(f"[error_estimate] {name}-{view}: references in {time.time() - started:.0f} s, their own relMSE "
+          f"{reference_error:.2e} (4x4 {reference_error_4x4:.2e})", flush=True)
+    rows = []
+    for rank, setting in enumerate(settings_of(cfg)[:1] if quick else settings_of(cfg)):
+        for seed in SEEDS[:1] if quick else SEEDS:
+            out = os.path.join(work, "image.exr")
+            options = base_options(name, cfg, view) + setting.split() + ["--seed", str(seed), "--aovs", "none"]
+            stats, _ = common.render(cfg["file"], out, options)
+            estimate = stats["error_estimate"]
+            true = composite_relmse(out, ref)
+            true_4x4 = composite_relmse(averaged_4x4(out, os.path.join(work, "image4.exr")), ref4)
+            row = {"scene": name, "view": view, "setting": setting, "rank": rank, "seed": seed,
+                   "render_s": round(stats["render_s"], 3), "estimate_s": round(estimate["seconds"], 3),
+                   "estimated": estimate["relmse"], "true": true, "ratio": estimate["relmse"] / true,
+                   "estimated_4x4": estimate["relmse_4x4"], "true_4x4": true_4x4,
+                   "ratio_4x4": estimate["relmse_4x4"] / true_4x4, "noise": estimate["noise"],
+                   "cache": estimate["cache"], "reference_error": reference_error,
+                   "reference_error_4x4": reference_error_4x4}
+            rows.append(row)
+            print(f"[error_estimate] {name}-{view} [{setting}] seed {seed}: {row['render_s']:.2f} s, estimated "
+                  f"{row['estimated']:.2e} true {true:.2e} (x{row['ratio']:.2f}); 4x4 {row['estimated_4x4']:.2e} "
+                  f"true {true_4x4:.2e} (x{row['ratio_4x4']:.2f})", flush=True)
+    return rows
+
+
+def plot(rows, path):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    views = sorted({(r["scene"], r["view"]) for r in rows})
+    fig, axes = plt.subplots(1, len(views), figsize=(3.2 * len(views), 3.2), squeeze=False)
+    for ax, (scene, view) in zip(axes[0], views):
+        mine = sorted((r for r in rows if (r["scene"], r["view"]) == (scene, view)), key=lambda r: r["render_s"])
+        t = [r["render_s"] for r in mine]
+        ax.loglog(t, [r["true"] for r in mine], "o-", label="true relMSE")
+        ax.loglog(t, [r["estimated"] for r in mine], "s--", label="estimated")
+        ax.loglog(t, [r["true_4x4"] for r in mine], "o-", label="true 4x4")
+        ax.loglog(t, [r["estimated_4x4"] for r in mine], "s--", label="estimated 4x4")
+        ax.set_title(f"{scene} {view}", fontsize=9)
+        ax.set_xlabel("render s")
+    axes[0][0].set_ylabel("relMSE")
+    axes[0][0].legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+
+
+def page(rows, minutes, quick):
+    within = [r for r in rows if 1 / TARGET_FACTOR <= r["ratio"] <= TARGET_FACTOR]
+    within_4x4 = [r for r in rows if 1 / TARGET_FACTOR <= r["ratio_4x4"] <= TARGET_FACTOR]
+    ratios = sorted(r["ratio"] for r in rows)
+    ratios_4x4 = sorted(r["ratio_4x4"] for r in rows)
+    lines = ["# The error estimate against the true error", "",
+             f"Written by `python3 bench/error_estimate.py` on {datetime.date.today()} ({minutes:.1f} min, "
+             f"{os.cpu_count()} cores){' with --quick: not a result' if quick else ''}; every run in "
+             "[error_estimate/runs.csv](error_estimate/runs.csv). How the estimate is made: [error.md](error.md).",
+             "", "The peers bench's views at a reduced size, its fastest, middle and slowest settings, two seeds "
+             "each, against a brute-force reference (`icrender reference`, --lambertian). `ref` is the "
+             "reference's own relMSE (half its distance from a second reference of other seeds): it is in every "
+             "true error.", "",
+             "| view | setting | seed | render s | estimate s | estimated | true | ratio | estimated 4x4 | true 4x4 "
+             "| ratio 4x4 | ref | ref 4x4 |", "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        lines.append(f"| {r['scene']} {r['view']} | `{r['setting']}` | {r['seed']} | {r['render_s']} | "
+                     f"{r['estimate_s']} | {r['estimated']:.2e} | {r['true']:.2e} | {r['ratio']:.2f} | "
+                     f"{r['estimated_4x4']:.2e} | {r['true_4x4']:.2e} | {r['ratio_4x4']:.2f} | "
+                     f"{r['reference_error']:.1e} | {r['reference_error_4x4']:.1e} |")
+    lines += ["", "![estimated and true error against the render's time](error_estimate/error_estimate.png)", "",
+              "Target: every estimate within a factor of 2 of the true relMSE.", "",
+              f"- relMSE: {len(within)} of {len(rows)} within; the ratio (estimated over true) from "
+              f"{ratios[0]:.2f} to {ratios[-1]:.2f}, median {statistics.median(ratios):.2f}.",
+              f"- 4x4 relMSE: {len(within_4x4)} of {len(rows)} within; from {ratios_4x4[0]:.2f} to "
+              f"{ratios_4x4[-1]:.2f}, median {statistics.median(ratios_4x4):.2f}.",
+              f"- Met: {'yes' if len(within) == len(within_4x4) == len(rows) else 'no'}.", ""]
+    with open(os.path.join(DOCS, "ERROR_ESTIMATE.md"), "w") as f:
+        f.write("\n".join(lines))
+    print(f"wrote {os.path.join(DOCS, 'ERROR_ESTIMATE.md')}")
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--quick", action="store_true", help="the Cornell box's first view, one setting: a check")
+    args = parser.parse_args()
+    common.require("bench/error_estimate.py", modules=["matplotlib"], commands=["oiiotool"])
+    common.build()
+    work = common.scratch()
+    started = time.time()
+    rows = []
+    for name, cfg in SCENES.items():
+        for view in cfg["views"]:
+            rows += measure(name, cfg, view, work, args.quick)
+            if args.quick:
+                break
+        if args.quick:
+            break
+    folder = os.path.join(DOCS, "error_estimate")
+    os.makedirs(folder, exist_ok=True)
+    common.write_csv(os.path.join(folder, "runs.csv"), rows)
+    plot(rows, os.path.join(folder, "error_estimate.png"))
+    page(rows, (time.time() - started) / 60, args.quick)
+
+
+if __name__ == "__main__":
+    main()
