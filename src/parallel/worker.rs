@@ -98,7 +98,7 @@ fn render_tiles(setup: &Setup<'_>, counters: &Counters, sharer: &Sharer<'_>, thr
         let pixels = render_tile(&integrator, camera, settings, tile, &mut stats.rays, |_| {
             sharer.after_pixel(&comm, thread)
         });
-        probe.tile(&mut stats.error, tile, &pixels, &mut stats.rays);
+        probe.tile(&mut stats.error, tile, &pixels);
         finished = Some(setup.finished_tile(index, 0, pixels));
         stats.tiles += 1;
     }

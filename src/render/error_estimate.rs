@@ -62,8 +62,10 @@ pub struct ErrorTally {
     /// difference (their mean's variance).
     pub cache_difference: f64,
     pub fresh_noise: f64,
-    /// Seconds the threads spent on it (rendering pixels twice, computing fresh records).
+    /// Seconds the threads spent on it (rendering pixels twice, computing fresh records), and
+    /// the rays it traced (not in the render's own counts).
     pub seconds: f64,
+    pub rays: u64,
 }
 
 /// The estimate a render reports (`--stats` `error_estimate`, the EXR header, the summary).
@@ -82,8 +84,10 @@ pub struct ErrorEstimate {
     /// Pixels rendered twice, and held out for the cache.
     pub probes: u64,
     pub holdouts: u64,
-    /// The threads' seconds making the estimate (summed over threads and ranks).
+    /// The threads' seconds making the estimate (summed over threads and ranks), and its rays
+    /// (not in the render's `rays`).
     pub seconds: f64,
+    pub rays: u64,
 }
 
 impl ErrorEstimate {
@@ -160,10 +164,9 @@ impl<'a> ErrorProbe<'a> {
     }
 
     /// Adds a finished tile (`values`, row by row) to `tally`: some of its pixels rendered
-    /// again, fewer measured against fresh records. Their rays are added to `rays`; their
-    /// lookups and records are not the image's and are left out of its counts (their time is
-    /// the estimate's `seconds`).
-    pub fn tile(&self, tally: &mut ErrorTally, tile: &Tile, values: &[PixelValue], rays: &mut RayCounts) {
+    /// again, fewer measured against fresh records. Their rays, lookups and records are not the
+    /// image's: they are left out of its counts, and the tally keeps their rays and time.
+    pub fn tile(&self, tally: &mut ErrorTally, tile: &Tile, values: &[PixelValue]) {
         let Some(integrator) = &self.integrator else {
             return;
         };
@@ -206,7 +209,7 @@ impl<'a> ErrorProbe<'a> {
                 tally.add_holdout(&holdout, value.components.total());
             }
         }
-        rays.add_rays(&own);
+        tally.rays += own.total();
         tally.seconds += started.elapsed().as_secs_f64();
     }
 }
@@ -231,6 +234,7 @@ impl ErrorTally {
         self.cache_difference += other.cache_difference;
         self.fresh_noise += other.fresh_noise;
         self.seconds += other.seconds;
+        self.rays += other.rays;
     }
 
     /// A pixel rendered twice: `first` is the image's, `second` from independent samples.
@@ -286,6 +290,7 @@ impl ErrorTally {
             probes: self.probes,
             holdouts: self.holdouts,
             seconds: self.seconds,
+            rays: self.rays,
         })
     }
 }

@@ -120,7 +120,7 @@ pub fn render_resumable(
                     {
                         let tile = &all[index];
                         let values = render_tile(integrator, camera, settings, tile, &mut stats.rays, |_| {});
-                        probe.tile(&mut stats.error, tile, &values, &mut stats.rays);
+                        probe.tile(&mut stats.error, tile, &values);
                         if let Some(journal) = journal {
                             journal.tile(index as u32, 0, &values);
                         }

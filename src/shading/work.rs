@@ -131,7 +131,12 @@ impl std::ops::DerefMut for Work<'_> {
 
 impl RayCounts {
     pub fn add(&mut self, o: &RayCounts) {
-        self.add_rays(o);
+        self.primary += o.primary;
+        self.shadow += o.shadow;
+        self.specular += o.specular;
+        self.ambient += o.ambient;
+        self.continued += o.continued;
+        self.nonfinite += o.nonfinite;
         self.lookups += o.lookups;
         self.hits += o.hits;
         self.records_computed += o.records_computed;
@@ -141,17 +146,6 @@ impl RayCounts {
         self.edge_pixels += o.edge_pixels;
         self.t_amb += o.t_amb;
         self.deferred += o.deferred;
-    }
-
-    /// Adds another's rays alone (their kinds and the dropped contributions), not its cache's
-    /// counts nor its time.
-    pub fn add_rays(&mut self, o: &RayCounts) {
-        self.primary += o.primary;
-        self.shadow += o.shadow;
-        self.specular += o.specular;
-        self.ambient += o.ambient;
-        self.continued += o.continued;
-        self.nonfinite += o.nonfinite;
     }
 
     pub fn total(&self) -> u64 {

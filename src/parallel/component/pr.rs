@@ -288,12 +288,11 @@ impl Pr<'_, '_> {
                 own.compute(integrator, sender.send(sink), seed);
                 // Every request of the tile, sent or computed here: the results it awaits.
                 let requests = (sender.sent - sent_before + own.computed - own_before) as u32;
-                let (job, stats) = (&self.setup.job, &mut self.stats);
+                let job = &self.setup.job;
                 ErrorProbe::new(&self.integrator, &job.camera, &job.settings).tile(
-                    &mut stats.error,
+                    &mut self.stats.error,
                     tile,
                     &pixels,
-                    &mut stats.rays,
                 );
                 finished = Some(self.setup.finished_tile(index, requests, pixels));
                 self.stats.tiles += 1;
