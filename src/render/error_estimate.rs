@@ -138,7 +138,7 @@ pub struct ErrorProbe<'a> {
     /// The render's integrator, reading the cache only: a pixel rendered again or held out
     /// adds no record to it, so the image is the one rendered without the estimate. None where
     /// the integrator leaves the indirect light to others (component mode's PRs with PAs): its
-    /// pixels lack the light a second render would have.
+    /// pixels lack the light a second render would have; and under --trace-cache.
     integrator: Option<Integrator<'a>>,
     camera: &'a Camera,
     settings: &'a RenderSettings,
@@ -149,10 +149,13 @@ pub struct ErrorProbe<'a> {
 impl<'a> ErrorProbe<'a> {
     pub fn new(integrator: &Integrator<'a>, camera: &'a Camera, settings: &'a RenderSettings) -> ErrorProbe<'a> {
         ErrorProbe {
-            integrator: integrator.defer.is_none().then_some(Integrator {
-                frozen: true,
-                ..*integrator
-            }),
+            // Nor under --trace-cache, whose trace lists the image's lookups and records.
+            integrator: (integrator.defer.is_none() && !integrator.cache.is_some_and(|c| c.tracing())).then_some(
+                Integrator {
+                    frozen: true,
+                    ..*integrator
+                },
+            ),
             camera,
             settings,
             again: RenderSettings {
