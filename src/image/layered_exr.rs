@@ -254,12 +254,25 @@ impl ExrLayout {
     /// Writes the channels of `frame`'s pixels in `overlap` (the rendered tile `rendered` met
     /// with `file_tile`) into `values`, the file tile's interleaved pixels.
     fn fill(&self, frame: &FrameBuffer, rendered: Region, file_tile: Region, overlap: Region, values: &mut [f32]) {
+        self.fill_with(frame, &[], rendered, file_tile, overlap, values);
+    }
+
+    /// `fill`, with `extra` layers made after the render (the denoised ones) beside the frame's.
+    fn fill_with(
+        &self,
+        frame: &FrameBuffer,
+        extra: &[&[Vec3]],
+        rendered: Region,
+        file_tile: Region,
+        overlap: Region,
+        values: &mut [f32],
+    ) {
         let n = self.plan.channels.len();
         for y in overlap.y0..overlap.y1 {
             for x in overlap.x0..overlap.x1 {
                 let i = ((y - rendered.y0) * rendered.width() + (x - rendered.x0)) as usize;
                 let at = ((y - file_tile.y0) * file_tile.width() + (x - file_tile.x0)) as usize * n;
-                self.plan.fill(frame, &[], i, &mut values[at..at + n]);
+                self.plan.fill(frame, extra, i, &mut values[at..at + n]);
             }
         }
     }
@@ -320,10 +333,6 @@ impl TileChunks {
         Ok(TileChunks { layout, encoder })
     }
 
-    pub fn layout(&self) -> &ExrLayout {
-        &self.layout
-    }
-
     /// The tile as the file stores it; None when it covers file tiles only in part (a region
     /// whose corner is off the tile grid), which only the file's holder can assemble.
     pub fn encode(&self, tile: &Tile, values: &[PixelValue]) -> Result<Option<EncodedTile>, String> {
@@ -350,9 +359,7 @@ impl TileChunks {
     /// The compressed chunk of `file_tile`, which `rendered` (`frame`'s pixels) covers whole.
     fn chunk(&self, frame: &FrameBuffer, rendered: Region, file_tile: Region) -> Result<Vec<u8>, String> {
         let values = self.layout.tile_values(frame, rendered, file_tile);
-        let mut bytes = Vec::new();
-        self.encoder.encode(self.layout.grid(file_tile), &values, &mut bytes)?;
-        Ok(bytes)
+        self.encoder.encode(self.layout.grid(file_tile), &values)
     }
 }
 
@@ -451,9 +458,8 @@ impl TileFile {
     fn write_values(&self, layout: &ExrLayout, file_tile: Region, values: &[f32]) -> Result<(), String> {
         match self {
             TileFile::Chunks { encoder, file } => {
-                let mut bytes = Vec::new();
-                encoder.encode(layout.grid(file_tile), values, &mut bytes)?;
-                file.write(layout.grid(file_tile), &bytes)
+                let grid = layout.grid(file_tile);
+                file.write(grid, &encoder.encode(grid, values)?)
             }
             TileFile::Stream(stream) => {
                 stream.write((file_tile.x0, file_tile.y0), (file_tile.x1, file_tile.y1), values)
@@ -685,13 +691,7 @@ pub fn write_whole(
             };
             values.clear();
             values.resize(file_tile.pixels() * n, 0.0);
-            for y in file_tile.y0..file_tile.y1 {
-                for x in file_tile.x0..file_tile.x1 {
-                    let i = (y * frame.width + x) as usize;
-                    let at = ((y - file_tile.y0) * file_tile.width() + (x - file_tile.x0)) as usize * n;
-                    layout.plan.fill(frame, extra, i, &mut values[at..at + n]);
-                }
-            }
+            layout.fill_with(frame, extra, whole, file_tile, file_tile, &mut values);
             streamed.file.write_values(layout, file_tile, &values)?;
         }
     };

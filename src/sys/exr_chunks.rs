@@ -101,8 +101,9 @@ impl TileEncoder {
     }
 
     /// The encoded chunk of tile (`column`, `row`) of the grid, from its interleaved values (its
-    /// rows cut at the window's edges), appended to `out`.
-    pub fn encode(&self, tile: (u32, u32), values: &[f32], out: &mut Vec<u8>) -> Result<(), String> {
+    /// rows cut at the window's edges).
+    pub fn encode(&self, tile: (u32, u32), values: &[f32]) -> Result<Vec<u8>, String> {
+        let mut out = Vec::new();
         let mut err = vec![0 as c_char; ERR_LEN];
         // SAFETY: `values` and `out` are alive for the call; `append` takes `out` back.
         let status = unsafe {
@@ -113,7 +114,7 @@ impl TileEncoder {
                 values.as_ptr(),
                 values.len(),
                 Some(append),
-                out as *mut Vec<u8> as *mut c_void,
+                &mut out as *mut Vec<u8> as *mut c_void,
                 err.as_mut_ptr(),
                 err.len(),
             )
@@ -121,7 +122,7 @@ impl TileEncoder {
         if status != 0 {
             return Err(buffer_message(&err));
         }
-        Ok(())
+        Ok(out)
     }
 }
 
