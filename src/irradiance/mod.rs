@@ -308,9 +308,26 @@ impl IrradianceCache {
     /// say so), and only until they reach it: the prepass asks this at every site, most of
     /// them covered.
     pub fn covered_in(&self, snapshot: &FrozenIndex, point: Vec3, normal: Vec3, headroom: f32, level: u32) -> bool {
+        self.covered_by(snapshot, |_| true, point, normal, headroom, level)
+    }
+
+    /// As [`IrradianceCache::covered_in`], by the records of `snapshot` that `admit` takes (by
+    /// their place in it) only.
+    pub fn covered_by(
+        &self,
+        snapshot: &FrozenIndex,
+        admit: impl Fn(usize) -> bool,
+        point: Vec3,
+        normal: Vec3,
+        headroom: f32,
+        level: u32,
+    ) -> bool {
         let mut total = 0.0f32;
         snapshot
-            .try_for_each_near_indexed(point, |_, r| {
+            .try_for_each_near_indexed(point, |i, r| {
+                if !admit(i) {
+                    return ControlFlow::Continue(());
+                }
                 total += self.lookup_weight(r, point, normal, headroom, level).unwrap_or(0.0);
                 if total >= FIRM_COVERAGE {
                     ControlFlow::Break(())
