@@ -265,6 +265,23 @@ pub struct RenderArgs {
     /// (a PR's misses go to the PAs). Default 3.
     #[arg(long = "overture", allow_negative_numbers = true)]
     pub overture: Option<u32>,
+    /// Render the image this many times over one record set, from independent samples, and
+    /// average the passes: their noise falls as 1/N, the cache's error stays. What
+    /// --target-error and --time-limit chose is rerun with it (the EXR's `icrender/command`).
+    #[arg(long = "passes", default_value_t = 1, allow_negative_numbers = true)]
+    pub passes: u32,
+    /// Render in passes until the error estimate (the relMSE `icrender compare` would report
+    /// against the converged image) is at most this, e.g. 1e-3: each pass renders the image
+    /// again from independent samples and the passes are averaged; where the cache's own error
+    /// dominates, the records are made again finer (-aa smaller). The image is written after
+    /// every pass that lowers the estimate. With --time-limit: whichever comes first.
+    #[arg(long = "target-error", allow_negative_numbers = true)]
+    pub target_error: Option<f64>,
+    /// Render in passes (as --target-error) for at most this many seconds of rendering, and
+    /// keep the image with the lowest error estimate. The first pass always ends, however long
+    /// it takes.
+    #[arg(long = "time-limit", allow_negative_numbers = true)]
+    pub time_limit: Option<f64>,
     /// Random seed; the same seed gives the same image.
     #[arg(long = "seed", default_value_t = 1, allow_negative_numbers = true, value_parser = whole_number::<u64>)]
     pub seed: u64,

@@ -78,6 +78,16 @@ pub fn validate(args: &RenderArgs) -> Result<(), String> {
     if args.threads == Some(0) {
         return Err("--threads must be at least 1".into());
     }
+    if args.passes == 0 {
+        return Err("--passes must be at least 1".into());
+    }
+    for (name, value) in [("--target-error", args.target_error), ("--time-limit", args.time_limit)] {
+        if let Some(v) = value
+            && !(v.is_finite() && v > 0.0)
+        {
+            return Err(format!("{name} must be a finite number above 0 (got {v})"));
+        }
+    }
     if let Some(av) = &args.ambient_value
         && av.iter().any(|v| !v.is_finite() || *v < 0.0)
     {
@@ -189,6 +199,24 @@ pub fn uses_cache(args: &RenderArgs, scene: &Scene) -> bool {
     args.ambient_accuracy > 0.0 && args.ambient_bounces > 0 && scene.needs().diffuse
 }
 
+/// The cache's settings from the options.
+fn cache_settings(args: &RenderArgs, scene: &Scene, camera: &Camera) -> CacheSettings {
+    let metric = match args.ic_metric {
+        MetricArg::Hessian => Metric::Hessian,
+        MetricArg::Ward88 => Metric::Ward88,
+    };
+    CacheSettings::new(
+        args.ambient_accuracy,
+        args.ambient_divisions,
+        args.ambient_supersamples,
+        args.ambient_resolution,
+        metric,
+        scene.cube_size(),
+    )
+    .with_view_floor(camera, args.ic_min_pixels)
+    .with_blend(args.ic_blend)
+}
+
 /// Refuses a job whose estimated memory exceeds --max-memory, before the BVH and the render.
 fn check_memory(args: &RenderArgs, scene: &Scene, role: memory::Role, limit: u64) -> Result<(), CommandError> {
     let component = matches!(args.mode, Some(crate::cli::ModeArg::Component) | None);
@@ -224,6 +252,18 @@ fn check_memory(args: &RenderArgs, scene: &Scene, role: memory::Role, limit: u64
 }
 
 impl Job {
+    /// An empty cache as `args` make it (a refined record set for `--target-error`,
+    /// `render::passes`), kept in memory only, with the last-bounce grid of the cache it
+    /// replaces (the grid does not depend on the records' settings). None without a cache.
+    pub fn refined_cache(&mut self, args: &RenderArgs) -> Option<IrradianceCache> {
+        let grid = self.cache.as_mut()?.take_last_bounce();
+        let cache = IrradianceCache::new(cache_settings(args, &self.scene, &self.camera));
+        if let Some(grid) = grid {
+            cache.set_last_bounce(grid);
+        }
+        Some(cache)
+    }
+
     /// Loads the scene, checks the job fits --max-memory (as a process in `role`), builds the
     /// BVH, chooses the view and opens the cache.
     pub fn prepare(args: &RenderArgs, role: memory::Role) -> Result<Job, CommandError> {
@@ -306,21 +346,7 @@ impl Job {
                 .then(|| std::sync::Arc::new(EmitterFootprint::new(&scene.emitters, &camera, window))),
         };
         let cache = if uses_cache(args, &scene) {
-            let metric = match args.ic_metric {
-                MetricArg::Hessian => Metric::Hessian,
-                MetricArg::Ward88 => Metric::Ward88,
-            };
-            let settings = CacheSettings::new(
-                args.ambient_accuracy,
-                args.ambient_divisions,
-                args.ambient_supersamples,
-                args.ambient_resolution,
-                metric,
-                scene.cube_size(),
-            )
-            .with_view_floor(&camera, args.ic_min_pixels)
-            .with_blend(args.ic_blend);
-            let cache = IrradianceCache::new(settings);
+            let cache = IrradianceCache::new(cache_settings(args, &scene, &camera));
             let cache = match &args.ambient_file {
                 Some(path) => {
                     let line = cache_settings_line(args, &scene);

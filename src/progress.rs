@@ -227,6 +227,20 @@ impl Progress {
     }
 }
 
+/// With JSON, a line after each pass of a render in passes (`render::passes`), event `pass`:
+/// its number, when it ended, the estimate of the passes' mean, and whether its image was
+/// written to `output` (a farm manager may pick it up: it is whole).
+pub fn pass_done(style: Style, log: &crate::render::passes::PassLog, output: &std::path::Path) {
+    if style != Style::Json {
+        return;
+    }
+    let mut line = serde_json::json!({"event": "pass", "output": output.display().to_string()});
+    if let (Some(line), Ok(serde_json::Value::Object(fields))) = (line.as_object_mut(), serde_json::to_value(log)) {
+        line.extend(fields);
+    }
+    print_line(&line);
+}
+
 /// The last line of a sequence's JSON progress: event `done`, the frames and their outputs'
 /// name pattern (`#` for the digits).
 pub fn sequence_done(style: Style, start: Instant, frames: &str, pattern: &str) {

@@ -305,6 +305,9 @@ pub struct RenderStats {
     /// The relMSE this render is estimated to have against the converged image, made without
     /// one (`render::error_estimate`); None where no pixel was rendered.
     pub error_estimate: Option<ErrorEstimate>,
+    /// With --passes, --target-error or --time-limit: the passes, and the estimate after each.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub passes: Option<crate::render::passes::PassesReport>,
     pub per_thread: Vec<ThreadReport>,
     pub per_rank: Vec<RankReport>,
 }

@@ -447,6 +447,11 @@ impl IrradianceCache {
         let _ = self.last_bounce.set(grid);
     }
 
+    /// Takes the last-bounce grid out (for a cache that replaces this one).
+    pub fn take_last_bounce(&mut self) -> Option<last_bounce::LastBounceGrid> {
+        self.last_bounce.take()
+    }
+
     pub fn last_bounce(&self) -> Option<&last_bounce::LastBounceGrid> {
         self.last_bounce.get()
     }

@@ -80,6 +80,10 @@ pub struct ErrorEstimate {
     pub noise: f64,
     /// Of the indirect layer's share, the cache's own error.
     pub cache: f64,
+    /// One record's noise (its variance, relative as relMSE weighs it), from the held-out
+    /// pixels' two fresh records: what more hemisphere samples (-ad) would lower, where the
+    /// cache's error is its records' noise rather than its interpolation's.
+    pub record_noise: f64,
     pub pixels: u64,
     /// Pixels rendered twice, and held out for the cache.
     pub probes: u64,
@@ -267,10 +271,23 @@ impl ErrorTally {
 
     /// The estimate from what was summed (None before any pixel).
     pub fn estimate(&self) -> Option<ErrorEstimate> {
+        self.estimate_over(1)
+    }
+
+    /// The estimate for the mean of `passes` images, each from independent samples over the
+    /// same record set, whose tallies were all summed here: a pass's noise (pooled over every
+    /// pass's probes) over the passes, and the cache's error, which is the same in each.
+    pub fn estimate_over(&self, passes: u32) -> Option<ErrorEstimate> {
         if self.pixels == 0 {
             return None;
         }
-        let per_probe = |sum: f64| if self.probes > 0 { sum / self.probes as f64 } else { 0.0 };
+        let per_probe = |sum: f64| {
+            if self.probes > 0 {
+                sum / self.probes as f64 / passes.max(1) as f64
+            } else {
+                0.0
+            }
+        };
         let [emission, direct, specular, indirect] = self.noise_by_layer.map(per_probe);
         let noise = per_probe(self.noise);
         let cache = if self.holdouts > 0 {
@@ -289,6 +306,11 @@ impl ErrorTally {
             },
             noise,
             cache,
+            record_noise: if self.holdouts > 0 {
+                2.0 * self.fresh_noise / self.holdouts as f64
+            } else {
+                0.0
+            },
             pixels: self.pixels,
             probes: self.probes,
             holdouts: self.holdouts,

@@ -6,6 +6,7 @@ pub mod ahead;
 pub mod edges;
 pub mod error_estimate;
 pub mod noise;
+pub mod passes;
 pub mod pixel;
 pub mod sink;
 
@@ -58,27 +59,9 @@ pub fn render_resumable(
     let keeps_tiles = checkpoint.is_some();
     let stopped =
         || crate::sys::signals::received().is_some() || (!keeps_tiles && streamed.is_some_and(StreamedExr::failed));
-    let watch = watch_prepass(progress);
-    let prepass =
-        (settings.prepass && integrator.cache.is_some()).then(|| prepass::run(integrator, camera, settings, &watch));
-    // The pixels an edge crosses, as the prepass found them.
-    let with_edges;
-    let settings = match prepass.as_ref().and_then(|p| p.edges.clone()) {
-        Some(map) => {
-            with_edges = RenderSettings {
-                edge_map: Some(map),
-                ..settings.clone()
-            };
-            &with_edges
-        }
-        None => settings,
-    };
-    // After the prepass the pixels only read the cache (see `Integrator::frozen`).
-    let reading = Integrator {
-        frozen: prepass.is_some(),
-        ..*integrator
-    };
-    let integrator = &reading;
+    let prepared = prepare(integrator, camera, settings, progress);
+    let (settings, prepass) = (&prepared.settings, prepared.prepass);
+    let reading = prepared_reader(integrator, prepass.is_some());
     let all = tiles_in(
         camera.width,
         camera.height,
@@ -106,10 +89,70 @@ pub fn render_resumable(
         // The frame holds the area rendered only: a region task's memory grows with its region.
         None => TileSink::held(restored.map_or_else(|| FrameBuffer::windowed(window), |r| r.frame)),
     };
-    let queue = TileQueue::new(if stopped() { Vec::new() } else { todo });
+    let todo = if stopped() { Vec::new() } else { todo };
+    let mut stats = trace_tiles(&reading, camera, settings, (&all, todo), &sink, journal, progress, &stopped);
+    progress.finish();
+    let frame = sink.into_frame(prepass.as_ref());
+    if let Some(prepass) = &prepass {
+        add_prepass_work(&mut stats, &prepass.threads);
+    }
+    Rendered {
+        frame,
+        threads: stats,
+        prepass,
+    }
+}
+
+/// What the pixels of a render start from: the prepass's account (when the settings ask for
+/// one and there is a cache) and the settings they take, with the edges it found.
+pub struct Prepared {
+    pub prepass: Option<PrepassOutcome>,
+    pub settings: RenderSettings,
+}
+
+/// Runs the prepass, if any: after it the record set is complete and frozen.
+pub fn prepare(integrator: &Integrator<'_>, camera: &Camera, settings: &RenderSettings, progress: &Progress) -> Prepared {
+    let watch = watch_prepass(progress);
+    let prepass =
+        (settings.prepass && integrator.cache.is_some()).then(|| prepass::run(integrator, camera, settings, &watch));
+    // The pixels an edge crosses, as the prepass found them.
+    let settings = match prepass.as_ref().and_then(|p| p.edges.clone()) {
+        Some(map) => RenderSettings {
+            edge_map: Some(map),
+            ..settings.clone()
+        },
+        None => settings.clone(),
+    };
+    Prepared { prepass, settings }
+}
+
+/// The integrator the pixels take: after a prepass they only read the cache (see
+/// `Integrator::frozen`).
+pub fn prepared_reader<'a>(integrator: &Integrator<'a>, prepassed: bool) -> Integrator<'a> {
+    Integrator {
+        frozen: prepassed,
+        ..*integrator
+    }
+}
+
+/// Renders tiles `todo` of `all` into `sink` on `settings.threads` threads, each taking the next
+/// tile until none is left or `stopped` says so; every tile is measured for the error estimate
+/// and journalled when there is a journal. Each thread's work.
+#[allow(clippy::too_many_arguments)]
+pub fn trace_tiles(
+    integrator: &Integrator<'_>,
+    camera: &Camera,
+    settings: &RenderSettings,
+    (all, todo): (&[crate::tiles::Tile], Vec<usize>),
+    sink: &TileSink<'_>,
+    journal: Option<&Checkpoint>,
+    progress: &Progress,
+    stopped: &(dyn Fn() -> bool + Sync),
+) -> Vec<ThreadStats> {
+    let queue = TileQueue::new(todo);
     let probe = error_estimate::ErrorProbe::new(integrator, camera, settings);
     let threads = settings.threads.max(1).min(queue.len().max(1));
-    let stats: Vec<ThreadStats> = std::thread::scope(|scope| {
+    std::thread::scope(|scope| {
         let workers: Vec<_> = (0..threads)
             .map(|_| {
                 scope.spawn(|| {
@@ -134,18 +177,7 @@ pub fn render_resumable(
             })
             .collect();
         workers.into_iter().map(|w| w.join().unwrap_or_default()).collect()
-    });
-    progress.finish();
-    let mut stats = stats;
-    let frame = sink.into_frame(prepass.as_ref());
-    if let Some(prepass) = &prepass {
-        add_prepass_work(&mut stats, &prepass.threads);
-    }
-    Rendered {
-        frame,
-        threads: stats,
-        prepass,
-    }
+    })
 }
 
 /// What the prepass hears after each of its rounds (`prepass::run`'s `watch`): the progress

@@ -12,7 +12,7 @@ use crate::scene::Scene;
 pub fn options_line(args: &RenderArgs) -> String {
     format!(
         "-x {} -y {} {} -st {} -lr {} -lw {} --ic-metric {} \
-         --light-samples {} --direct {} --spp {} --seed {} --ic-build {} --ic-deep {} --ic-blend {}{}{}{}{}",
+         --light-samples {} --direct {} --spp {} --seed {} --ic-build {} --ic-deep {} --ic-blend {}{}{}{}{}{}",
         args.width,
         args.height,
         crate::job::ambient_options(args),
@@ -44,7 +44,12 @@ pub fn options_line(args: &RenderArgs) -> String {
         },
         args.overture.map(|n| format!(" --overture {n}")).unwrap_or_default(),
         if args.lambertian { " --lambertian" } else { "" },
-        if args.flatten { " --flatten" } else { "" }
+        if args.flatten { " --flatten" } else { "" },
+        if args.passes > 1 {
+            format!(" --passes {}", args.passes)
+        } else {
+            String::new()
+        }
     )
 }
 
@@ -371,6 +376,10 @@ pub fn rerun_command(args: &RenderArgs) -> String {
         emission_samples,
         edge_samples,
         overture,
+        passes,
+        // Rerun as what they chose: the passes and the accuracy (`commands::render::passes`).
+        target_error: _,
+        time_limit: _,
         seed,
         tile,
         threads: _,
@@ -450,6 +459,9 @@ pub fn rerun_command(args: &RenderArgs) -> String {
         &emission_samples.to_string(),
     ]);
     push(&["--edge-samples", &edge_samples.to_string()]);
+    if *passes > 1 {
+        push(&["--passes", &passes.to_string()]);
+    }
     push(&["--seed", &seed.to_string(), "--tile", tile]);
     if let Some(file) = ambient_file {
         // The checkpoint's own cache file is the checkpoint's business, not the user's.

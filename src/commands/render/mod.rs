@@ -3,6 +3,7 @@
 
 mod header;
 mod outputs;
+mod passes;
 
 pub use header::{data_attributes, options_line, part_settings, rerun_command};
 pub use outputs::{Outputs, check_new_output, job_stats, output_name, producible_layers};
@@ -305,6 +306,12 @@ pub fn run(args: &RenderArgs, sequence: SequenceRenderer) -> CommandResult {
         if args.trace_cache.is_some() {
             return Err(CommandError::input("--trace-cache traces the serial mode only".into()));
         }
+        if passes::in_passes(args) {
+            return Err(CommandError::input(format!(
+                "{} renders in one process (no mpirun, no --mode)",
+                passes::asked_by(args)
+            )));
+        }
         return run_parallel(args, mode);
     }
     let wall = Instant::now();
@@ -314,6 +321,9 @@ pub fn run(args: &RenderArgs, sequence: SequenceRenderer) -> CommandResult {
             "--reference compares whole images: render the regions, merge them, and `icrender compare` the merged image"
                 .into(),
         ));
+    }
+    if passes::in_passes(args) {
+        passes::check(args)?;
     }
     if let Some(frames) = args.frames()? {
         return sequence(args, frames);
@@ -326,6 +336,9 @@ pub fn run(args: &RenderArgs, sequence: SequenceRenderer) -> CommandResult {
         }
         None => None,
     };
+    if passes::in_passes(args) {
+        return passes::run(args, &outputs, reference.as_ref(), wall);
+    }
     let all_tiles = render_tiles(args)?;
     let (journal, restored) = open_checkpoint(args, &all_tiles)?.map_or((None, None), |(j, r)| (Some(j), Some(r)));
     let job = Job::prepare(&with_checkpoint_cache(args), crate::memory::Role::Single)?;
