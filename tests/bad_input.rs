@@ -517,3 +517,65 @@ fn a_text_file_that_is_not_gltf_is_named_as_such() {
         expect_failure(&c.path(name), &VIEW, &c.out(), &[name, "not a glTF file", says]);
     }
 }
+
+/// --target-error, --time-limit and --passes: a value that is not a positive finite number, or
+/// a combination that cannot work (a journal of one pass's tiles, a sequence, mpirun's modes,
+/// a record set made as the pixels render, an -af file the refinements would outgrow), is
+/// refused in one line naming the option, before anything is loaded or written.
+#[test]
+fn bad_passes_targets_and_limits_are_refused_before_rendering() {
+    let c = Case::new();
+    let mut b = GltfBuilder::new();
+    valid_scene(&mut b);
+    let scene = b.write(c.dir.path(), "ok");
+    let scene = scene.to_str().unwrap();
+    let work = c.path("work");
+    std::fs::create_dir(&work).unwrap();
+    let out = work.join("out.exr").to_string_lossy().into_owned();
+    let checkpoint = work.join("journal").to_string_lossy().into_owned();
+    let cache = work.join("cache.ic").to_string_lossy().into_owned();
+    for (option, values) in [
+        ("--target-error", &["-0.001", "0", "NaN", "inf"][..]),
+        ("--time-limit", &["-5", "0", "nan", "infinity"][..]),
+    ] {
+        for value in values {
+            let mut args = vec!["render", scene, "-x", "8", "-y", "8", "-o", &out, option, value];
+            args.extend_from_slice(&VIEW);
+            expect_refusal(&args, &work, &[option, "above 0"]);
+        }
+    }
+    let mut args = vec!["render", scene, "-x", "8", "-y", "8", "-o", &out, "--passes", "0"];
+    args.extend_from_slice(&VIEW);
+    expect_refusal(&args, &work, &["--passes", "at least 1"]);
+    for (extra, words) in [
+        (
+            &["--target-error", "1e-3", "--checkpoint", &checkpoint][..],
+            &["--target-error", "--checkpoint"][..],
+        ),
+        (
+            &["--time-limit", "5", "--frames", "1-2"][..],
+            &["--time-limit", "--frames"][..],
+        ),
+        (
+            &["--passes", "3", "--mode", "broadcast"][..],
+            &["--passes", "one process"][..],
+        ),
+        (
+            &["--time-limit", "5", "--ic-build", "progressive"][..],
+            &["--time-limit", "progressive"][..],
+        ),
+        (
+            &["--target-error", "1e-3", "-af", &cache][..],
+            &["--target-error", "-af"][..],
+        ),
+        (
+            &["--target-error", "1e-3", "--passes", "4"][..],
+            &["--target-error", "--passes"][..],
+        ),
+    ] {
+        let mut args = vec!["render", scene, "-x", "8", "-y", "8", "-o", &out];
+        args.extend_from_slice(extra);
+        args.extend_from_slice(&VIEW);
+        expect_refusal(&args, &work, words);
+    }
+}

@@ -188,6 +188,9 @@ pub struct IrradianceCache {
     frozen: OnceLock<FrozenIndex>,
     /// The last bounce's grid (`--ic-deep grid`), built before the prepass's first round.
     last_bounce: OnceLock<last_bounce::LastBounceGrid>,
+    /// Records a frozen cache's misses made for their own use (gaps), kept to join the set
+    /// between the passes of a render in passes (`render::passes`).
+    gaps: Mutex<Vec<Record>>,
 }
 
 impl IrradianceCache {
@@ -206,7 +209,38 @@ impl IrradianceCache {
             trace: None,
             frozen: OnceLock::new(),
             last_bounce: OnceLock::new(),
+            gaps: Mutex::new(Vec::new()),
         }
+    }
+
+    /// Keeps a record made at a frozen cache's miss (see `gaps`).
+    pub fn keep_gap(&self, record: Record) {
+        self.gaps.lock().unwrap_or_else(|e| e.into_inner()).push(record);
+    }
+
+    /// Adds the gaps' records kept since the last call to the set, and freezes it again (their
+    /// curvatures fitted with the rest); how many joined.
+    pub fn absorb_gaps(&mut self) -> usize {
+        let mut gaps = std::mem::take(self.gaps.get_mut().unwrap_or_else(|e| e.into_inner()));
+        if gaps.is_empty() {
+            return 0;
+        }
+        // In an order of their own, not the threads' (the set's order is its lookups' sums'
+        // order): the next pass is the same whatever the threads.
+        let key = |r: &Record| {
+            (
+                r.position.to_array().map(f32::to_bits),
+                r.normal.to_array().map(f32::to_bits),
+            )
+        };
+        gaps.sort_unstable_by_key(key);
+        self.frozen = OnceLock::new();
+        let count = gaps.len();
+        for record in gaps {
+            self.insert(record);
+        }
+        self.fit_curvatures_and_freeze();
+        count
     }
 
     /// From now on lookups read a lock-free copy of the records (see `RecordIndex::frozen`):

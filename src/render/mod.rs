@@ -90,7 +90,16 @@ pub fn render_resumable(
         None => TileSink::held(restored.map_or_else(|| FrameBuffer::windowed(window), |r| r.frame)),
     };
     let todo = if stopped() { Vec::new() } else { todo };
-    let mut stats = trace_tiles(&reading, camera, settings, (&all, todo), &sink, journal, progress, &stopped);
+    let mut stats = trace_tiles(
+        &reading,
+        camera,
+        settings,
+        (&all, todo),
+        &sink,
+        journal,
+        progress,
+        &stopped,
+    );
     progress.finish();
     let frame = sink.into_frame(prepass.as_ref());
     if let Some(prepass) = &prepass {
@@ -111,7 +120,12 @@ pub struct Prepared {
 }
 
 /// Runs the prepass, if any: after it the record set is complete and frozen.
-pub fn prepare(integrator: &Integrator<'_>, camera: &Camera, settings: &RenderSettings, progress: &Progress) -> Prepared {
+pub fn prepare(
+    integrator: &Integrator<'_>,
+    camera: &Camera,
+    settings: &RenderSettings,
+    progress: &Progress,
+) -> Prepared {
     let watch = watch_prepass(progress);
     let prepass =
         (settings.prepass && integrator.cache.is_some()).then(|| prepass::run(integrator, camera, settings, &watch));

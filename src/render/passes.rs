@@ -88,16 +88,13 @@ impl Refinements {
         } else {
             [Refinement::Finer, Refinement::Smoother]
         };
-        wanted
-            .into_iter()
-            .filter(|r| !self.useless.contains(r))
-            .find_map(|r| {
-                tuning.refined(r).map(|t| Refined {
-                    refinement: r,
-                    tuning: t,
-                    gain: self.gain(r),
-                })
+        wanted.into_iter().filter(|r| !self.useless.contains(r)).find_map(|r| {
+            tuning.refined(r).map(|t| Refined {
+                refinement: r,
+                tuning: t,
+                gain: self.gain(r),
             })
+        })
     }
 
     /// The share of the cache's error `refinement` is expected to leave.
@@ -393,10 +390,16 @@ mod tests {
 
     #[test]
     fn the_passes_stop_at_the_target() {
-        assert_eq!(next_step(target(0.011), &measured(1, 0.01, 0.001)), Step::Stop(Stopped::Reached));
+        assert_eq!(
+            next_step(target(0.011), &measured(1, 0.01, 0.001)),
+            Step::Stop(Stopped::Reached)
+        );
         // Noise 0.01 a pass and cache 0.001: 0.002 needs ten passes' mean.
         assert_eq!(next_step(target(0.002), &measured(9, 0.01, 0.001)), Step::Pass);
-        assert_eq!(next_step(target(0.002), &measured(10, 0.01, 0.001)), Step::Stop(Stopped::Reached));
+        assert_eq!(
+            next_step(target(0.002), &measured(10, 0.01, 0.001)),
+            Step::Stop(Stopped::Reached)
+        );
     }
 
     #[test]
@@ -407,7 +410,13 @@ mod tests {
         assert_eq!(next_step(target(0.001), &m), Step::Refine);
         // No refinement left: passes until their noise is a fifth of the estimate, then stop.
         assert_eq!(
-            next_step(target(0.003), &Measured { refine_gain: None, ..measured(1, 0.001, 0.0025) }),
+            next_step(
+                target(0.003),
+                &Measured {
+                    refine_gain: None,
+                    ..measured(1, 0.001, 0.0025)
+                }
+            ),
             Step::Pass,
             "the cache's error is 0.83 of the target: out of reach, the passes' noise is above a fifth"
         );
@@ -481,7 +490,10 @@ mod tests {
         assert_eq!((finer.refinement, finer.gain), (Refinement::Finer, FIRST_GAIN));
         assert!((finer.tuning.accuracy - 0.2 / REFINE_FACTOR).abs() < 1e-6 && finer.tuning.divisions == 512);
         let smoother = tried.next(tuning, 1e-4, 1e-3).unwrap();
-        assert_eq!((smoother.refinement, smoother.tuning.divisions), (Refinement::Smoother, 1024));
+        assert_eq!(
+            (smoother.refinement, smoother.tuning.divisions),
+            (Refinement::Smoother, 1024)
+        );
         tried.judge(Refinement::Finer, 1e-4, 0.6e-4);
         let learnt = tried.next(tuning, 1e-4, 1e-5).unwrap();
         assert_eq!(learnt.refinement, Refinement::Finer);

@@ -193,7 +193,11 @@ impl Integrator<'_> {
         }
         if self.frozen {
             counts.gap_records += 1;
-            return record.value;
+            let value = record.value;
+            if self.keeps_gaps {
+                cache.keep_gap(record);
+            }
+            return value;
         }
         // Another thread may have covered this point while we sampled: the work was done twice.
         if cache.lookup(hit.position, hit.normal, headroom, state.level).is_some() {

@@ -116,6 +116,9 @@ pub struct Integrator<'a> {
     /// The cache is complete (the prepass made it): a lookup that finds no record makes one
     /// for its own use and does not add it, so no pixel depends on another's timing.
     pub frozen: bool,
+    /// Such a record is kept for the next pass of a render in passes (`render::passes`): it
+    /// joins the set between passes (`IrradianceCache::absorb_gaps`).
+    pub keeps_gaps: bool,
 }
 
 /// Passes through fully transparent (alpha-masked) points before a ray gives up.
@@ -143,6 +146,7 @@ impl<'a> Integrator<'a> {
             cache,
             defer: None,
             frozen: false,
+            keeps_gaps: false,
         }
     }
 

@@ -128,16 +128,16 @@ pub fn run(args: &RenderArgs, outputs: &Outputs, reference: Option<&ImageData>, 
     loop {
         report.record_sets += 1;
         let build_start = Instant::now();
-        let integrator = Integrator::new(&job.scene, &job.tracer, &job.shading, job.cache.as_ref());
         let progress = Progress::with_style(all.len(), style);
-        let prepared = prepare(&integrator, &job.camera, &job.settings, &progress);
+        let prepared = {
+            let integrator = Integrator::new(&job.scene, &job.tracer, &job.shading, job.cache.as_ref());
+            prepare(&integrator, &job.camera, &job.settings, &progress)
+        };
         let build_s = build_start.elapsed().as_secs_f64();
         if let Some(prepass) = &prepared.prepass {
             add_prepass_work(&mut work, &prepass.threads);
         }
-        let reader = prepared_reader(&integrator, prepared.prepass.is_some());
         let window = prepared.settings.window(&job.camera);
-        let records = job.cache.as_ref().map_or(0, |c| c.len() as u64);
         let mut passes = Accumulated::new();
         let mut passes_s = 0.0;
         // Whether this set's passes are the image on disk.
@@ -155,18 +155,31 @@ pub fn run(args: &RenderArgs, outputs: &Outputs, reference: Option<&ImageData>, 
                 later = Progress::with_style(all.len(), style);
                 &later
             };
+            let records = job.cache.as_ref().map_or(0, |c| c.len() as u64);
             let sink = TileSink::held(FrameBuffer::windowed(window));
-            let threads = trace_tiles(
-                &reader,
-                &job.camera,
-                &settings,
-                (&all, (0..all.len()).collect()),
-                &sink,
-                None,
-                progress,
-                &stopped,
-            );
+            let threads = {
+                let integrator = Integrator::new(&job.scene, &job.tracer, &job.shading, job.cache.as_ref());
+                // The records a pass's samples miss (they fall where no earlier pass's did) join
+                // the set before the next pass, instead of being made again in every pass.
+                let reader = Integrator {
+                    keeps_gaps: true,
+                    ..prepared_reader(&integrator, prepared.prepass.is_some())
+                };
+                trace_tiles(
+                    &reader,
+                    &job.camera,
+                    &settings,
+                    (&all, (0..all.len()).collect()),
+                    &sink,
+                    None,
+                    progress,
+                    &stopped,
+                )
+            };
             progress.finish();
+            if let Some(cache) = job.cache.as_mut() {
+                cache.absorb_gaps();
+            }
             if let Some(signal) = crate::sys::signals::received() {
                 return Err(interrupted(signal, written.as_ref(), outputs));
             }
@@ -230,7 +243,9 @@ pub fn run(args: &RenderArgs, outputs: &Outputs, reference: Option<&ImageData>, 
             // `WRITE_EVERY` old (a write of a large frame costs a pass's share).
             let better = set_written || written.as_ref().is_none_or(|w| relmse < w.relmse);
             let due = step != Step::Pass
-                || written.as_ref().is_none_or(|w| w.at.elapsed().as_secs_f64() >= write_every);
+                || written
+                    .as_ref()
+                    .is_none_or(|w| w.at.elapsed().as_secs_f64() >= write_every);
             report.log.push(log.clone());
             if better && due {
                 set_written = true;
