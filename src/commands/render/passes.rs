@@ -298,7 +298,6 @@ pub fn run(args: &RenderArgs, outputs: &Outputs, reference: Option<&ImageData>, 
                 break (step, cache, refined);
             }
         };
-        drop(progress);
         match step {
             Step::Refine => {
                 let Some(refined) = refined else {
