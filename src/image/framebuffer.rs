@@ -146,6 +146,17 @@ impl FrameBuffer {
         self.data.iter_mut().zip(&other.data).for_each(|(a, b)| *a = a.merge(b));
     }
 
+    /// Multiplies the pixels of `tile` (inside the window) as `scale` does the whole frame's.
+    pub fn scale_tile(&mut self, tile: &crate::tiles::Tile, factor: f32) {
+        for y in tile.y0..tile.y1 {
+            for x in tile.x0..tile.x1 {
+                let i = self.at(x, y);
+                self.layers.iter_mut().for_each(|plane| plane[i] *= factor);
+                self.data[i].scale(factor);
+            }
+        }
+    }
+
     /// Multiplies every layer, and the averaged data layers, by `factor`.
     pub fn scale(&mut self, factor: f32) {
         self.layers.iter_mut().flatten().for_each(|v| *v *= factor);

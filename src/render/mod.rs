@@ -96,7 +96,7 @@ pub fn render_resumable(
         settings,
         (&all, todo),
         &sink,
-        journal,
+        (journal, None),
         progress,
         &stopped,
     );
@@ -151,7 +151,8 @@ pub fn prepared_reader<'a>(integrator: &Integrator<'a>, prepassed: bool) -> Inte
 
 /// Renders tiles `todo` of `all` into `sink` on `settings.threads` threads, each taking the next
 /// tile until none is left or `stopped` says so; every tile is measured for the error estimate
-/// and journalled when there is a journal. Each thread's work.
+/// (into `tallies` too, tile by tile, where given) and journalled when there is a journal.
+/// Each thread's work.
 #[allow(clippy::too_many_arguments)]
 pub fn trace_tiles(
     integrator: &Integrator<'_>,
@@ -159,7 +160,7 @@ pub fn trace_tiles(
     settings: &RenderSettings,
     (all, todo): (&[crate::tiles::Tile], Vec<usize>),
     sink: &TileSink<'_>,
-    journal: Option<&Checkpoint>,
+    (journal, tallies): (Option<&Checkpoint>, Option<&passes::TileTallies>),
     progress: &Progress,
     stopped: &(dyn Fn() -> bool + Sync),
 ) -> Vec<ThreadStats> {
@@ -177,7 +178,12 @@ pub fn trace_tiles(
                     {
                         let tile = &all[index];
                         let values = render_tile(integrator, camera, settings, tile, &mut stats.rays, |_| {});
-                        probe.tile(&mut stats.error, tile, &values);
+                        let mut tally = error_estimate::ErrorTally::default();
+                        probe.tile(&mut tally, tile, &values);
+                        if let Some(tallies) = tallies {
+                            tallies.add(index, &tally);
+                        }
+                        stats.error.merge(&tally);
                         if let Some(journal) = journal {
                             journal.tile(index as u32, 0, &values);
                         }

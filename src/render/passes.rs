@@ -9,6 +9,7 @@
 
 use super::error_estimate::{ErrorEstimate, ErrorTally};
 use crate::image::framebuffer::FrameBuffer;
+use crate::tiles::Tile;
 
 /// A finer record set has its accuracy (-aa) and its view's radius floor (--ic-min-pixels)
 /// divided by this: about twice the records where the accuracy binds, and half the cache's
@@ -267,51 +268,148 @@ pub fn next_step(rule: StopRule, m: &Measured) -> Step {
     }
 }
 
-/// The passes over one record set: their sum and what their estimates were summed from.
-pub struct Accumulated {
-    sum: Option<FrameBuffer>,
-    pub passes: u32,
-    pub tally: ErrorTally,
-}
+/// Each tile's error tally of one pass, filled by the threads as they finish tiles.
+pub struct TileTallies(Vec<std::sync::Mutex<ErrorTally>>);
 
-impl Accumulated {
-    pub fn new() -> Accumulated {
-        Accumulated {
-            sum: None,
-            passes: 0,
-            tally: ErrorTally::default(),
+impl TileTallies {
+    pub fn new(tiles: usize) -> TileTallies {
+        TileTallies((0..tiles).map(|_| Default::default()).collect())
+    }
+
+    pub fn add(&self, tile: usize, tally: &ErrorTally) {
+        if let Some(t) = self.0.get(tile) {
+            t.lock().unwrap_or_else(|e| e.into_inner()).merge(tally);
         }
     }
 
-    /// Adds a pass's frame and its threads' tallies.
-    pub fn add(&mut self, frame: FrameBuffer, tally: &ErrorTally) {
+    fn into_inner(self) -> Vec<ErrorTally> {
+        self.0
+            .into_iter()
+            .map(|t| t.into_inner().unwrap_or_else(|e| e.into_inner()))
+            .collect()
+    }
+}
+
+/// Every tile takes at least this share of the passes the noisiest tile takes: a tile whose
+/// few probes happened to miss its noise is rendered again, and measured again.
+const LEAST_SHARE: f64 = 0.25;
+
+/// The passes over one record set: their sum, how many passes each tile took (the passes after
+/// the first go to the tiles where the estimate says the noise is) and what the estimates were
+/// summed from, overall and tile by tile.
+pub struct Accumulated {
+    tiles: Vec<Tile>,
+    sum: Option<FrameBuffer>,
+    /// Passes over the set (each rendering the tiles `next_tiles` chose), and each tile's.
+    pub passes: u32,
+    counts: Vec<u32>,
+    pub tally: ErrorTally,
+    by_tile: Vec<ErrorTally>,
+}
+
+impl Accumulated {
+    pub fn new(tiles: &[Tile]) -> Accumulated {
+        Accumulated {
+            tiles: tiles.to_vec(),
+            sum: None,
+            passes: 0,
+            counts: vec![0; tiles.len()],
+            tally: ErrorTally::default(),
+            by_tile: vec![ErrorTally::default(); tiles.len()],
+        }
+    }
+
+    /// Adds a pass that rendered `rendered` (indices into the tiles) into `frame`, with their
+    /// tallies.
+    pub fn add(&mut self, frame: FrameBuffer, rendered: &[usize], tallies: TileTallies) {
         match &mut self.sum {
             Some(sum) => sum.accumulate(&frame),
             None => self.sum = Some(frame),
         }
         self.passes += 1;
-        self.tally.merge(tally);
+        for &t in rendered {
+            self.counts[t] += 1;
+        }
+        for (mine, pass) in self.by_tile.iter_mut().zip(tallies.into_inner()) {
+            self.tally.merge(&pass);
+            mine.merge(&pass);
+        }
     }
 
-    /// The mean of the passes (None before the first).
+    /// The tiles' pixel shares (of the area the tiles cover).
+    fn shares(&self) -> Vec<f64> {
+        let pixels = |t: &Tile| ((t.x1 - t.x0) * (t.y1 - t.y0)) as f64;
+        let total: f64 = self.tiles.iter().map(pixels).sum::<f64>().max(1.0);
+        self.tiles.iter().map(|t| pixels(t) / total).collect()
+    }
+
+    /// One pass's noise in tile t (relative, as relMSE weighs it), and by layer: its probes'
+    /// (the whole image's where it has none yet).
+    fn tile_noise(&self, t: usize) -> (f64, [f64; 4]) {
+        let tally = if self.by_tile[t].probes > 0 {
+            &self.by_tile[t]
+        } else {
+            &self.tally
+        };
+        let per = |sum: f64| sum / tally.probes.max(1) as f64;
+        (per(tally.noise), tally.noise_by_layer.map(per))
+    }
+
+    /// The tiles the next pass renders: each until its passes reach its share of the noisiest
+    /// tile's, in proportion to its noise's square root (what spends a given time where it
+    /// lowers the image's mean noise the most: n_t proportional to sqrt(v_t), for tiles of
+    /// like cost), and no fewer than `LEAST_SHARE` of them.
+    pub fn next_tiles(&self) -> Vec<usize> {
+        let roots: Vec<f64> = (0..self.tiles.len()).map(|t| self.tile_noise(t).0.sqrt()).collect();
+        let loudest = roots.iter().cloned().fold(0.0f64, f64::max);
+        let next = (self.passes + 1) as f64;
+        (0..self.tiles.len())
+            .filter(|&t| {
+                let share = if loudest > 0.0 { roots[t] / loudest } else { 1.0 };
+                (self.counts[t] as f64) < (next * share.max(LEAST_SHARE)).ceil()
+            })
+            .collect()
+    }
+
+    /// The passes a pixel took on average.
+    pub fn mean_passes(&self) -> f64 {
+        self.shares().iter().zip(&self.counts).map(|(w, n)| w * *n as f64).sum()
+    }
+
+    /// The image: each tile's sum over its passes (None before the first pass).
     pub fn mean(&self) -> Option<FrameBuffer> {
         let mut mean = self.sum.clone()?;
-        if self.passes > 1 {
-            mean.scale(1.0 / self.passes as f32);
+        for (tile, &n) in self.tiles.iter().zip(&self.counts) {
+            if n > 1 {
+                mean.scale_tile(tile, 1.0 / n as f32);
+            }
         }
         Some(mean)
     }
 
-    /// The estimate of the mean's error: each pass's noise, pooled, over the passes; the
-    /// cache's, pooled over every pass's held-out pixels.
+    /// The estimate of the image's error: each tile's noise (a pass's, pooled over its passes'
+    /// probes) over its passes, weighed by its pixels; the cache's, pooled over every pass's
+    /// held-out pixels (it is the same in each).
     pub fn estimate(&self) -> Option<ErrorEstimate> {
-        self.tally.estimate_over(self.passes.max(1))
-    }
-}
-
-impl Default for Accumulated {
-    fn default() -> Self {
-        Accumulated::new()
+        let mut estimate = self.tally.estimate_over(1)?;
+        let (mut noise, mut layers) = (0.0, [0.0; 4]);
+        for (t, w) in self.shares().into_iter().enumerate() {
+            let n = self.counts[t].max(1) as f64;
+            let (v, by_layer) = self.tile_noise(t);
+            noise += w * v / n;
+            for (sum, l) in layers.iter_mut().zip(by_layer) {
+                *sum += w * l / n;
+            }
+        }
+        let cache = estimate.cache;
+        estimate.noise = noise;
+        estimate.relmse = noise + cache;
+        estimate.relmse_4x4 = noise / 16.0 + cache;
+        estimate.by_layer.emission = layers[0];
+        estimate.by_layer.direct = layers[1];
+        estimate.by_layer.specular = layers[2];
+        estimate.by_layer.indirect = layers[3] + cache;
+        Some(estimate)
     }
 }
 
@@ -338,6 +436,8 @@ pub struct PassLog {
     /// 1, 2, ... over the whole render, and over its record set.
     pub pass: u32,
     pub pass_of_set: u32,
+    /// Tiles it rendered (the first pass of a set all, the next ones the noisiest).
+    pub tiles: u32,
     pub accuracy: f32,
     pub divisions: u32,
     pub records: u64,
@@ -508,6 +608,68 @@ mod tests {
             divisions: 8192,
         };
         assert_eq!(Refinements::default().next(limits, 1e-4, 1e-5), None);
+    }
+
+    fn tile(x0: u32) -> Tile {
+        Tile {
+            x0,
+            y0: 0,
+            x1: x0 + 2,
+            y1: 2,
+        }
+    }
+
+    /// A tile's tally of `probes` probes whose noise sums to `noise` (all of it direct light).
+    fn tally(probes: u64, noise: f64) -> ErrorTally {
+        ErrorTally {
+            pixels: 4,
+            probes,
+            noise,
+            noise_by_layer: [0.0, noise, 0.0, 0.0],
+            ..Default::default()
+        }
+    }
+
+    /// Two tiles, one with 16 times the other's noise: after the first pass (both), the loud
+    /// one takes every pass and the quiet one a quarter of them (the square roots' ratio); the
+    /// estimate weighs each tile's noise by its pixels over its passes, and the image is each
+    /// tile's sum over its own passes.
+    #[test]
+    fn the_passes_go_where_the_noise_is() {
+        let tiles = [tile(0), tile(2)];
+        let mut passes = Accumulated::new(&tiles);
+        let mut rendered = vec![0, 1];
+        for pass in 0..8 {
+            let tallies = TileTallies::new(2);
+            let mut frame = FrameBuffer::new(4, 2);
+            for &t in &rendered {
+                tallies.add(t, &tally(1, if t == 0 { 1.6e-3 } else { 1e-4 }));
+                for x in tiles[t].x0..tiles[t].x1 {
+                    for y in 0..2 {
+                        let light = crate::image::components::Components {
+                            direct: glam::Vec3::splat(1.0),
+                            ..Default::default()
+                        };
+                        frame.add_at(x, y, &light);
+                    }
+                }
+            }
+            passes.add(frame, &rendered, tallies);
+            rendered = passes.next_tiles();
+            assert!(rendered.contains(&0), "pass {pass}: the loud tile is always rendered");
+        }
+        assert_eq!(passes.counts, vec![8, 2]);
+        let estimate = passes.estimate().unwrap();
+        let expected = 0.5 * 1.6e-3 / 8.0 + 0.5 * 1e-4 / 2.0;
+        assert!((estimate.noise - expected).abs() < 1e-12, "{estimate:?}");
+        assert!((estimate.by_layer.direct - expected).abs() < 1e-12);
+        let mean = passes.mean().unwrap();
+        assert!(
+            mean.layer(crate::image::framebuffer::Layer::Direct)
+                .iter()
+                .all(|v| (v.x - 1.0).abs() < 1e-6)
+        );
+        assert!((passes.mean_passes() - 5.0).abs() < 1e-12);
     }
 
     #[test]

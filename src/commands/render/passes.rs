@@ -10,10 +10,9 @@ use crate::commands::{CommandError, CommandResult, Exit, warn};
 use crate::image::framebuffer::FrameBuffer;
 use crate::job::{Job, cache_build};
 use crate::progress::{self, Progress};
-use crate::render::error_estimate::ErrorTally;
 use crate::render::passes::{
     Accumulated, Measured, PassLog, PassesReport, RecordTuning, Refined, Refinement, Refinements, Step, StopRule,
-    Stopped, next_step, pass_seed,
+    Stopped, TileTallies, next_step, pass_seed,
 };
 use crate::render::sink::TileSink;
 use crate::render::{RenderSettings, ThreadStats, add_prepass_work, prepare, prepared_reader, trace_tiles};
@@ -138,7 +137,7 @@ pub fn run(args: &RenderArgs, outputs: &Outputs, reference: Option<&ImageData>, 
             add_prepass_work(&mut work, &prepass.threads);
         }
         let window = prepared.settings.window(&job.camera);
-        let mut passes = Accumulated::new();
+        let mut passes = Accumulated::new(&all);
         let mut passes_s = 0.0;
         // Whether this set's passes are the image on disk.
         let mut set_written = false;
@@ -148,13 +147,21 @@ pub fn run(args: &RenderArgs, outputs: &Outputs, reference: Option<&ImageData>, 
                 seed: pass_seed(args.seed, passes.passes),
                 ..prepared.settings.clone()
             };
+            // The first pass renders every tile; the next ones, the tiles the estimate says
+            // are noisiest, more often than the rest.
+            let todo: Vec<usize> = match passes.passes {
+                0 => (0..all.len()).collect(),
+                _ => passes.next_tiles(),
+            };
+            let rendered = todo.clone();
             let later;
             let progress = if passes.passes == 0 {
                 &progress
             } else {
-                later = Progress::with_style(all.len(), style);
+                later = Progress::with_style(todo.len(), style);
                 &later
             };
+            let tallies = TileTallies::new(all.len());
             let records = job.cache.as_ref().map_or(0, |c| c.len() as u64);
             let sink = TileSink::held(FrameBuffer::windowed(window));
             let threads = {
@@ -169,9 +176,9 @@ pub fn run(args: &RenderArgs, outputs: &Outputs, reference: Option<&ImageData>, 
                     &reader,
                     &job.camera,
                     &settings,
-                    (&all, (0..all.len()).collect()),
+                    (&all, todo),
                     &sink,
-                    None,
+                    (None, Some(&tallies)),
                     progress,
                     &stopped,
                 )
@@ -188,15 +195,14 @@ pub fn run(args: &RenderArgs, outputs: &Outputs, reference: Option<&ImageData>, 
             let frame = sink
                 .into_frame(prepared.prepass.as_ref().filter(|_| first))
                 .ok_or_else(|| CommandError::failed("a pass held no frame".into()))?;
-            let mut tally = ErrorTally::default();
-            threads.iter().for_each(|t| tally.merge(&t.error));
             add_prepass_work(&mut work, &threads);
-            passes.add(frame, &tally);
+            passes.add(frame, &rendered, tallies);
             let estimate = passes.estimate();
             let relmse = estimate.as_ref().map_or(f64::INFINITY, |e| e.relmse);
             let mut log = PassLog {
                 pass: report.log.len() as u32 + 1,
                 pass_of_set: passes.passes,
+                tiles: rendered.len() as u32,
                 accuracy: tuning.accuracy,
                 divisions: tuning.divisions,
                 records,
@@ -209,8 +215,7 @@ pub fn run(args: &RenderArgs, outputs: &Outputs, reference: Option<&ImageData>, 
                 written: false,
             };
             passes_s += pass_start.elapsed().as_secs_f64();
-            let one_pass = passes.tally.estimate_over(1);
-            let (cache, record_noise) = one_pass.as_ref().map_or((0.0, 0.0), |e| (e.cache, e.record_noise));
+            let (cache, record_noise) = estimate.as_ref().map_or((0.0, 0.0), |e| (e.cache, e.record_noise));
             // Whether the refinement that made this set lowered the cache's error as it should.
             if let Some((refinement, before)) = last_refinement.take() {
                 refinements.judge(refinement, before, cache);
@@ -220,7 +225,9 @@ pub fn run(args: &RenderArgs, outputs: &Outputs, reference: Option<&ImageData>, 
                 .filter(|_| job.cache.is_some());
             let measured = Measured {
                 passes: passes.passes,
-                noise_per_pass: one_pass.as_ref().map_or(0.0, |e| e.noise),
+                // The image's noise as if each pass had rendered every tile (the plan's model:
+                // the noise over the passes).
+                noise_per_pass: estimate.as_ref().map_or(0.0, |e| e.noise) * passes.passes as f64,
                 cache,
                 build_s,
                 pass_s: passes_s / passes.passes as f64,
@@ -260,7 +267,7 @@ pub fn run(args: &RenderArgs, outputs: &Outputs, reference: Option<&ImageData>, 
                 if let Some(prepass) = &prepared.prepass {
                     stats.add_prepass(prepass);
                 }
-                stats.spp = args.spp * passes.passes;
+                stats.spp = (args.spp as f64 * passes.mean_passes()).round() as u32;
                 stats.error_estimate = estimate.clone();
                 stats.passes = Some(report.clone());
                 stats.wall_s = wall.elapsed().as_secs_f64();
