@@ -11,9 +11,15 @@ reference`, to a noise target or a time limit, the same --lambertian semantics a
 bench), then icrender at the fastest, a middle and the slowest of the peers bench's settings,
 each with two seeds. The true relMSE comes from `icrender compare`, the 4x4 one from both images
 box-averaged 4x4 (oiiotool) and compared; the reference's own error (its distance from a second
-reference of other seeds) is listed beside them, as it is part of every error measured. Prints
-a table and writes docs/ERROR_ESTIMATE.md, its CSV and a plot of estimated and true error
-against the render's time.
+reference of other seeds) is listed beside them, as it is part of every error measured.
+
+Then the passes (`--target-error`, `--time-limit`) on the same views: each of the peers bench's
+settings once (seed 1), for the fastest fixed setting that reaches a given true error; two
+targets (the middle setting's true error and a third of the way from it to the slowest's, both
+at least three times the reference's own), each against the fastest fixed setting whose error
+is no higher; and a time limit of three times the middle setting's time. Prints tables and
+writes docs/ERROR_ESTIMATE.md, its CSVs and a plot of estimated and true error against the
+render's time.
 """
 
 import argparse
@@ -33,6 +39,12 @@ SIZES = {"cornell": (128, 128), "conference": (160, 120), "sibenik": (160, 120)}
 REFERENCE_NOISE, REFERENCE_SECONDS = 0.004, 45
 SEEDS = [1, 2]
 TARGET_FACTOR = 2.0
+# The passes' targets: the true error at most this many times the target, the time at most this
+# many times the limit, and at most this many times the fastest fixed setting's time.
+TARGET_ERROR_FACTOR, TIME_LIMIT_FACTOR, COST_FACTOR = 1.5, 1.1, 1.25
+# A target is at least this many times the reference's own error (else it cannot be judged), and
+# no passes run longer than this (seconds).
+REFERENCE_MARGIN, PASSES_CAP_S = 3.0, 90
 
 
 def settings_of(cfg):
@@ -95,7 +107,62 @@ def measure(name, cfg, view, work, quick):
             print(f"[error_estimate] {name}-{view} [{setting}] seed {seed}: {row['render_s']:.2f} s, estimated "
                   f"{row['estimated']:.2e} true {true:.2e} (x{row['ratio']:.2f}); 4x4 {row['estimated_4x4']:.2e} "
                   f"true {true_4x4:.2e} (x{row['ratio_4x4']:.2f})", flush=True)
-    return rows
+    return rows, ref, ref4, reference_error
+
+
+def passes_runs(name, cfg, view, work, ref, ref4, reference_error, rows, quick):
+    """The ladder once (seed 1), then --target-error at two targets and --time-limit once."""
+    ladder = []
+    for setting in (cfg["icrender"][:2] if quick else cfg["icrender"]):
+        out = os.path.join(work, "ladder.exr")
+        options = base_options(name, cfg, view) + setting.split() + ["--seed", "1", "--aovs", "none"]
+        stats, _ = common.render(cfg["file"], out, options)
+        ladder.append({"setting": setting, "render_s": stats["render_s"], "true": composite_relmse(out, ref)})
+    mine = [r for r in rows if r["seed"] == 1]
+    middle = next(r for r in mine if r["rank"] == 1) if len(mine) > 1 else mine[0]
+    slowest = max(mine, key=lambda r: r["rank"])
+    floor = REFERENCE_MARGIN * reference_error
+    targets = sorted({max(middle["true"], floor), max(middle["true"] * (slowest["true"] / middle["true"]) ** (1 / 3), floor)},
+                     reverse=True)
+    out_rows = []
+    for kind, value in [("target", t) for t in targets] + [("limit", max(2.0, round(3 * middle["render_s"], 1)))]:
+        out = os.path.join(work, "passes.exr")
+        flag = ["--target-error", f"{value:.3g}", "--time-limit", str(PASSES_CAP_S)] if kind == "target" \
+            else ["--time-limit", str(value)]
+        options = base_options(name, cfg, view) + flag + ["--seed", "1", "--aovs", "none"]
+        started = time.time()
+        stats, _ = common.render(cfg["file"], out, options)
+        wall = time.time() - started
+        passes = stats["passes"]
+        last = passes["log"][-1]
+        true = composite_relmse(out, ref)
+        true_4x4 = composite_relmse(averaged_4x4(out, os.path.join(work, "passes4.exr")), ref4)
+        seconds = last["elapsed_s"]
+        row = {"scene": name, "view": view, "kind": kind, "value": value, "stopped": passes["stopped"],
+               "passes": passes["passes"], "record_sets": passes["record_sets"], "passes_total": len(passes["log"]),
+               "accuracy": passes["accuracy"], "divisions": passes["divisions"], "seconds": round(seconds, 3),
+               "wall_s": round(wall, 3), "estimated": stats["error_estimate"]["relmse"], "true": true,
+               "true_4x4": true_4x4, "reference_error": reference_error}
+        truth = true - reference_error
+        row["true_vs_truth"] = truth if truth >= 0.5 * true else None
+        if kind == "target":
+            reached = [r for r in ladder if r["true"] <= true]
+            fastest = min(reached, key=lambda r: r["render_s"]) if reached else None
+            row["fastest_setting"] = fastest["setting"] if fastest else None
+            row["fastest_s"] = round(fastest["render_s"], 3) if fastest else None
+            row["cost_ratio"] = seconds / fastest["render_s"] if fastest else None
+            row["error_ratio"] = true / value
+            print(f"[error_estimate] {name}-{view} --target-error {value:.3g}: {passes['stopped']}, "
+                  f"{passes['passes']} passes ({passes['record_sets']} record sets) in {seconds:.2f} s; estimate "
+                  f"{row['estimated']:.2e}, measured {true:.2e} (x{row['error_ratio']:.2f} the target); fastest "
+                  f"fixed setting as good: {row['fastest_s']} s (x{row['cost_ratio'] or float('nan'):.2f})", flush=True)
+        else:
+            row["time_ratio"] = seconds / value
+            print(f"[error_estimate] {name}-{view} --time-limit {value}: {passes['passes']} passes in {seconds:.2f} s "
+                  f"(x{row['time_ratio']:.2f} the limit; the process {wall:.2f} s); estimate {row['estimated']:.2e}, "
+                  f"measured {true:.2e}", flush=True)
+        out_rows.append(row)
+    return out_rows
 
 
 def plot(rows, path):
@@ -130,7 +197,46 @@ def against_truth(row):
     return out
 
 
-def page(rows, minutes, quick):
+def passes_lines(passes):
+    """The page's section on --target-error and --time-limit."""
+    shown = lambda v, f="{:.2f}": "-" if v in (None, "") else f.format(float(v))  # noqa: E731
+    targets = [r for r in passes if r["kind"] == "target"]
+    limits = [r for r in passes if r["kind"] == "limit"]
+    lines = ["## Passes: `--target-error` and `--time-limit`", "",
+             "Every run once, seed 1, from the defaults. `measured` includes the reference's own error (`ref` above); "
+             "`fastest fixed`: the fastest of the peers bench's settings whose measured error is no higher; `s`: when "
+             "the last pass ended (after the scene's load, as `render s`).", "",
+             "| view | target | stopped | passes (sets) | -aa, -ad | s | estimated | measured | measured / target "
+             "| fastest fixed s | s / fastest |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+    for r in targets:
+        lines.append(f"| {r['scene']} {r['view']} | {float(r['value']):.2e} | {r['stopped']} | {r['passes']} of "
+                     f"{r['passes_total']} ({r['record_sets']}) | {float(r['accuracy']):.3f}, {r['divisions']} | "
+                     f"{r['seconds']} | {float(r['estimated']):.2e} | {float(r['true']):.2e} | "
+                     f"{shown(r['error_ratio'])} | {shown(r['fastest_s'], '{:.3f}')} | {shown(r['cost_ratio'])} |")
+    lines += ["", "| view | limit s | last pass ended s | / limit | passes (sets) | process s | estimated | measured |",
+              "|---|---|---|---|---|---|---|---|"]
+    for r in limits:
+        lines.append(f"| {r['scene']} {r['view']} | {r['value']} | {r['seconds']} | {shown(r['time_ratio'])} | "
+                     f"{r['passes']} of {r['passes_total']} ({r['record_sets']}) | {r['wall_s']} | "
+                     f"{float(r['estimated']):.2e} | {float(r['true']):.2e} |")
+    ok_error = [r for r in targets if float(r["error_ratio"]) <= TARGET_ERROR_FACTOR]
+    ok_time = [r for r in limits if float(r["time_ratio"]) <= TIME_LIMIT_FACTOR]
+    costed = [r for r in targets if r["cost_ratio"] not in (None, "")]
+    ok_cost = [r for r in costed if float(r["cost_ratio"]) <= COST_FACTOR]
+    cost_ratios = sorted(float(r["cost_ratio"]) for r in costed) or [float("nan")]
+    lines += ["", f"Targets: `--target-error E` ends with a true relMSE of at most {TARGET_ERROR_FACTOR} E; "
+              f"`--time-limit S` within {TIME_LIMIT_FACTOR} S; reaching a target costs at most {COST_FACTOR}x the "
+              "fastest fixed setting that reaches the same error.", "",
+              f"- measured error at most {TARGET_ERROR_FACTOR} E: {len(ok_error)} of {len(targets)} "
+              "(the measured error includes the reference's own).",
+              f"- within {TIME_LIMIT_FACTOR} S: {len(ok_time)} of {len(limits)}.",
+              f"- at most {COST_FACTOR}x the fastest fixed setting: {len(ok_cost)} of {len(costed)} with a fixed setting "
+              f"as good (of {len(targets)}); the ratio from {cost_ratios[0]:.2f} to {cost_ratios[-1]:.2f}, median "
+              f"{statistics.median(cost_ratios):.2f}.", ""]
+    return lines
+
+
+def page(rows, minutes, quick, passes=()):
     for r in rows:
         r.update({f"{k}_vs_truth": v for k, v in against_truth(r).items()})
     judged = [r for r in rows if r["ratio_vs_truth"] is not None]
@@ -170,6 +276,8 @@ def page(rows, minutes, quick):
               f"- Met: {'yes' if len(within) == len(judged) == len(rows) and len(within_4x4) == len(judged_4x4) == len(rows) else 'no'}"
               f"{'' if len(judged) == len(judged_4x4) == len(rows) else ' (not every run could be judged: its reference was too noisy)'}.",
               ""]
+    if passes:
+        lines += passes_lines(passes)
     with open(os.path.join(DOCS, "ERROR_ESTIMATE.md"), "w") as f:
         f.write("\n".join(lines))
     print(f"wrote {os.path.join(DOCS, 'ERROR_ESTIMATE.md')}")
@@ -184,25 +292,30 @@ def main():
     folder = os.path.join(DOCS, "error_estimate")
     if args.page_only is not None:
         rows = common.read_csv(os.path.join(folder, "runs.csv"))
+        passes_csv = os.path.join(folder, "passes.csv")
+        passes = common.read_csv(passes_csv) if os.path.exists(passes_csv) else []
         plot(rows, os.path.join(folder, "error_estimate.png"))
-        page(rows, args.page_only, args.quick)
+        page(rows, args.page_only, args.quick, passes)
         return
     common.require("bench/error_estimate.py", modules=["matplotlib"], commands=["oiiotool"])
     common.build()
     work = common.scratch()
     started = time.time()
-    rows = []
+    rows, passes = [], []
     for name, cfg in SCENES.items():
         for view in cfg["views"]:
-            rows += measure(name, cfg, view, work, args.quick)
+            mine, ref, ref4, reference_error = measure(name, cfg, view, work, args.quick)
+            rows += mine
+            passes += passes_runs(name, cfg, view, work, ref, ref4, reference_error, mine, args.quick)
             if args.quick:
                 break
         if args.quick:
             break
     os.makedirs(folder, exist_ok=True)
     common.write_csv(os.path.join(folder, "runs.csv"), rows)
+    common.write_csv(os.path.join(folder, "passes.csv"), passes)
     plot(rows, os.path.join(folder, "error_estimate.png"))
-    page(rows, (time.time() - started) / 60, args.quick)
+    page(rows, (time.time() - started) / 60, args.quick, passes)
 
 
 if __name__ == "__main__":
