@@ -677,9 +677,25 @@ def calibrate(case, work, store):
           f"workers' waits, {entry['ahead_pixel_s'] * 1e6:.2f} us a pixel")
 
 
+def representative(entry):
+    """The one-process run a case's profile is made from: of its first run and those repeated
+    between the measured runs (`measure_local`, `measure_testbed`), the one of median wall time,
+    so that a spell of the machine's, faster or slower, during the profiles alone does not read
+    as the model's error."""
+    runs = sorted([entry["default"]] + entry.get("repeats", []), key=lambda r: r["wall_s"])
+    return runs[(len(runs) - 1) // 2]
+
+
+def profile_again(case, work, store):
+    """One more one-process run of `case`, among the measured runs, for `representative`."""
+    stats = slim(one_process(case["path"], case["size"], case["options"], 1, work))
+    store["profiles"][f"{case['scene']}-{case['size']}"].setdefault("repeats", []).append(stats)
+    print(f"profile {case['scene']}-{case['size']} again: one process {stats['wall_s']:.2f} s")
+
+
 def profile_of(store, case, cores=True):
     e = store["profiles"][f"{case['scene']}-{case['size']}"]
-    pr = Profile(e["default"], e.get("noedge"), e.get("threads2") if cores else None, None, e.get("mpi_extra_s"))
+    pr = Profile(representative(e), e.get("noedge"), e.get("threads2") if cores else None, None, e.get("mpi_extra_s"))
     pr.ahead_fill, pr.ahead_pixel_s = e.get("ahead_fill", 0.0), e.get("ahead_pixel_s", 0.0)
     pr.tile_wire = e.get("tile_wire", pr.tile_wire)
     pr.master_pixel_s = e.get("master_pixel_s", pr.master_pixel_s)
@@ -692,7 +708,12 @@ def measure_local(store, work, repeats, plan):
     """mpirun on this machine: `plan` is [(case, mode, ranks)], each run `repeats` times,
     interleaved (a slow spell of the machine then hits every configuration alike)."""
     runs = store.setdefault("local", [])
+    for case in {id(c): c for c, _, _ in plan}.values():
+        store["profiles"][f"{case['scene']}-{case['size']}"]["repeats"] = []
     for rep in range(repeats):
+        # The profiles again, between the runs they predict (`representative`).
+        for case in {id(c): c for c, _, _ in plan}.values():
+            profile_again(case, work, store)
         for case, mode, np in plan:
             run, error = mpi_local(np, case["path"], case["size"], case["options"], mode, work)
             name = f"{case['scene']}-{case['size']}"
@@ -710,6 +731,7 @@ def measure_testbed(store, work, repeats, links, cases):
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))
     runs, costs = store.setdefault("testbed", []), store.setdefault("links", {})
     hosts = max(np for _, np in cases)
+    store["profiles"][f"{TESTBED['scene']}-{TESTBED['size']}"]["repeats"] = []
     try:
         for link in links:
             cluster_bench.up(hosts, link)
@@ -718,6 +740,7 @@ def measure_testbed(store, work, repeats, links, cases):
                 costs[link] = [statistics.median(m["latency_s"] for m in measured),
                                statistics.median(m["bandwidth_bytes_per_s"] for m in measured)]
             for rep in range(repeats):
+                profile_again(TESTBED, work, store)
                 for mode, np in cases:
                     run, error = mpi_testbed(np, TESTBED["path"], TESTBED["size"], TESTBED["options"], mode, work)
                     if run is None:
@@ -954,9 +977,11 @@ def write_docs(store, validation, check, target, prediction, ifs, log):
         "max(slowest rank, all work / effective cores) (effective cores: one thread's compute over two threads'), "
         "and what every rank repeats takes P / cores times as long. Per-message cost (LogP gap): 5 us over TCP, "
         "0.5 us over RDMA (assumed, not measured). The effective cores of every case are the machine's, from the "
-        "conference 640x360 runs at 1 and 2 threads. The one-process profiles' times are divided by their "
-        "threads' busy over CPU seconds (the share of the cores other jobs took); the mpirun runs are not "
-        "corrected, and their load average is listed.",
+        "conference 640x360 runs at 1 and 2 threads. A case's profile is, of its one-process runs (one before "
+        "the measured runs and one before each repeat of them), the one of median wall time: a spell of the "
+        "machine's during the profiles alone would read as the model's error. The one-process profiles' times "
+        "are divided by their threads' busy over CPU seconds (the share of the cores other jobs took); the "
+        "mpirun runs are not corrected, and their load average is listed.",
         "",
         "## Inputs",
         "",
