@@ -330,6 +330,17 @@ fn existing_outputs_are_never_replaced_without_overwrite() {
     assert!(read_exr(&out).width == 8);
 }
 
+/// A valid scene in the case's directory and an empty `work` directory beside it, for the
+/// refusals (`expect_refusal` checks that nothing in it changes).
+fn scene_and_work(c: &Case) -> (String, PathBuf) {
+    let mut b = GltfBuilder::new();
+    valid_scene(&mut b);
+    let scene = b.write(c.dir.path(), "ok").to_string_lossy().into_owned();
+    let work = c.path("work");
+    std::fs::create_dir(&work).unwrap();
+    (scene, work)
+}
+
 /// Runs `render` expecting a refusal before any work: one error line (the last line), naming
 /// everything in `must_mention`, no clap tip about `--`, and nothing written into `dir`.
 fn expect_refusal(args: &[&str], dir: &Path, must_mention: &[&str]) -> String {
@@ -369,12 +380,8 @@ fn expect_refusal(args: &[&str], dir: &Path, must_mention: &[&str]) -> String {
 #[test]
 fn output_names_that_would_lose_or_mislabel_the_exr_are_refused() {
     let c = Case::new();
-    let mut b = GltfBuilder::new();
-    valid_scene(&mut b);
-    let scene = b.write(c.dir.path(), "ok");
-    let scene = scene.to_str().unwrap();
-    let work = c.path("work");
-    std::fs::create_dir(&work).unwrap();
+    let (scene, work) = scene_and_work(&c);
+    let scene = scene.as_str();
     let name = |n: &str| work.join(n).to_string_lossy().into_owned();
     let base = ["render", scene, "-x", "8", "-y", "8", "-ad", "4", "-q"];
     for (output, extra) in [
@@ -525,12 +532,8 @@ fn a_text_file_that_is_not_gltf_is_named_as_such() {
 #[test]
 fn bad_passes_targets_and_limits_are_refused_before_rendering() {
     let c = Case::new();
-    let mut b = GltfBuilder::new();
-    valid_scene(&mut b);
-    let scene = b.write(c.dir.path(), "ok");
-    let scene = scene.to_str().unwrap();
-    let work = c.path("work");
-    std::fs::create_dir(&work).unwrap();
+    let (scene, work) = scene_and_work(&c);
+    let scene = scene.as_str();
     let out = work.join("out.exr").to_string_lossy().into_owned();
     let checkpoint = work.join("journal").to_string_lossy().into_owned();
     let cache = work.join("cache.ic").to_string_lossy().into_owned();
