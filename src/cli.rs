@@ -110,6 +110,13 @@ pub struct ExportArgs {
     pub overwrite: bool,
 }
 
+/// Defaults of options that a render in passes (`commands::render::passes`) starts from other
+/// values when they are left as they are.
+pub const DEFAULT_ACCURACY: f32 = 0.2;
+pub const DEFAULT_DIVISIONS: u32 = 512;
+pub const DEFAULT_SUPERSAMPLES: u32 = 128;
+pub const DEFAULT_LIGHT_SAMPLES: u32 = 16;
+
 #[derive(Args, Debug, Clone)]
 pub struct RenderArgs {
     /// The glTF 2.0 scene (.gltf or .glb).
@@ -130,13 +137,13 @@ pub struct RenderArgs {
     pub ambient_bounces: u32,
     /// -aa: ambient accuracy; larger means larger record radii and fewer records. 0 turns the
     /// irradiance cache off (brute force at every point).
-    #[arg(long = "aa", default_value_t = 0.2, allow_negative_numbers = true)]
+    #[arg(long = "aa", default_value_t = DEFAULT_ACCURACY, allow_negative_numbers = true)]
     pub ambient_accuracy: f32,
     /// -ad: hemisphere samples of a new record (brute force: at the first bounce).
-    #[arg(long = "ad", default_value_t = 512, allow_negative_numbers = true)]
+    #[arg(long = "ad", default_value_t = DEFAULT_DIVISIONS, allow_negative_numbers = true)]
     pub ambient_divisions: u32,
     /// -as: extra hemisphere samples where the first ones vary most.
-    #[arg(long = "as", default_value_t = 128, allow_negative_numbers = true)]
+    #[arg(long = "as", default_value_t = DEFAULT_SUPERSAMPLES, allow_negative_numbers = true)]
     pub ambient_supersamples: u32,
     /// -ar: ambient resolution; the smallest record radius is the scene's cube size / ar, as in
     /// Radiance (0: no such limit, only --ic-min-pixels'). Off by default: a share of the whole
@@ -235,7 +242,7 @@ pub struct RenderArgs {
     pub min_weight: f32,
     /// Shadow rays to area emitters per shading point on the eye path (stratified). Shadow rays
     /// are cheap next to the noise one ray leaves in penumbrae and with many emitters.
-    #[arg(long = "light-samples", default_value_t = 16, allow_negative_numbers = true)]
+    #[arg(long = "light-samples", default_value_t = DEFAULT_LIGHT_SAMPLES, allow_negative_numbers = true)]
     pub light_samples: u32,
     /// How area lights are integrated. analytic: their unshadowed irradiance exactly (Lambert's
     /// formula, in scenes with few emitting triangles) and the shadow rays only for how much of

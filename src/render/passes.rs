@@ -30,10 +30,11 @@ const HELPED: f64 = 0.8;
 /// What a refinement of the record set changes.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RecordTuning {
-    /// -aa, --ic-min-pixels and -ad.
+    /// -aa, --ic-min-pixels, -ad and -as.
     pub accuracy: f32,
     pub min_pixels: f32,
     pub divisions: u32,
+    pub supersamples: u32,
 }
 
 /// The two ways a record set is remade to lower the cache's error.
@@ -57,6 +58,7 @@ impl RecordTuning {
             }),
             Refinement::Smoother => (self.divisions * 2 <= MOST_DIVISIONS).then(|| RecordTuning {
                 divisions: self.divisions * 2,
+                supersamples: self.supersamples * 2,
                 ..self
             }),
         }
@@ -584,6 +586,7 @@ mod tests {
             accuracy: 0.2,
             min_pixels: 3.0,
             divisions: 512,
+            supersamples: 128,
         };
         let mut tried = Refinements::default();
         let finer = tried.next(tuning, 1e-4, 1e-5).unwrap();
@@ -606,6 +609,7 @@ mod tests {
             accuracy: 0.025,
             min_pixels: 1.0,
             divisions: 8192,
+            supersamples: 2048,
         };
         assert_eq!(Refinements::default().next(limits, 1e-4, 1e-5), None);
     }
