@@ -401,9 +401,20 @@ mod tests {
         };
         tally.add_probe(&first, &second);
         let estimate = tally.estimate().unwrap();
-        let expected = 0.5 * 0.2f64.powi(2) / (4.0 + REL_EPSILON);
+        // Relative to the two renders' mean, 1.9.
+        let expected = 0.5 * 0.2f64.powi(2) / (1.9f64.powi(2) + REL_EPSILON);
         assert!((estimate.relmse - expected).abs() < 1e-6, "{estimate:?}");
         assert!((estimate.relmse_4x4 - expected / 16.0).abs() < 1e-6);
+        // A pixel that missed a light the other render hit counts as a pixel half as bright as
+        // the light, not as a dark one: (1 - 0)^2 / 2 over 0.5^2.
+        let mut edge = ErrorTally::default();
+        let light = Components {
+            emission: Vec3::ONE,
+            ..Default::default()
+        };
+        edge.add_probe(&Components::default(), &light);
+        let expected_edge = 0.5 / (0.25 + REL_EPSILON);
+        assert!((edge.noise - expected_edge).abs() < 1e-6, "{edge:?}");
         assert!((estimate.by_layer.direct - expected).abs() < 1e-6);
         assert_eq!(estimate.by_layer.specular, 0.0);
     }
