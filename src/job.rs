@@ -14,6 +14,7 @@ use crate::scene::footprint::EmitterFootprint;
 use crate::scene::view::{Camera, View};
 use crate::scene::{LoadOptions, Scene};
 use crate::shading::ShadingOptions;
+use crate::shading::last_bounce::sites_per_pixel;
 use crate::tracer::Tracer;
 use glam::Vec3;
 use std::time::Instant;
@@ -253,10 +254,14 @@ fn check_memory(args: &RenderArgs, scene: &Scene, role: memory::Role, limit: u64
 
 impl Job {
     /// An empty cache as `args` make it (a refined record set for `--target-error`,
-    /// `render::passes`), kept in memory only, with the last-bounce grid of the cache it
-    /// replaces (the grid does not depend on the records' settings). None without a cache.
+    /// `render::passes`), kept in memory only, and the shading options `args` make (-ad sets
+    /// the last-bounce grid's sites too). The grid of the cache it replaces is kept where it
+    /// has as many sites a pixel (it does not depend on the records' other settings), so the
+    /// image is the one `args` render from scratch. None without a cache.
     pub fn refined_cache(&mut self, args: &RenderArgs) -> Option<IrradianceCache> {
-        let grid = self.cache.as_mut()?.take_last_bounce();
+        let same_grid = sites_per_pixel(self.shading.ambient_divisions) == sites_per_pixel(args.ambient_divisions);
+        let grid = self.cache.as_mut()?.take_last_bounce().filter(|_| same_grid);
+        self.shading = shading_options(args);
         let cache = IrradianceCache::new(cache_settings(args, &self.scene, &self.camera));
         if let Some(grid) = grid {
             cache.set_last_bounce(grid);

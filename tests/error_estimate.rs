@@ -239,3 +239,57 @@ fn passes_make_the_same_image_whatever_the_threads() {
     ];
     assert_same_image(&images[0], &images[1], &how_it_ran, "--passes 3 on 1 and 2 threads");
 }
+
+/// Whatever way the passes went (more passes, a refined record set, both), the header's command
+/// renders the image again, bit for bit: the record set's settings and the passes as rendered
+/// (the conference room at -ab 2, whose last-bounce grid takes its sites from -ad).
+#[test]
+fn the_headers_command_reruns_a_render_in_passes() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = shared_scene("conference_room/conference.gltf");
+    let scene = scene.to_str().unwrap();
+    let first = dir.path().join("first.exr");
+    run_ok(&[
+        "render",
+        scene,
+        "-o",
+        first.to_str().unwrap(),
+        "-x",
+        "96",
+        "-y",
+        "64",
+        "-ab",
+        "2",
+        "--target-error",
+        "2e-3",
+        "--time-limit",
+        "6",
+        "-q",
+        "--no-preview",
+    ]);
+    let command = header_attribute(&first, "icrender/command");
+    let again = dir.path().join("again.exr");
+    let words: Vec<String> = command
+        .split_whitespace()
+        .skip(1)
+        .map(|w| {
+            if w == first.to_str().unwrap() {
+                again.to_string_lossy().into_owned()
+            } else {
+                w.to_string()
+            }
+        })
+        .collect();
+    assert!(words.iter().any(|w| w == "--passes"), "{command}");
+    let mut args: Vec<&str> = words.iter().map(String::as_str).collect();
+    args.push("-q");
+    run_ok(&args);
+    let how_it_ran = [
+        "icrender/statistics",
+        "icrender/render_time_s",
+        "icrender/error_estimate",
+        "DateTime",
+        "icrender/command",
+    ];
+    assert_same_image(&read_exr(&first), &read_exr(&again), &how_it_ran, &command);
+}
