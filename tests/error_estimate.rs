@@ -52,6 +52,16 @@ fn estimated_and_measured(dir: &Path, name: &str, reference: &Path, extra: &[&st
     (stats["error_estimate"].clone(), measured(&image, reference))
 }
 
+/// The header attributes that say how a render ran, and its command (the output names differ):
+/// left out where two renders must make the same image.
+const HOW_IT_RAN: [&str; 5] = [
+    "icrender/statistics",
+    "icrender/render_time_s",
+    "icrender/error_estimate",
+    "DateTime",
+    "icrender/command",
+];
+
 /// The image every test here renders: the Cornell box at 64x64, -ab 1.
 const SIZE: [&str; 6] = ["-x", "64", "-y", "64", "-ab", "1"];
 
@@ -229,15 +239,7 @@ fn passes_make_the_same_image_whatever_the_threads() {
             read_exr(&out)
         })
         .collect();
-    // What says how it ran, and the command (its output names differ).
-    let how_it_ran = [
-        "icrender/statistics",
-        "icrender/render_time_s",
-        "icrender/error_estimate",
-        "DateTime",
-        "icrender/command",
-    ];
-    assert_same_image(&images[0], &images[1], &how_it_ran, "--passes 3 on 1 and 2 threads");
+    assert_same_image(&images[0], &images[1], &HOW_IT_RAN, "--passes 3 on 1 and 2 threads");
 }
 
 /// Whatever way the passes went (more passes, a refined record set, both), the header's command
@@ -284,12 +286,5 @@ fn the_headers_command_reruns_a_render_in_passes() {
     let mut args: Vec<&str> = words.iter().map(String::as_str).collect();
     args.push("-q");
     run_ok(&args);
-    let how_it_ran = [
-        "icrender/statistics",
-        "icrender/render_time_s",
-        "icrender/error_estimate",
-        "DateTime",
-        "icrender/command",
-    ];
-    assert_same_image(&read_exr(&first), &read_exr(&again), &how_it_ran, &command);
+    assert_same_image(&read_exr(&first), &read_exr(&again), &HOW_IT_RAN, &command);
 }
