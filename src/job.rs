@@ -253,20 +253,24 @@ fn check_memory(args: &RenderArgs, scene: &Scene, role: memory::Role, limit: u64
 }
 
 impl Job {
-    /// An empty cache as `args` make it (a refined record set for `--target-error`,
-    /// `render::passes`), kept in memory only, and the shading options `args` make (-ad sets
-    /// the last-bounce grid's sites too). The grid of the cache it replaces is kept where it
-    /// has as many sites a pixel (it does not depend on the records' other settings), so the
-    /// image is the one `args` render from scratch. None without a cache.
-    pub fn refined_cache(&mut self, args: &RenderArgs) -> Option<IrradianceCache> {
+    /// Replaces the cache with an empty one as `args` make it (a refined record set for
+    /// `--target-error`, `render::passes`), kept in memory only, and the shading options with
+    /// those `args` make (-ad sets the last-bounce grid's sites too). The grid of the cache it
+    /// replaces is kept where it has as many sites a pixel (it does not depend on the records'
+    /// other settings), so the image is the one `args` render from scratch. Nothing without a
+    /// cache.
+    pub fn refine_records(&mut self, args: &RenderArgs) {
         let same_grid = sites_per_pixel(self.shading.ambient_divisions) == sites_per_pixel(args.ambient_divisions);
-        let grid = self.cache.as_mut()?.take_last_bounce().filter(|_| same_grid);
+        let Some(old) = self.cache.as_mut() else {
+            return;
+        };
+        let grid = old.take_last_bounce().filter(|_| same_grid);
         self.shading = shading_options(args);
         let cache = IrradianceCache::new(cache_settings(args, &self.scene, &self.camera));
         if let Some(grid) = grid {
             cache.set_last_bounce(grid);
         }
-        Some(cache)
+        self.cache = Some(cache);
     }
 
     /// Loads the scene, checks the job fits --max-memory (as a process in `role`), builds the

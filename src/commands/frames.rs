@@ -13,8 +13,8 @@
 //! resumes the first unfinished one from its journal and goes on.
 
 use super::render::{
-    Outputs, check_denoiser, checkpoint_key, job_stats, kept_after_stop, output_name, render_tiles, render_window,
-    with_checkpoint_cache,
+    Outputs, check_denoiser, checkpoint_key, kept_after_stop, one_process_stats, output_name, render_tiles,
+    render_window, with_checkpoint_cache,
 };
 use super::{CommandError, CommandResult, warn};
 use crate::checkpoint::Checkpoint;
@@ -177,17 +177,17 @@ pub fn run(args: &RenderArgs, frames: Frames) -> CommandResult {
                 exit: super::Exit::Interrupted(signal),
             });
         }
-        let mut stats = job_stats(args, &job, "serial", 1, render_s);
+        let mut stats = one_process_stats(
+            args,
+            &job,
+            (render_s, frame_start.elapsed().as_secs_f64()),
+            &rendered.threads,
+            rendered.prepass.as_ref(),
+        );
         stats.tiles_restored = tiles_restored as u64;
-        stats.add_threads(&rendered.threads);
-        if let Some(prepass) = &rendered.prepass {
-            stats.add_prepass(prepass);
-        }
         stats.frame = Some(n);
         stats.frame_time_s = Some(time);
         stats.records_before = Some(records_before);
-        stats.wall_s = frame_start.elapsed().as_secs_f64();
-        stats.single_rank();
         if stats.nonfinite_dropped > 0 {
             warn(&format!(
                 "frame {n}: {} non-finite contribution(s) were dropped",

@@ -219,11 +219,11 @@ impl IrradianceCache {
     }
 
     /// Adds the gaps' records kept since the last call to the set, and freezes it again (their
-    /// curvatures fitted with the rest); how many joined.
-    pub fn absorb_gaps(&mut self) -> usize {
+    /// curvatures fitted with the rest).
+    pub fn absorb_gaps(&mut self) {
         let mut gaps = std::mem::take(self.gaps.get_mut().unwrap_or_else(|e| e.into_inner()));
         if gaps.is_empty() {
-            return 0;
+            return;
         }
         // In an order of their own, not the threads' (the set's order is its lookups' sums'
         // order): the next pass is the same whatever the threads.
@@ -235,12 +235,10 @@ impl IrradianceCache {
         };
         gaps.sort_unstable_by_key(key);
         self.frozen = OnceLock::new();
-        let count = gaps.len();
         for record in gaps {
             self.insert(record);
         }
         self.fit_curvatures_and_freeze();
-        count
     }
 
     /// From now on lookups read a lock-free copy of the records (see `RecordIndex::frozen`):

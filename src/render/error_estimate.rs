@@ -281,23 +281,10 @@ impl ErrorTally {
 
     /// The estimate from what was summed (None before any pixel).
     pub fn estimate(&self) -> Option<ErrorEstimate> {
-        self.estimate_over(1)
-    }
-
-    /// The estimate for the mean of `passes` images, each from independent samples over the
-    /// same record set, whose tallies were all summed here: a pass's noise (pooled over every
-    /// pass's probes) over the passes, and the cache's error, which is the same in each.
-    pub fn estimate_over(&self, passes: u32) -> Option<ErrorEstimate> {
         if self.pixels == 0 {
             return None;
         }
-        let per_probe = |sum: f64| {
-            if self.probes > 0 {
-                sum / self.probes as f64 / passes.max(1) as f64
-            } else {
-                0.0
-            }
-        };
+        let per_probe = |sum: f64| if self.probes > 0 { sum / self.probes as f64 } else { 0.0 };
         let [emission, direct, specular, indirect] = self.noise_by_layer.map(per_probe);
         let noise = per_probe(self.noise);
         let cache = if self.holdouts > 0 {

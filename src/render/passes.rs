@@ -305,7 +305,7 @@ pub struct Accumulated {
     /// Passes over the set (each rendering the tiles `next_tiles` chose), and each tile's.
     pub passes: u32,
     counts: Vec<u32>,
-    pub tally: ErrorTally,
+    tally: ErrorTally,
     by_tile: Vec<ErrorTally>,
 }
 
@@ -393,7 +393,7 @@ impl Accumulated {
     /// probes) over its passes, weighed by its pixels; the cache's, pooled over every pass's
     /// held-out pixels (it is the same in each).
     pub fn estimate(&self) -> Option<ErrorEstimate> {
-        let mut estimate = self.tally.estimate_over(1)?;
+        let mut estimate = self.tally.estimate()?;
         let (mut noise, mut layers) = (0.0, [0.0; 4]);
         for (t, w) in self.shares().into_iter().enumerate() {
             let n = self.counts[t].max(1) as f64;

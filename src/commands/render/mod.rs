@@ -6,7 +6,7 @@ mod outputs;
 mod passes;
 
 pub use header::{data_attributes, options_line, part_settings, rerun_command};
-pub use outputs::{Outputs, check_new_output, job_stats, output_name, producible_layers};
+pub use outputs::{Outputs, check_new_output, job_stats, one_process_stats, output_name, producible_layers};
 
 use super::{CommandError, CommandResult, warn};
 use crate::checkpoint::{self, Checkpoint, Restored};
@@ -375,20 +375,20 @@ pub fn run(args: &RenderArgs, sequence: SequenceRenderer) -> CommandResult {
         return Err(interrupted(args, signal));
     }
 
-    let mut stats = job_stats(args, &job, "serial", 1, render_s);
+    let mut stats = one_process_stats(
+        args,
+        &job,
+        (render_s, wall.elapsed().as_secs_f64()),
+        &thread_stats,
+        rendered.prepass.as_ref(),
+    );
     stats.tiles_restored = tiles_restored as u64;
-    stats.add_threads(&thread_stats);
-    if let Some(prepass) = &rendered.prepass {
-        stats.add_prepass(prepass);
-    }
     if stats.nonfinite_dropped > 0 {
         warn(&format!(
             "{} non-finite contribution(s) were dropped",
             stats.nonfinite_dropped
         ));
     }
-    stats.wall_s = wall.elapsed().as_secs_f64();
-    stats.single_rank();
     outputs.save(args, &job, frame, streamed, &stats)?;
     progress.done(&outputs.exr, stats.error_estimate.as_ref());
     if !args.quiet {

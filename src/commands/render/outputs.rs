@@ -137,6 +137,25 @@ pub fn job_stats(args: &RenderArgs, job: &Job, mode: &'static str, ranks: usize,
     }
 }
 
+/// The statistics of a render in one process: the job's, every thread's work (the prepass's
+/// included) and the prepass's own account, reported as the one rank of `per_rank`.
+pub fn one_process_stats(
+    args: &RenderArgs,
+    job: &Job,
+    (render_s, wall_s): (f64, f64),
+    threads: &[crate::render::ThreadStats],
+    prepass: Option<&crate::prepass::PrepassOutcome>,
+) -> RenderStats {
+    let mut stats = job_stats(args, job, "serial", 1, render_s);
+    stats.add_threads(threads);
+    if let Some(prepass) = prepass {
+        stats.add_prepass(prepass);
+    }
+    stats.wall_s = wall_s;
+    stats.single_rank();
+    stats
+}
+
 /// Where the results go, checked writable before any work is done.
 pub struct Outputs {
     pub exr: PathBuf,

@@ -4,7 +4,7 @@
 //! finer record set, or stop. The image is written after every pass that lowers the error
 //! estimate, so the file on disk is always a whole image, the best one so far.
 
-use super::{Outputs, job_stats, render_tiles, report_error};
+use super::{Outputs, one_process_stats, render_tiles, report_error};
 use crate::cli::{
     CacheBuildArg, DEFAULT_ACCURACY, DEFAULT_DIVISIONS, DEFAULT_LIGHT_SAMPLES, DEFAULT_SUPERSAMPLES, ProgressArg,
     RenderArgs,
@@ -299,16 +299,16 @@ pub fn run(args: &RenderArgs, outputs: &Outputs, reference: Option<&ImageData>, 
                 (report.accuracy, report.min_pixels, report.divisions) =
                     (tuning.accuracy, tuning.min_pixels, tuning.divisions);
                 let rendered = as_rendered(args, tuning, passes.passes);
-                let mut stats = job_stats(&rendered, &job, "serial", 1, start.elapsed().as_secs_f64());
-                stats.add_threads(&work);
-                if let Some(prepass) = &prepared.prepass {
-                    stats.add_prepass(prepass);
-                }
+                let mut stats = one_process_stats(
+                    &rendered,
+                    &job,
+                    (start.elapsed().as_secs_f64(), wall.elapsed().as_secs_f64()),
+                    &work,
+                    prepared.prepass.as_ref(),
+                );
                 stats.spp = (args.spp as f64 * passes.mean_passes()).round() as u32;
                 stats.error_estimate = estimate.clone();
                 stats.passes = Some(report.clone());
-                stats.wall_s = wall.elapsed().as_secs_f64();
-                stats.single_rank();
                 let mean = passes
                     .mean()
                     .ok_or_else(|| CommandError::failed("no pass to average".into()))?;
@@ -349,7 +349,7 @@ pub fn run(args: &RenderArgs, outputs: &Outputs, reference: Option<&ImageData>, 
                 };
                 last_refinement = Some((refined.refinement, cache));
                 tuning = refined.tuning;
-                job.cache = job.refined_cache(&as_rendered(args, tuning, 1));
+                job.refine_records(&as_rendered(args, tuning, 1));
             }
             Step::Stop(why) => {
                 report.stopped = adaptive(args).then(|| why.text());
@@ -369,6 +369,12 @@ pub fn run(args: &RenderArgs, outputs: &Outputs, reference: Option<&ImageData>, 
             .map_err(|e| CommandError::failed(format!("{}: {e}", path.display())))?;
     }
     let stats = &written.stats;
+    if stats.nonfinite_dropped > 0 {
+        warn(&format!(
+            "{} non-finite contribution(s) were dropped",
+            stats.nonfinite_dropped
+        ));
+    }
     progress::Progress::with_style(all.len(), style).done(&outputs.exr, stats.error_estimate.as_ref());
     let render_s = start.elapsed().as_secs_f64();
     if !args.quiet {
