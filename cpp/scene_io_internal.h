@@ -223,6 +223,7 @@ class Converter {
     std::vector<char> on_path_;
     uint64_t visits_ = 0;
     bool warned_skin_ = false;
+    std::vector<size_t> skinned_;  // skins of placed meshes (their joints are marked after the walk)
     std::vector<int64_t> anim_accessor_data_;  // glTF accessor -> index into s_.anim_data (-1: not read)
     uint64_t anim_values_ = 0;
 
@@ -306,7 +307,7 @@ class Converter {
 
     void add_camera(const tinygltf::Node &node, size_t ni, const std::string &label, const Mat4 &world);
 
-    void add_light(const tinygltf::Node &node, const std::string &label, const tinygltf::Value &ext,
+    void add_light(const tinygltf::Node &node, size_t ni, const std::string &label, const tinygltf::Value &ext,
                    const Mat4 &world);
 
     void walk_scene();

@@ -7,7 +7,7 @@
 
 namespace icr_io {
 
-void Converter::add_light(const tinygltf::Node &node, const std::string &label, const tinygltf::Value &ext,
+void Converter::add_light(const tinygltf::Node &node, size_t ni, const std::string &label, const tinygltf::Value &ext,
                           const Mat4 &world) {
     double li;
     if (!number_member(ext, "light", &li))
@@ -51,6 +51,7 @@ void Converter::add_light(const tinygltf::Node &node, const std::string &label, 
     }
     for (int i = 0; i < 3; ++i) out.position[i] = world[size_t(12 + i)];
     transform_dir(world, 0, 0, -1, out.direction);
+    out.node = uint32_t(ni);
     s_.lights.push_back(out);
 }
 

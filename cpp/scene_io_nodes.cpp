@@ -131,6 +131,7 @@ Mat4 Converter::place_node(size_t ni, const Mat4 &parent, int64_t parent_index) 
             warnings.push_back("skins are ignored; skinned meshes use their bind pose");
             warned_skin_ = true;
         }
+        if (node.skin >= 0 && size_t(node.skin) < m_.skins.size()) skinned_.push_back(size_t(node.skin));
         const std::vector<Mat4> placements = placements_of(node, label, world);
         for (int64_t mi : mesh_primitives(size_t(node.mesh))) {
             if (mi < 0) continue;
@@ -157,7 +158,7 @@ Mat4 Converter::place_node(size_t ni, const Mat4 &parent, int64_t parent_index) 
 
     auto lp = node.extensions.find("KHR_lights_punctual");
     if (lp != node.extensions.end()) {
-        add_light(node, label, lp->second, world);
+        add_light(node, ni, label, lp->second, world);
         pose.places |= ICR_PLACES_LIGHT;
     }
     return world;
@@ -211,6 +212,11 @@ void Converter::walk_scene() {
         n.scale[0] = n.scale[1] = n.scale[2] = 1.0;
     }
     for (int r : scene_roots()) walk_from(r);
+    // The joints of the skins placed meshes use: an animation that moves one would deform a
+    // mesh, which the renderer does not do (it refuses such frames, naming the joint).
+    for (size_t skin : skinned_)
+        for (int joint : m_.skins[skin].joints)
+            if (joint >= 0 && size_t(joint) < s_.nodes.size()) s_.nodes[size_t(joint)].places |= ICR_PLACES_JOINT;
 }
 
 }  // namespace icr_io

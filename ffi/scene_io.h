@@ -79,6 +79,7 @@ typedef struct icr_light {
     float outer_cone;
     double position[3];           /* world; double: a scene may sit 1e7 units from the origin */
     float direction[3];           /* world, unit: where the light points (node's -Z) */
+    uint32_t node;                /* the glTF node that places it (animations move it) */
 } icr_light;
 
 /* A camera placed by a node, in world space. */
@@ -98,6 +99,7 @@ typedef struct icr_camera {
 #define ICR_PLACES_MESH 1u
 #define ICR_PLACES_LIGHT 2u
 #define ICR_PLACES_CAMERA 4u
+#define ICR_PLACES_JOINT 8u      /* a joint of a skin that an in-scene mesh uses */
 
 /*
  * A glTF node's rest pose, for evaluating animations: one per node of the file, in file order.

@@ -6,6 +6,7 @@ use crate::cli::{CacheBuildArg, MetricArg, RenderArgs, parse_tile};
 use crate::commands::{CommandError, warn};
 use crate::frames::Frames;
 use crate::irradiance::record::Metric;
+use crate::irradiance::temporal::{Disturbance, Invalidation};
 use crate::irradiance::{CacheSettings, IrradianceCache};
 use crate::memory;
 use crate::render::pixel::RenderSettings;
@@ -283,8 +284,9 @@ impl Job {
             allow_outside_refs: args.allow_outside_refs,
             max_memory: args.max_memory,
             flatten: args.flatten,
+            keep_pose_source: args.frames.is_some() || args.frame.is_some(),
         };
-        let scene = Scene::load(&args.scene, &material_options)?;
+        let mut scene = Scene::load(&args.scene, &material_options)?;
         if let Some(limit) = args.max_memory {
             check_memory(args, &scene, role, limit)?;
         }
@@ -300,14 +302,21 @@ impl Job {
                 args.scene.display()
             )));
         }
-        let build_start = Instant::now();
-        let tracer = Tracer::new(&scene).map_err(|e| CommandError::input(format!("{}: {e}", args.scene.display())))?;
-        let build_s = build_start.elapsed().as_secs_f64();
         let frames = match args.frames()? {
             Some(frames) => Some((frames, plan_frames(args, &scene, frames)?)),
             None => None,
         };
         let time = frames.as_ref().map(|(f, _)| f.time(f.range.first));
+        match (&frames, time) {
+            // The meshes and lights where the first frame has them, before the BVH is built.
+            (Some((_, plan)), Some(time)) if plan.meshes_animated || plan.lights_animated => {
+                scene.pose_at(time);
+            }
+            _ => scene.pose_source = None,
+        }
+        let build_start = Instant::now();
+        let tracer = Tracer::new(&scene).map_err(|e| CommandError::input(format!("{}: {e}", args.scene.display())))?;
+        let build_s = build_start.elapsed().as_secs_f64();
         let (view, view_note) =
             crate::commands::view::choose_view(&scene, &tracer, &args.view, args.width, args.height, time)
                 .map_err(|e| CommandError::input(format!("{}: view: {e}", args.scene.display())))?;
@@ -400,10 +409,21 @@ impl Job {
         })
     }
 
-    /// Moves the view to where the animation puts the camera at `time` (a frame's), with
-    /// what depends on it (the emitters' footprint in the image); every other part of the job,
-    /// the cache among them, stays.
-    pub fn at_time(&mut self, args: &RenderArgs, time: f64) -> Result<(), CommandError> {
+    /// Moves the meshes, lights and view to where the animations put them at `time` (a
+    /// frame's), with what depends on them: the BVH is built again when a mesh moved, and the
+    /// cache drops the records the moves changed (`irradiance::temporal`), keeping the rest for
+    /// this frame's prepass to add to; what it kept and dropped is returned (None without
+    /// a cache).
+    pub fn at_time(&mut self, args: &RenderArgs, time: f64) -> Result<Option<Invalidation>, CommandError> {
+        let change = self.scene.pose_at(time);
+        if !change.is_empty() {
+            let build_start = Instant::now();
+            self.tracer = Tracer::new(&self.scene)
+                .map_err(|e| CommandError::input(format!("{}: at {time} s: {e}", args.scene.display())))?;
+            self.build_s = build_start.elapsed().as_secs_f64();
+        }
+        let disturbance = Disturbance::of(&change, &self.scene);
+        let invalidation = self.cache.as_mut().map(|c| c.forget_disturbed(&disturbance));
         let (view, _) = crate::commands::view::choose_view(
             &self.scene,
             &self.tracer,
@@ -422,13 +442,15 @@ impl Job {
                 self.settings.window(&self.camera),
             )));
         }
-        Ok(())
+        Ok(invalidation)
     }
 }
 
-/// What rendering `frames` of this scene means: refused when its animations move anything but
-/// cameras (see `Rig::plan_frames`); said on stderr when the frames will all be alike (nothing
-/// animates the camera, or -vp -vd -vu override all of it) or run past the animation's end.
+/// What rendering `frames` of this scene means: refused when its animations deform meshes (see
+/// `Rig::plan_frames`), and with a cache file (-af, or --checkpoint's) when they move meshes or
+/// lights (a file holds the records of one still scene); said on stderr when the frames will all
+/// be alike (nothing animates, or -vp -vd -vu override the camera and nothing else moves) or run
+/// past the animations' end.
 fn plan_frames(args: &RenderArgs, scene: &Scene, frames: Frames) -> Result<FramesPlan, CommandError> {
     let camera = scene.cameras.first().map(|c| c.node);
     let plan = scene
@@ -438,9 +460,27 @@ fn plan_frames(args: &RenderArgs, scene: &Scene, frames: Frames) -> Result<Frame
     for note in &plan.notes {
         warn(&format!("{}: {note}", args.scene.display()));
     }
+    let scene_moves = plan.meshes_animated || plan.lights_animated;
+    if scene_moves {
+        let file = if args.checkpoint.is_some() {
+            Some("--checkpoint (its frames share a cache file)")
+        } else if args.ambient_file.is_some() {
+            Some("-af")
+        } else {
+            None
+        };
+        if let Some(file) = file {
+            return Err(CommandError::input(format!(
+                "{}: its animations move meshes or lights, so no one set of records holds for every frame: \
+                 {file} cannot be used for its frames (each frame keeps what the moves left of the last one's \
+                 records in memory)",
+                args.scene.display()
+            )));
+        }
+    }
     let v = &args.view;
     let overridden = v.vp.is_some() && v.vd.is_some() && v.vu.is_some();
-    if frames.count() > 1 && !args.quiet {
+    if frames.count() > 1 && !args.quiet && !scene_moves {
         let why = if camera.is_none() {
             Some("the scene has no camera, so every frame has the same automatic view")
         } else if !plan.camera_animated {

@@ -298,6 +298,14 @@ pub struct RenderStats {
     pub frame_time_s: Option<f64>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub records_before: Option<u64>,
+    /// With frames of animations that move meshes or lights: the records the moves since the
+    /// last frame changed, dropped before this frame's prepass (`records_before` is what they
+    /// left).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub records_invalidated: Option<u64>,
+    /// The seconds this frame spent placing the meshes again and building their BVH.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub pose_s: Option<f64>,
     /// The process's peak resident memory when the render ended, before the files were written
     /// (rank 0's under mpirun; Linux's VmHWM, absent where the system does not report it).
     #[serde(skip_serializing_if = "Option::is_none")]

@@ -1,7 +1,7 @@
 //! Frame sequences through the real binary: a glTF animation of the camera rendered with
 //! `--frames` / `--frame`, checked against still renders of a camera placed by hand where the
 //! animation puts it; frame file names; the irradiance cache carried from frame to frame; what
-//! is refused (animated meshes, mpirun modes); JSON progress per frame; a checkpointed
+//! is refused (mpirun modes); JSON progress per frame; a checkpointed
 //! sequence resumed at its first unfinished frame; a farm's prepass over all frames.
 
 mod common;
@@ -430,49 +430,6 @@ fn the_cache_is_carried_from_frame_to_frame_and_later_frames_make_few_records() 
     let indirect = |i: &ImageData| rgb(i, "indirect").iter().map(|c| mean(c)).sum::<f64>();
     let (a, b) = (indirect(&carried), indirect(&alone));
     assert!((a - b).abs() < 0.02 * b, "indirect mean {a} carried against {b} alone");
-}
-
-#[test]
-fn animations_of_meshes_or_lights_are_refused_for_frames_and_ignored_by_stills() {
-    let dir = tempfile::tempdir().unwrap();
-    let d = dir.path();
-    let mut b = GltfBuilder::new();
-    room(&mut b);
-    let camera = b.perspective_camera(YFOV);
-    b.node(json!({"camera": camera, "translation": [0.0, 1.2, 1.9]}));
-    let blue = b.material(lambertian("blue", [0.1, 0.1, 0.8]));
-    let cart = b.quad(
-        [[0.0, 0.0, 0.0], [0.3, 0.0, 0.0], [0.3, 0.3, 0.0], [0.0, 0.3, 0.0]],
-        Some(blue),
-    );
-    let group = b.node(json!({"name": "trolley", "children": [cart]}));
-    b.animation("push", &[(group, "translation", "LINEAR", &TIMES, &MOVES)]);
-    let scene = b.write(d, "trolley");
-    let e = refused_frames(&scene, &["--frames", "1-2"], &d.join("t.exr"));
-    assert!(
-        e.contains("trolley.gltf")
-            && e.contains("animation 'push'")
-            && e.contains("node 'trolley'")
-            && e.contains("a mesh"),
-        "{e}"
-    );
-    assert!(e.lines().count() == 1, "one line: {e}");
-    assert!(!d.join("t.0001.exr").exists());
-    // A still render of the file is the rest pose, as before frames existed.
-    render(&scene, &["-x", "8", "-y", "6", "-o", s(&d.join("still.exr"))]);
-    // A light's animation likewise.
-    let mut b = GltfBuilder::new();
-    room(&mut b);
-    let camera = b.perspective_camera(YFOV);
-    b.node(json!({"camera": camera, "translation": [0.0, 1.2, 1.9]}));
-    let bulb = b.point_light([0.0, 2.0, 0.0], 5.0);
-    b.animation("flicker", &[(bulb, "translation", "STEP", &TIMES, &MOVES)]);
-    let scene = b.write(d, "bulb");
-    let e = refused_frames(&scene, &["--frame", "1"], &d.join("l.exr"));
-    assert!(
-        e.contains("animation 'flicker'") && e.contains("a light with it"),
-        "{e}"
-    );
 }
 
 #[test]

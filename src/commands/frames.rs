@@ -2,10 +2,12 @@
 //! animation, each written whole to its own EXR before the next begins (a farm may pick frame
 //! files up as they appear).
 //!
-//! The scene, its BVH and the irradiance cache are made once. Only cameras animate (see
-//! `scene::animation`), so the indirect light does not change from frame to frame and the
-//! cache's records hold for every frame: each frame's prepass finds the records earlier frames
-//! made and adds only those its own view needs that are missing.
+//! The scene, its BVH and the irradiance cache are made once. Where only cameras animate, the
+//! indirect light does not change from frame to frame and the cache's records hold for every
+//! frame: each frame's prepass finds the records earlier frames made and adds only those its
+//! own view needs that are missing. Where meshes or lights move, each frame places them again
+//! (`scene::posing`), builds the BVH again, and drops the records the moves changed
+//! (`irradiance::temporal`) before its prepass makes what is missing.
 //!
 //! With `--checkpoint DIR` each frame journals its tiles in `DIR/frame-N/` and, once its files
 //! are written, leaves `DIR/frame-N/done`; the cache goes to `DIR/cache.icc` (unless -af names
@@ -101,6 +103,10 @@ pub fn run(args: &RenderArgs, frames: Frames) -> CommandResult {
             .map_err(|e| CommandError::input(format!("{}: cannot create the directory: {e}", dir.display())))?;
     }
     let mut job = Job::prepare(&with_checkpoint_cache(args), crate::memory::Role::Single)?;
+    let scene_moves = job
+        .frames
+        .as_ref()
+        .is_some_and(|(_, plan)| plan.meshes_animated || plan.lights_animated);
     let style = progress::Style::chosen(args.progress == ProgressArg::Json, args.quiet);
     crate::sys::signals::catch_termination().map_err(CommandError::failed)?;
     let mut written = Vec::new();
@@ -115,11 +121,10 @@ pub fn run(args: &RenderArgs, frames: Frames) -> CommandResult {
         };
         let frame_start = Instant::now();
         let time = frames.time(n);
-        job.at_time(args, time)?;
-        let records_before = job.cache.as_mut().map_or(0, |c| {
-            c.thaw();
-            c.len() as u64
-        });
+        let pose_start = Instant::now();
+        let invalidation = job.at_time(args, time)?;
+        let pose_s = pose_start.elapsed().as_secs_f64();
+        let records_before = invalidation.map_or(0, |i| i.kept);
         let (journal, restored) = match &args.checkpoint {
             Some(dir) => {
                 let key = format!("{}; frame {n} at {time} s", checkpoint_key(args));
@@ -188,6 +193,10 @@ pub fn run(args: &RenderArgs, frames: Frames) -> CommandResult {
         stats.frame = Some(n);
         stats.frame_time_s = Some(time);
         stats.records_before = Some(records_before);
+        if scene_moves {
+            stats.records_invalidated = Some(invalidation.map_or(0, |i| i.invalidated));
+            stats.pose_s = Some(pose_s);
+        }
         if stats.nonfinite_dropped > 0 {
             warn(&format!(
                 "frame {n}: {} non-finite contribution(s) were dropped",
@@ -204,11 +213,14 @@ pub fn run(args: &RenderArgs, frames: Frames) -> CommandResult {
         written.push(n);
         if !args.quiet {
             eprintln!(
-                "icrender: frame {n} ({time:.4} s): {}x{} in {render_s:.2} s ({} records made, {records_before} carried, \
+                "icrender: frame {n} ({time:.4} s): {}x{} in {render_s:.2} s ({} records made, {records_before} carried{}, \
                  {:.0}% of lookups hit) -> {}",
                 args.width,
                 args.height,
                 stats.records_computed,
+                stats
+                    .records_invalidated
+                    .map_or(String::new(), |i| format!(", {i} dropped where things moved")),
                 100.0 * stats.hits as f64 / stats.lookups.max(1) as f64,
                 outputs.exr.display()
             );

@@ -148,6 +148,22 @@ impl RecordIndex {
         true
     }
 
+    /// Keeps the records `keep` says to and drops the rest; how many were dropped.
+    pub fn retain(&mut self, mut keep: impl FnMut(&Record) -> bool) -> usize {
+        let mut dropped = 0;
+        for shard in &mut self.shards {
+            let map = shard.get_mut().unwrap_or_else(|e| e.into_inner());
+            map.retain(|_, records| {
+                let before = records.len();
+                records.retain(&mut keep);
+                dropped += before - records.len();
+                !records.is_empty()
+            });
+        }
+        self.count.fetch_sub(dropped, Ordering::Relaxed);
+        dropped
+    }
+
     pub fn insert(&self, record: Record) {
         let level = self.level_for(record.reach());
         let (x, y, z) = self.cell_of(record.position, self.cell_size(level));

@@ -9,6 +9,7 @@ pub mod index;
 pub mod last_bounce;
 pub mod persist;
 pub mod record;
+pub mod temporal;
 pub mod trace;
 pub mod validation;
 
@@ -257,6 +258,24 @@ impl IrradianceCache {
         self.frozen = OnceLock::new();
         // The next frame's scene may have moved: its prepass builds its own grid.
         self.last_bounce = OnceLock::new();
+    }
+
+    /// Drops the records `disturbance` says the last moves changed (a frame of an animation
+    /// that moves meshes or lights, `temporal`); the cache is thawed first. A cache with a file
+    /// is never given moves (frames of such animations refuse -af).
+    pub fn forget_disturbed(&mut self, disturbance: &temporal::Disturbance) -> temporal::Invalidation {
+        self.thaw();
+        self.gaps.get_mut().unwrap_or_else(|e| e.into_inner()).clear();
+        let before = self.index.len() as u64;
+        let invalidated = if disturbance.is_empty() {
+            0
+        } else {
+            self.index.retain(|r| !disturbance.disturbs(r)) as u64
+        };
+        temporal::Invalidation {
+            kept: before - invalidated,
+            invalidated,
+        }
     }
 
     /// Attaches a persistent file: its records join the cache, new ones are appended to it.

@@ -7,11 +7,11 @@
 //! the same order of operations, so that a node no channel drives gets exactly the world matrix
 //! the loader gave it, and a render of frames matches a still render of the same pose.
 //!
-//! Only cameras are animated: `Rig::plan_frames` refuses animations that move a mesh or a light
-//! (the scene, its BVH and the irradiance cache carried from frame to frame assume they stand
-//! still).
+//! Cameras, meshes and lights move with their nodes (`scene::posing` places the meshes and
+//! lights at a frame's time); `Rig::plan_frames` refuses animations that would deform a mesh
+//! (morph targets, skins), which the renderer does not do.
 
-use crate::sys::scene_io::{AnimPath, GltfChannel, GltfNode, Interpolation, LocalPose};
+use crate::sys::scene_io::{AnimPath, GltfChannel, GltfNode, Interpolation, LocalPose, Places};
 
 /// Column-major 4x4, as glTF and the loader store matrices.
 pub type Mat4 = [f64; 16];
@@ -189,14 +189,18 @@ pub struct Rig {
     driver: Vec<[Option<usize>; 3]>,
 }
 
-/// What rendering frames with this scene's animations means, once they are known to move
-/// cameras only (see `Rig::plan_frames`).
+/// What rendering frames with this scene's animations means (see `Rig::plan_frames`).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct FramesPlan {
     /// Whether any channel moves the camera's node or one of its ancestors.
     pub camera_animated: bool,
     /// The first and last key time of the channels that move the camera, seconds.
     pub keys: Option<(f64, f64)>,
+    /// Whether channels move meshes, and lights (punctual ones; an emissive mesh is a mesh).
+    pub meshes_animated: bool,
+    pub lights_animated: bool,
+    /// The first and last key time of the channels that move meshes or lights, seconds.
+    pub scene_keys: Option<(f64, f64)>,
     /// Things said once on stderr: channels ignored, and why.
     pub notes: Vec<String>,
 }
@@ -270,62 +274,71 @@ impl Rig {
         chain
     }
 
-    /// What the node's subtree (the node and its descendants) places: (mesh, light).
-    fn subtree_places(&self) -> Vec<(bool, bool)> {
-        let mut out = vec![(false, false); self.nodes.len()];
+    /// What the node's subtree (the node and its descendants) places.
+    fn subtree_places(&self) -> Vec<Places> {
+        let mut out = vec![Places::default(); self.nodes.len()];
         for (i, n) in self.nodes.iter().enumerate() {
-            if !n.in_scene || !(n.places.mesh || n.places.light) {
+            let p = n.places;
+            if !n.in_scene || !(p.mesh || p.light || p.joint) {
                 continue;
             }
             for a in self.chain(i) {
-                out[a].0 |= n.places.mesh;
-                out[a].1 |= n.places.light;
+                out[a].mesh |= p.mesh;
+                out[a].light |= p.light;
+                out[a].joint |= p.joint;
             }
         }
         out
     }
 
-    /// Checks that the animations move nothing but cameras (the node driving the render's
-    /// camera is `camera`, None without a glTF camera) and says what frames will show.
-    /// Refused: a channel moving a node that places a mesh or a light, or has one below it; a
-    /// channel that breaks glTF's rules and would move the camera.
+    /// Checks the animations frames can render (the node driving the render's camera is
+    /// `camera`, None without a glTF camera) and says what frames will show. Meshes, lights and
+    /// cameras move with their nodes' translation, rotation and scale. Refused, naming the
+    /// animation and the node: a channel that deforms a mesh (morph target weights, or the
+    /// joints of a skin), and a channel that breaks glTF's rules and would move something.
     pub fn plan_frames(&self, camera: Option<usize>) -> Result<FramesPlan, String> {
         let places = self.subtree_places();
         let camera_chain = camera.map(|c| self.chain(c)).unwrap_or_default();
         let mut plan = FramesPlan::default();
-        let mut weights = 0usize;
         let mut duplicates = Vec::new();
         for (i, c) in self.channels.iter().enumerate() {
             let Some(node) = c.node.filter(|&n| self.nodes[n].in_scene) else {
                 // A node outside the scene (or none) moves nothing that is rendered.
                 continue;
             };
-            let slot = path_slot(c.path);
-            let (mesh, light) = places[node];
-            if slot.is_none() {
-                if c.path == AnimPath::Weights && mesh {
-                    weights += 1;
+            let below = places[node];
+            let Some(slot) = path_slot(c.path) else {
+                if c.path == AnimPath::Weights && below.mesh {
+                    return Err(format!(
+                        "{} animates the morph target weights of {}: icrender does not deform meshes (morph \
+                         targets are not supported); render the frames without that animation",
+                        Self::animation_label(c),
+                        self.node_label(node),
+                    ));
                 }
                 continue;
-            }
-            if mesh || light {
-                let what = if mesh { "a mesh" } else { "a light" };
+            };
+            if below.joint {
                 return Err(format!(
-                    "{} moves {} (its {}) and {what} with it: icrender animates cameras only (meshes and \
-                     lights stay where the file puts them at rest, and the irradiance cache is carried from \
-                     frame to frame); render this scene's frames without that animation",
+                    "{} moves {} (its {}), a joint of a skin (or a joint's parent): icrender does not deform \
+                     meshes (skins are not supported); render the frames without that animation",
                     Self::animation_label(c),
                     self.node_label(node),
                     path_name(c.path),
                 ));
             }
-            if !camera_chain.contains(&node) {
+            let moves_camera = camera_chain.contains(&node);
+            if !(below.mesh || below.light || moves_camera) {
                 continue;
             }
             if let Some(error) = &c.error {
-                return Err(format!("the camera's animation cannot be used: {error}"));
+                let what = if moves_camera {
+                    "the camera's animation"
+                } else {
+                    "an animation that moves the scene"
+                };
+                return Err(format!("{what} cannot be used: {error}"));
             }
-            let slot = slot.expect("checked");
             if self.driver[node][slot] != Some(i) {
                 duplicates.push(format!(
                     "{} ({} of {})",
@@ -335,18 +348,22 @@ impl Rig {
                 ));
                 continue;
             }
-            plan.camera_animated = true;
+            plan.meshes_animated |= below.mesh;
+            plan.lights_animated |= below.light;
             let (first, last) = (c.times[0] as f64, c.times[c.times.len() - 1] as f64);
-            plan.keys = Some(plan.keys.map_or((first, last), |(a, b)| (a.min(first), b.max(last))));
-        }
-        if weights > 0 {
-            plan.notes.push(format!(
-                "{weights} animation channel(s) of morph target weights ignored (morph targets are not supported)"
-            ));
+            let widen =
+                |keys: Option<(f64, f64)>| Some(keys.map_or((first, last), |(a, b)| (a.min(first), b.max(last))));
+            if moves_camera {
+                plan.camera_animated = true;
+                plan.keys = widen(plan.keys);
+            }
+            if below.mesh || below.light {
+                plan.scene_keys = widen(plan.scene_keys);
+            }
         }
         if !duplicates.is_empty() {
             plan.notes.push(format!(
-                "the camera's node is driven twice by the same property: {} ignored, the file's first channel \
+                "a node is driven twice by the same property: {} ignored, the file's first channel \
                  for each property is used (all animations play together from time 0)",
                 duplicates.join(", ")
             ));
@@ -354,8 +371,31 @@ impl Rig {
         Ok(plan)
     }
 
+    /// Whether a channel drives the node or one of its ancestors (its world matrix moves).
+    pub fn moves(&self, node: usize) -> bool {
+        node < self.nodes.len()
+            && self
+                .chain(node)
+                .into_iter()
+                .any(|n| self.driver[n].iter().any(Option::is_some))
+    }
+
+    /// The node's world matrix at rest (no channel applied), as the loader composed it.
+    pub fn rest_world(&self, node: usize) -> Mat4 {
+        let mut world = IDENTITY;
+        for n in self.chain(node).into_iter().rev() {
+            world = mul(&world, &self.local_pose(n, None));
+        }
+        world
+    }
+
     /// The node's local transform at `time`: its rest pose with the driven parts replaced.
     fn local_at(&self, node: usize, time: f64) -> Mat4 {
+        self.local_pose(node, Some(time))
+    }
+
+    /// The node's local transform, with its channels applied at `time` when there is one.
+    fn local_pose(&self, node: usize, time: Option<f64>) -> Mat4 {
         match &self.nodes[node].pose {
             LocalPose::Matrix(m) => *m,
             LocalPose::Trs {
@@ -368,7 +408,10 @@ impl Rig {
                     rotation: *rotation,
                     scale: *scale,
                 };
-                let drive = |slot: usize| self.driver[node][slot].map(|c| sample(&self.channels[c], time));
+                let drive = |slot: usize| {
+                    let time = time?;
+                    self.driver[node][slot].map(|c| sample(&self.channels[c], time))
+                };
                 if let Some(v) = drive(0) {
                     trs.translation = [v[0], v[1], v[2]];
                 }
@@ -532,16 +575,19 @@ mod tests {
         mesh: false,
         light: false,
         camera: true,
+        joint: false,
     };
     const MESH: Places = Places {
         mesh: true,
         light: false,
         camera: false,
+        joint: false,
     };
     const NOTHING: Places = Places {
         mesh: false,
         light: false,
         camera: false,
+        joint: false,
     };
 
     #[test]
@@ -567,16 +613,32 @@ mod tests {
     }
 
     #[test]
-    fn animations_that_move_meshes_are_refused_and_others_ignored() {
-        // A mesh under an animated group: refused, naming the animation and the node.
-        let mut nodes = vec![node(None, NOTHING, [0.0; 3]), node(Some(0), MESH, [0.0; 3])];
+    fn a_mesh_under_an_animated_group_moves_and_a_skin_s_joint_is_refused() {
+        // A mesh under an animated group: planned, the mesh's node moves, its rest world stays.
+        let mut nodes = vec![node(None, NOTHING, [0.0; 3]), node(Some(0), MESH, [1.0, 0.0, 0.0])];
         nodes[0].name = "Trolley".into();
         nodes.push(node(None, CAMERA, [0.0; 3]));
-        let moving = channel(AnimPath::Translation, Interpolation::Linear, &[0.0, 1.0], &[0.0; 6]);
+        let moving = channel(
+            AnimPath::Translation,
+            Interpolation::Linear,
+            &[0.0, 1.0],
+            &[0.0, 0.0, 0.0, 2.0, 0.0, 0.0],
+        );
         let rig = Rig::new(nodes.clone(), vec![moving.clone()]);
-        let e = rig.plan_frames(Some(2)).unwrap_err();
+        let plan = rig.plan_frames(Some(2)).unwrap();
+        assert!(plan.meshes_animated && !plan.lights_animated && !plan.camera_animated);
+        assert_eq!(plan.scene_keys, Some((0.0, 1.0)));
+        assert!(rig.moves(1) && !rig.moves(2));
+        assert_eq!(&rig.rest_world(1)[12..15], &[1.0, 0.0, 0.0]);
+        assert_eq!(&rig.world_at(1, 0.5)[12..15], &[2.0, 0.0, 0.0]);
+        // The same group as a skin's joint: refused, naming the animation and the node.
+        let mut jointed = nodes.clone();
+        jointed[0].places.joint = true;
+        let e = Rig::new(jointed, vec![moving.clone()])
+            .plan_frames(Some(2))
+            .unwrap_err();
         assert!(
-            e.contains("animation 'walk'") && e.contains("node 'Trolley'") && e.contains("a mesh"),
+            e.contains("animation 'walk'") && e.contains("node 'Trolley'") && e.contains("skin"),
             "{e}"
         );
         // The same channel on a node outside the scene moves nothing rendered.
@@ -584,6 +646,6 @@ mod tests {
         nodes[1].in_scene = false;
         let rig = Rig::new(nodes, vec![moving]);
         let plan = rig.plan_frames(Some(2)).unwrap();
-        assert!(!plan.camera_animated);
+        assert!(!plan.camera_animated && !plan.meshes_animated);
     }
 }

@@ -12,6 +12,7 @@ pub mod light_tree;
 pub mod material;
 pub mod names;
 pub mod placement;
+pub mod posing;
 pub mod texture;
 pub mod view;
 
@@ -48,6 +49,9 @@ pub struct LoadOptions {
     /// Copy every placement of a mesh used more than once into world space, as meshes used
     /// once are, instead of instancing it (`--flatten`: for comparison).
     pub flatten: bool,
+    /// Keep what re-placing the meshes and lights at another time needs (`posing`): for
+    /// frames of animations that move them.
+    pub keep_pose_source: bool,
 }
 
 impl Default for LoadOptions {
@@ -58,6 +62,7 @@ impl Default for LoadOptions {
             allow_outside_refs: false,
             max_memory: None,
             flatten: false,
+            keep_pose_source: false,
         }
     }
 }
@@ -97,6 +102,9 @@ pub struct Scene {
     pub warnings: Vec<String>,
     /// Names and Cryptomatte IDs of each mesh's node and of each material.
     pub names: names::Names,
+    /// With `LoadOptions::keep_pose_source`, what re-placing the meshes and lights at another
+    /// time of the animations needs (`posing`); None otherwise.
+    pub pose_source: Option<Box<posing::PoseSource>>,
 }
 
 /// What the scene can produce, so no layer, pass or ray is spent on what it cannot.
@@ -138,7 +146,6 @@ impl Scene {
             .map(|(i, m)| names::material_name(&m.name, i))
             .collect();
         material_names.push(names::DEFAULT_MATERIAL.to_string());
-        let mut object_names = Vec::new();
         if options.lambertian {
             materials.iter_mut().for_each(Material::make_lambertian);
         }
@@ -147,102 +154,46 @@ impl Scene {
 
         let surveys = instancing::Surveys::of(&gltf, options.flatten);
         let origin = placement::tracing_origin(&gltf, &surveys.used_bounds());
-        let plan = instancing::plan(&gltf, &surveys, origin, default_material);
-        drop(surveys);
-        let mut shared = plan.instancing;
-        let mut meshes = Vec::new();
-        // What every placement of a shared mesh drops counts once per placement, as copies do.
-        let mut dropped = (shared.placements.iter())
-            .map(|p| shared.meshes[p.mesh as usize].dropped)
-            .sum::<usize>();
-        let mut emitter_triangles = Vec::new();
-        let mut bounds_min = Vec3::splat(f32::INFINITY);
-        let mut bounds_max = Vec3::splat(f32::NEG_INFINITY);
-        // Objects, bounds and emitters in the file's order whether a mesh is copied or shared,
-        // so that the light tree and the names are those of the flattened scene.
-        for (instance, role) in gltf.instances.iter().zip(&plan.roles) {
-            let object = object_names.len() as u32;
-            let mesh = match *role {
-                instancing::Role::Placed(p) => {
-                    let placement = &mut shared.placements[p as usize];
-                    placement.object = object;
-                    let (lo, hi) = plan.bounds[p as usize];
-                    bounds_min = bounds_min.min(lo);
-                    bounds_max = bounds_max.max(hi);
-                    let material = shared.meshes[placement.mesh as usize].material;
-                    if materials[material as usize].is_emissive() {
-                        // One light per placement: its triangles in world space (few; the
-                        // geometry traced is not copied).
-                        let copy = shared.flattened(p, origin);
-                        collect_emitters(&copy, materials[material as usize].emission, &mut emitter_triangles);
-                    }
-                    object_names.push(names::node_name(&instance.node_name, instance.node));
-                    continue;
-                }
-                instancing::Role::Flatten => {
-                    let source = &gltf.meshes[instance.mesh];
-                    let material = source.material.map_or(default_material, |m| m as u32);
-                    let world = DMat4::from_cols_array(&instance.world);
-                    let (mut mesh, dropped_here) = placement::place_mesh(source, world, origin, material);
-                    dropped += dropped_here;
-                    mesh.object = object;
-                    mesh
-                }
-            };
-            if mesh.indices.is_empty() {
-                continue;
-            }
-            object_names.push(names::node_name(&instance.node_name, instance.node));
-            for tri in &mesh.indices {
-                for &i in tri {
-                    let p = Vec3::from(mesh.positions[i as usize]);
-                    bounds_min = bounds_min.min(p);
-                    bounds_max = bounds_max.max(p);
-                }
-            }
-            let m = &materials[mesh.material as usize];
-            if m.is_emissive() {
-                collect_emitters(&mesh, m.emission, &mut emitter_triangles);
-            }
-            meshes.push(mesh);
-        }
-        if dropped > 0 {
+        let geometry = Geometry::place(&gltf, surveys, origin, &materials, default_material);
+        if geometry.dropped > 0 {
             warnings.push(format!(
-                "dropped {dropped} triangle(s) with zero area or non-finite or out-of-range coordinates"
+                "dropped {} triangle(s) with zero area or non-finite or out-of-range coordinates",
+                geometry.dropped
             ));
         }
-        if meshes.is_empty() && shared.is_empty() {
-            return Err(if dropped > 0 {
+        if geometry.meshes.is_empty() && geometry.instancing.is_empty() {
+            return Err(if geometry.dropped > 0 {
                 format!(
-                    "no valid triangles: all {dropped} were degenerate or had non-finite or out-of-range coordinates"
+                    "no valid triangles: all {} were degenerate or had non-finite or out-of-range coordinates",
+                    geometry.dropped
                 )
             } else {
                 "the scene has no triangles".into()
             });
         }
-        let mut punctual_lights = Vec::new();
-        for l in &gltf.lights {
-            match PunctualLight::from_gltf(l, origin) {
-                Some(light) => punctual_lights.push(light),
-                None => warnings.push(format!("light '{}' ignored: non-finite position or direction", l.name)),
-            }
-        }
+        let (punctual_lights, ignored) = punctual_lights(&gltf.lights, origin);
+        warnings.extend(ignored);
+        let rig = animation::Rig::new(gltf.nodes.clone(), gltf.channels.clone());
+        let cameras = gltf.cameras.clone();
         Ok(Scene {
             path: path.to_path_buf(),
-            meshes,
-            instancing: shared,
+            meshes: geometry.meshes,
+            instancing: geometry.instancing,
             materials,
             textures,
             punctual_lights,
-            emitters: EmitterSet::new(emitter_triangles),
-            cameras: gltf.cameras,
-            rig: animation::Rig::new(gltf.nodes, gltf.channels),
+            emitters: EmitterSet::new(geometry.emitter_triangles),
+            cameras,
+            rig,
             origin,
-            bounds_min,
-            bounds_max,
-            dropped_triangles: dropped,
+            bounds_min: geometry.bounds_min,
+            bounds_max: geometry.bounds_max,
+            dropped_triangles: geometry.dropped,
             warnings,
-            names: names::Names::new(object_names, material_names),
+            names: names::Names::new(geometry.object_names, material_names),
+            pose_source: options
+                .keep_pose_source
+                .then(|| Box::new(posing::PoseSource::of(gltf, options.flatten))),
         })
     }
 
@@ -364,6 +315,113 @@ impl Scene {
     }
 }
 
+/// The punctual lights of the file in the renderer's coordinates, and a warning for each one
+/// that cannot be placed.
+fn punctual_lights(lights: &[scene_io::GltfLight], origin: DVec3) -> (Vec<PunctualLight>, Vec<String>) {
+    let mut placed = Vec::new();
+    let mut warnings = Vec::new();
+    for l in lights {
+        match PunctualLight::from_gltf(l, origin) {
+            Some(light) => placed.push(light),
+            None => warnings.push(format!("light '{}' ignored: non-finite position or direction", l.name)),
+        }
+    }
+    (placed, warnings)
+}
+
+/// The scene's triangles as one pose of the file places them: the meshes copied into the
+/// renderer's coordinates, the shared ones' placements, the emitting triangles, the bounds
+/// and the objects' names (a frame of an animation re-places them, `posing`).
+pub(crate) struct Geometry {
+    pub meshes: Vec<WorldMesh>,
+    pub instancing: instancing::Instancing,
+    pub emitter_triangles: Vec<EmitterTriangle>,
+    pub bounds_min: Vec3,
+    pub bounds_max: Vec3,
+    pub dropped: usize,
+    pub object_names: Vec<String>,
+}
+
+impl Geometry {
+    pub fn place(
+        gltf: &GltfScene,
+        surveys: instancing::Surveys,
+        origin: DVec3,
+        materials: &[Material],
+        default_material: u32,
+    ) -> Geometry {
+        let plan = instancing::plan(gltf, &surveys, origin, default_material);
+        drop(surveys);
+        let mut shared = plan.instancing;
+        let mut meshes = Vec::new();
+        // What every placement of a shared mesh drops counts once per placement, as copies do.
+        let mut dropped = (shared.placements.iter())
+            .map(|p| shared.meshes[p.mesh as usize].dropped)
+            .sum::<usize>();
+        let mut emitter_triangles = Vec::new();
+        let mut object_names = Vec::new();
+        let mut bounds_min = Vec3::splat(f32::INFINITY);
+        let mut bounds_max = Vec3::splat(f32::NEG_INFINITY);
+        // Objects, bounds and emitters in the file's order whether a mesh is copied or shared,
+        // so that the light tree and the names are those of the flattened scene.
+        for (instance, role) in gltf.instances.iter().zip(&plan.roles) {
+            let object = object_names.len() as u32;
+            let mesh = match *role {
+                instancing::Role::Placed(p) => {
+                    let placement = &mut shared.placements[p as usize];
+                    placement.object = object;
+                    let (lo, hi) = plan.bounds[p as usize];
+                    bounds_min = bounds_min.min(lo);
+                    bounds_max = bounds_max.max(hi);
+                    let material = shared.meshes[placement.mesh as usize].material;
+                    if materials[material as usize].is_emissive() {
+                        // One light per placement: its triangles in world space (few; the
+                        // geometry traced is not copied).
+                        let copy = shared.flattened(p, origin);
+                        collect_emitters(&copy, materials[material as usize].emission, &mut emitter_triangles);
+                    }
+                    object_names.push(names::node_name(&instance.node_name, instance.node));
+                    continue;
+                }
+                instancing::Role::Flatten => {
+                    let source = &gltf.meshes[instance.mesh];
+                    let material = source.material.map_or(default_material, |m| m as u32);
+                    let world = DMat4::from_cols_array(&instance.world);
+                    let (mut mesh, dropped_here) = placement::place_mesh(source, world, origin, material);
+                    dropped += dropped_here;
+                    mesh.object = object;
+                    mesh
+                }
+            };
+            if mesh.indices.is_empty() {
+                continue;
+            }
+            object_names.push(names::node_name(&instance.node_name, instance.node));
+            for tri in &mesh.indices {
+                for &i in tri {
+                    let p = Vec3::from(mesh.positions[i as usize]);
+                    bounds_min = bounds_min.min(p);
+                    bounds_max = bounds_max.max(p);
+                }
+            }
+            let m = &materials[mesh.material as usize];
+            if m.is_emissive() {
+                collect_emitters(&mesh, m.emission, &mut emitter_triangles);
+            }
+            meshes.push(mesh);
+        }
+        Geometry {
+            meshes,
+            instancing: shared,
+            emitter_triangles,
+            bounds_min,
+            bounds_max,
+            dropped,
+            object_names,
+        }
+    }
+}
+
 fn collect_emitters(mesh: &WorldMesh, radiance: Vec3, out: &mut Vec<EmitterTriangle>) {
     for (prim_id, &[a, b, c]) in mesh.indices.iter().enumerate() {
         let p0 = Vec3::from(mesh.positions[a as usize]);
@@ -411,6 +469,7 @@ impl Scene {
             dropped_triangles: 0,
             warnings: Vec::new(),
             names: Default::default(),
+            pose_source: None,
         }
     }
 }

@@ -78,6 +78,8 @@ pub struct GltfLight {
     pub outer_cone: f32,
     pub position: [f64; 3],
     pub direction: [f32; 3],
+    /// The glTF node that places it (an index into `GltfScene::nodes`).
+    pub node: usize,
 }
 
 #[derive(Clone, Debug)]
@@ -101,6 +103,8 @@ pub struct Places {
     pub mesh: bool,
     pub light: bool,
     pub camera: bool,
+    /// A joint of a skin that a placed mesh uses.
+    pub joint: bool,
 }
 
 /// A node's local transform at rest, as the file gives it.
@@ -320,6 +324,7 @@ unsafe fn copy_scene(view: abi::icr_scene_view) -> Result<GltfScene, String> {
                 outer_cone: l.outer_cone,
                 position: l.position,
                 direction: l.direction,
+                node: l.node as usize,
             });
         }
         for c in slice_or_empty(view.cameras, view.camera_count) {
@@ -352,6 +357,7 @@ unsafe fn copy_scene(view: abi::icr_scene_view) -> Result<GltfScene, String> {
                     mesh: n.places & abi::ICR_PLACES_MESH != 0,
                     light: n.places & abi::ICR_PLACES_LIGHT != 0,
                     camera: n.places & abi::ICR_PLACES_CAMERA != 0,
+                    joint: n.places & abi::ICR_PLACES_JOINT != 0,
                 },
                 pose: if n.has_matrix != 0 {
                     LocalPose::Matrix(n.matrix)
