@@ -306,6 +306,12 @@ pub struct RenderStats {
     /// The seconds this frame spent placing the meshes again and building their BVH.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub pose_s: Option<f64>,
+    /// With -ab 2 and up, the last-bounce grid's sites this frame took from the last one (the
+    /// moves did not reach them) and sampled afresh.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub last_bounce_sites_kept: Option<u64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub last_bounce_sites_sampled: Option<u64>,
     /// The process's peak resident memory when the render ended, before the files were written
     /// (rank 0's under mpirun; Linux's VmHWM, absent where the system does not report it).
     #[serde(skip_serializing_if = "Option::is_none")]

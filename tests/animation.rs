@@ -199,6 +199,47 @@ fn where_the_moves_do_not_reach_frames_are_the_same_pixels() {
 }
 
 #[test]
+fn at_two_bounces_the_last_bounce_grid_keeps_the_sites_the_move_does_not_reach() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let scene = hall(d, "push", None);
+    let out = d.join("g.####.exr");
+    let stats = d.join("g.####.json");
+    render(
+        &scene,
+        &[
+            "--frames",
+            "0-2",
+            "--fps",
+            "2",
+            "-ab",
+            "2",
+            "-o",
+            s(&out),
+            "--stats",
+            s(&stats),
+        ],
+    );
+    for n in 1..=2 {
+        let st = stats_of(&d.join(format!("g.000{n}.json")));
+        let (kept, sampled) = (
+            st["last_bounce_sites_kept"].as_u64().unwrap(),
+            st["last_bounce_sites_sampled"].as_u64().unwrap(),
+        );
+        eprintln!("frame {n}: grid sites {kept} kept, {sampled} sampled");
+        assert!(kept > 0 && sampled > 0, "frame {n}: {kept} kept, {sampled} sampled");
+    }
+    // The last frame (the crate at x = -2.5) against its still render, which samples every site.
+    let still_scene = hall(d, "still_end", Some(-2.5));
+    let still = d.join("still_end.exr");
+    render(&still_scene, &["-ab", "2", "-o", s(&still)]);
+    let (frame, still) = (read_exr(&d.join("g.0002.exr")), read_exr(&still));
+    assert_eq!(rgb(&frame, "direct"), rgb(&still, "direct"));
+    let e = relmse(&frame, &still);
+    assert!(e < 2e-3, "frame 2 against its still at -ab 2: relMSE {e:.2e}");
+}
+
+#[test]
 fn frames_of_a_still_scene_are_the_same_image() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();

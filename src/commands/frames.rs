@@ -107,6 +107,9 @@ pub fn run(args: &RenderArgs, frames: Frames) -> CommandResult {
         .frames
         .as_ref()
         .is_some_and(|(_, plan)| plan.meshes_animated || plan.lights_animated);
+    if scene_moves && let Some(cache) = job.cache.as_mut() {
+        cache.remember_grid_sites();
+    }
     let style = progress::Style::chosen(args.progress == ProgressArg::Json, args.quiet);
     crate::sys::signals::catch_termination().map_err(CommandError::failed)?;
     let mut written = Vec::new();
@@ -196,6 +199,11 @@ pub fn run(args: &RenderArgs, frames: Frames) -> CommandResult {
         if scene_moves {
             stats.records_invalidated = Some(invalidation.map_or(0, |i| i.invalidated));
             stats.pose_s = Some(pose_s);
+            if let Some(memory) = job.cache.as_ref().and_then(|c| c.grid_memory()) {
+                let (kept, sampled) = memory.counts();
+                stats.last_bounce_sites_kept = Some(kept);
+                stats.last_bounce_sites_sampled = Some(sampled);
+            }
         }
         if stats.nonfinite_dropped > 0 {
             warn(&format!(

@@ -4,6 +4,7 @@
 //! optional file (-af) that persists records across runs.
 
 pub mod codec;
+pub mod grid_memory;
 pub mod hemisphere;
 pub mod index;
 pub mod last_bounce;
@@ -192,6 +193,8 @@ pub struct IrradianceCache {
     /// Records a frozen cache's misses made for their own use (gaps), kept to join the set
     /// between the passes of a render in passes (`render::passes`).
     gaps: Mutex<Vec<Record>>,
+    /// The last-bounce grid's sites kept for the next frame (`remember_grid_sites`).
+    grid_memory: Option<grid_memory::GridMemory>,
 }
 
 impl IrradianceCache {
@@ -211,7 +214,18 @@ impl IrradianceCache {
             frozen: OnceLock::new(),
             last_bounce: OnceLock::new(),
             gaps: Mutex::new(Vec::new()),
+            grid_memory: None,
         }
+    }
+
+    /// From now on the last-bounce grid's sites are kept for the next frame, which takes those
+    /// the moves did not reach (`grid_memory`): for frames of scenes whose meshes move.
+    pub fn remember_grid_sites(&mut self) {
+        self.grid_memory.get_or_insert_with(Default::default);
+    }
+
+    pub fn grid_memory(&self) -> Option<&grid_memory::GridMemory> {
+        self.grid_memory.as_ref()
     }
 
     /// Keeps a record made at a frozen cache's miss (see `gaps`).
@@ -266,6 +280,9 @@ impl IrradianceCache {
     pub fn forget_disturbed(&mut self, disturbance: &temporal::Disturbance) -> temporal::Invalidation {
         self.thaw();
         self.gaps.get_mut().unwrap_or_else(|e| e.into_inner()).clear();
+        if let Some(memory) = &mut self.grid_memory {
+            memory.forget_disturbed(disturbance);
+        }
         let before = self.index.len() as u64;
         let invalidated = if disturbance.is_empty() {
             0

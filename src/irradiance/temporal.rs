@@ -99,7 +99,53 @@ pub struct Disturbance {
     pub everywhere: bool,
     /// Per moved mesh, per pose (before, after): its regions, each with the share of the
     /// light from it that may change.
-    moves: Vec<[Vec<(Aabb, f32)>; 2]>,
+    moves: Vec<[PoseRegions; 2]>,
+}
+
+/// One pose's regions, and what the faintest of them (left out) may add together: their
+/// changes summed, as if each covered the whole hemisphere.
+#[derive(Clone, Debug, Default)]
+struct PoseRegions {
+    regions: Vec<(Aabb, f32)>,
+    left_out: f32,
+}
+
+/// The faintest regions of a pose are not looked at one by one (a frame's grid sites and
+/// records are tested against every region) while their changes add up to at most this share
+/// of `TOLERANCE`: counted whole instead.
+const LEFT_OUT_SHARE: f32 = 0.25;
+
+/// Regions changing less than this share of `TOLERANCE` each are tested as one.
+const FAINT: f32 = 0.5;
+
+impl PoseRegions {
+    fn of(mut regions: Vec<(Aabb, f32)>) -> PoseRegions {
+        regions.sort_by(|a, b| b.1.total_cmp(&a.1));
+        let mut left_out = 0.0;
+        while let Some(&(_, change)) = regions.last() {
+            if left_out + change > LEFT_OUT_SHARE * TOLERANCE {
+                break;
+            }
+            left_out += change;
+            regions.pop();
+        }
+        // The faint ones left (each changing less than the tolerance: the shadows of the many
+        // lamps of a lit room) as one region, their box's, changing what they add up to: it
+        // covers at least the share each covers, so the sum is bounded as before, and a frame's
+        // sites and records are tested against a few regions instead of one per lamp.
+        let faint_from = regions.partition_point(|r| r.1 >= FAINT * TOLERANCE);
+        if regions.len() - faint_from > 1 {
+            let faint = regions.split_off(faint_from);
+            let change = faint.iter().map(|r| r.1).sum();
+            let region = faint
+                .iter()
+                .map(|r| r.0)
+                .reduce(|a, b| a.union(&b))
+                .expect("two or more");
+            regions.push((region, change));
+        }
+        PoseRegions { regions, left_out }
+    }
 }
 
 /// The records a move left and those it took.
@@ -272,7 +318,7 @@ impl Disturbance {
         Disturbance {
             everywhere: false,
             moves: (change.moved.iter())
-                .map(|(before, after)| [regions(before), regions(after)])
+                .map(|(before, after)| [PoseRegions::of(regions(before)), PoseRegions::of(regions(after))])
                 .collect(),
         }
     }
@@ -286,16 +332,22 @@ impl Disturbance {
     /// now; both darken or both brighten the same surfaces, so the change is at most the larger
     /// of the two, not their sum. Several meshes' changes add.
     pub fn disturbs(&self, record: &Record) -> bool {
+        self.disturbs_point(record.position, record.normal, record.reach())
+    }
+
+    /// Whether the moves may have changed by more than `TOLERANCE` the light arriving at
+    /// `position` on a surface facing `normal`, read over `reach` around it.
+    pub fn disturbs_point(&self, position: Vec3, normal: Vec3, reach: f32) -> bool {
         if self.everywhere {
             return true;
         }
         let mut total = 0.0f32;
         for poses in &self.moves {
             let mut largest = 0.0f32;
-            for regions in poses {
-                let mut share = 0.0f32;
-                for (region, change) in regions {
-                    share += change * seen_share(region, record);
+            for pose in poses {
+                let mut share = pose.left_out;
+                for (region, change) in &pose.regions {
+                    share += change * seen_share(region, position, normal, reach);
                 }
                 largest = largest.max(share);
             }
@@ -308,23 +360,23 @@ impl Disturbance {
     }
 }
 
-/// The share of `record`'s cosine-weighted hemisphere that `region` may cover: its area
-/// projected across the direction to it over pi times the squared distance to its nearest
-/// point (the solid angle of a far box, over-estimated near it), at most 1; 1 when the record's
-/// disc reaches into the region (it is read where the light may change wholly); 0 when the
-/// region lies wholly below the record's surface.
-fn seen_share(region: &Aabb, record: &Record) -> f32 {
-    let p = record.position;
+/// The share of the cosine-weighted hemisphere over `p` (facing `normal`) that `region` may
+/// cover: its area projected across the direction to it over pi times the squared distance to
+/// its nearest point (the solid angle of a far box, over-estimated near it), at most 1; 1 when
+/// the disc read around `p` (`reach`) reaches into the region (it is read where the light may
+/// change wholly); 0 when the region lies wholly below the surface.
+fn seen_share(region: &Aabb, p: Vec3, normal: Vec3, reach: f32) -> f32 {
     let nearest = p.clamp(region.lo, region.hi);
     let distance = (nearest - p).length();
-    if distance <= record.reach() {
+    if distance <= reach {
         return 1.0;
     }
-    let below = corners(region).iter().all(|&c| (c - p).dot(record.normal) < 0.0);
-    if below {
+    // The corner highest above the surface's plane: below it, the whole box is.
+    let e = region.hi - region.lo;
+    let highest = (region.centre() - p).dot(normal) + 0.5 * normal.abs().dot(e);
+    if highest < 0.0 {
         return 0.0;
     }
-    let e = region.hi - region.lo;
     let u = (region.centre() - p).normalize_or_zero();
     let projected = u.x.abs() * e.y * e.z + u.y.abs() * e.x * e.z + u.z.abs() * e.x * e.y;
     (projected / (std::f32::consts::PI * distance * distance)).min(1.0)

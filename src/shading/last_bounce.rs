@@ -90,7 +90,7 @@ impl Integrator<'_> {
         };
         let pixel = y as u64 * camera.width as u64 + x as u64;
         let mut rng = Rng::new(seed, SITE_STREAM + pixel);
-        for _ in 0..sites_per_pixel(self.options.ambient_divisions) {
+        for site in 0..sites_per_pixel(self.options.ambient_divisions) {
             let (origin, dir) = camera.ray(x as f32 + rng.next_f32(), y as f32 + rng.next_f32());
             // The site's own rays count as the render's: a camera ray, then a path's segments.
             counts.primary += 1;
@@ -118,6 +118,16 @@ impl Integrator<'_> {
             if !reached || surface.diffuse.max_element() <= 0.0 {
                 continue;
             }
+            // The site's samples from last frame, where its path ends where it did and the
+            // moves did not reach (frames of a scene whose meshes move, `grid_memory`).
+            let memory = self.cache.and_then(|c| c.grid_memory());
+            let key = (pixel, site);
+            if let Some((samples, rng_after)) = memory.and_then(|m| m.recall(key, hit.position, hit.normal)) {
+                out.extend(samples);
+                rng = rng_after;
+                continue;
+            }
+            let first_sample = out.len();
             let state = PathState {
                 level,
                 specular_depth: 0,
@@ -137,6 +147,9 @@ impl Integrator<'_> {
                     normal: hit.normal,
                     received: Received { direct, indirect },
                 });
+            }
+            if let Some(memory) = memory {
+                memory.keep(key, hit.position, hit.normal, &out[first_sample..], &rng);
             }
         }
     }
