@@ -19,8 +19,8 @@ Per frame it measures:
 - cost: each frame's render seconds (prepass and pixels) and pose seconds (meshes placed again,
   BVH built again), and the records kept, dropped and made.
 
-    python3 bench/frames_moving.py            # about 6 minutes on 2 cores
-    python3 bench/frames_moving.py --quick    # 3 frames, about 2 minutes
+    python3 bench/frames_moving.py            # about 8 minutes on 2 cores
+    python3 bench/frames_moving.py --quick    # 3 frames, about 4 minutes
 """
 
 import argparse
@@ -192,29 +192,37 @@ def far_from_path(position, path, origin_free=True):
     return (distance > FAR) & np.any(position != 0.0, axis=-1)
 
 
-def run_case(what, numbers, options):
+# The cases: (label, scene, options added to the command line's).
+CASES = [("crate", "crate", []), ("crate -ab 2", "crate", ["-ab", "2"]), ("lamp", "lamp", [])]
+
+
+def run_case(label, what, numbers, options):
     scene = os.path.join(OUT, f"{what}.gltf")
     author(scene, what)
     first, last = numbers[0], numbers[-1]
-    seq_wall = render(scene, ["--frames", f"{first}-{last}"], os.path.join(OUT, f"{what}.seq.####.exr"),
-                      os.path.join(OUT, f"{what}.seq.####.json"), options)
+    tag = label.replace(" ", "")
+    seq_wall = render(scene, ["--frames", f"{first}-{last}"], os.path.join(OUT, f"{tag}.seq.####.exr"),
+                      os.path.join(OUT, f"{tag}.seq.####.json"), options)
     rows = []
     path = CRATE_PATH if what == "crate" else LAMP_PATH
     previous = None
     for n in numbers:
-        alone_exr = os.path.join(OUT, f"{what}.alone.{n:04d}.exr")
-        ref_exr = os.path.join(OUT, f"{what}.ref.{n:04d}.exr")
+        alone_exr = os.path.join(OUT, f"{tag}.alone.{n:04d}.exr")
+        ref_exr = os.path.join(OUT, f"{tag}.ref.{n:04d}.exr")
         alone_wall = render(scene, ["--frame", str(n)], alone_exr, alone_exr.replace(".exr", ".json"), options)
         render(scene, ["--frame", str(n), "--spp", "4"], ref_exr, ref_exr.replace(".exr", ".json"), options)
-        seq = load(os.path.join(OUT, f"{what}.seq.{n:04d}.json"))
+        seq = load(os.path.join(OUT, f"{tag}.seq.{n:04d}.json"))
         alone = load(alone_exr.replace(".exr", ".json"))
         (s_rgb, position), (a_rgb, _), (r_rgb, _) = (
-            read(os.path.join(OUT, f"{what}.seq.{n:04d}.exr")), read(alone_exr), read(ref_exr))
+            read(os.path.join(OUT, f"{tag}.seq.{n:04d}.exr")), read(alone_exr), read(ref_exr))
         row = {
-            "case": what, "frame": n,
+            "case": label, "frame": n,
             "seq_render_s": seq["render_s"], "seq_pose_s": seq.get("pose_s", 0.0),
+            "remade": seq.get("records_remade", 0),
             "kept": seq["records_before"], "dropped": seq.get("records_invalidated", 0),
-            "made": seq["records_computed"],
+            "made": seq["records_computed"] - seq.get("records_remade", 0),
+            "grid_sites_kept": seq.get("last_bounce_sites_kept", 0),
+            "grid_sites_sampled": seq.get("last_bounce_sites_sampled", 0),
             "alone_render_s": alone["render_s"], "alone_wall_s": alone_wall, "alone_made": alone["records_computed"],
             "seq_vs_ref_4x4": relmse(blocks(s_rgb), blocks(r_rgb)),
             "alone_vs_ref_4x4": relmse(blocks(a_rgb), blocks(r_rgb)),
@@ -226,8 +234,9 @@ def run_case(what, numbers, options):
             row["alone_flicker"] = relmse(a_rgb, previous[1], far)
         previous = (s_rgb, a_rgb)
         rows.append(row)
-        print(f"{what} frame {n}: seq {row['seq_render_s']:.2f}+{row['seq_pose_s']:.2f} s "
-              f"(kept {row['kept']}, dropped {row['dropped']}, made {row['made']}), alone {row['alone_render_s']:.2f} s; "
+        print(f"{label} frame {n}: seq {row['seq_render_s']:.2f}+{row['seq_pose_s']:.2f} s "
+              f"(kept {row['kept']}, dropped {row['dropped']}, remade {row['remade']}, made {row['made']}), "
+              f"alone {row['alone_render_s']:.2f} s; "
               f"4x4 relMSE vs spp 4: seq {row['seq_vs_ref_4x4']:.2e}, alone {row['alone_vs_ref_4x4']:.2e}; "
               f"flicker seq {row.get('seq_flicker', float('nan')):.2e} alone {row.get('alone_flicker', float('nan')):.2e}",
               flush=True)
@@ -260,7 +269,8 @@ def write_page(args, cases, seconds):
         f"({seconds / 60:.1f} min, 2 cores); every frame in [frames/moving.csv](frames/moving.csv). "
         "How the cache decides what to keep: [rendering.md](rendering.md#frames-animations).",
         "",
-        f"The conference room, {args.size}, {' '.join(args.options.split()) or 'default settings'}, "
+        f"The conference room, {args.size}, {' '.join(args.options.split()) or 'default settings'} "
+        "(and -ab 2 where the case says), "
         f"frames {args.first}-{args.first + args.count - 1} at {FPS} fps, seen by a still camera: "
         f"`crate`, a {CRATE:.0f}-unit crate pushed {math.dist(*CRATE_PATH):.0f} units a second along the floor "
         f"(turning a quarter turn); `lamp`, a point light carried {math.dist(*LAMP_PATH):.0f} units a second "
@@ -269,7 +279,8 @@ def write_page(args, cases, seconds):
         f"{FAR:.0f} units from the path (flicker, relMSE; target 1e-4); the frames after the first "
         "against the first (cost; target half).",
         "",
-        "| case | first frame s | later frames s (mean, pose included) | later / first | worst ghost 4x4 | "
+        "| case | first frame s | later frames s (mean, pose included) | later / first | "
+        "worst ghost 4x4 | "
         "alone at default spp, worst 4x4 | worst flicker | alone, worst flicker |",
         "|---|---|---|---|---|---|---|---|",
     ]
@@ -278,15 +289,19 @@ def write_page(args, cases, seconds):
         lines.append(f"| {what} | {s['first_s']:.2f} | {s['later_s']:.2f} | {s['later_share']:.2f} | "
                      f"{s['worst_ghost']:.2e} | {s['worst_alone']:.2e} | {s['worst_flicker']:.2e} | "
                      f"{s['worst_alone_flicker']:.2e} |")
-    lines += ["", "Per frame:", "",
-              "| case | frame | render s | pose s | kept | dropped | made | alone s | ghost 4x4 | alone 4x4 | "
-              "flicker | alone flicker |",
-              "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    lines += ["", "Per frame (kept, dropped, remade, made: records kept from the last frame, dropped by the "
+              "moves, made again at their own points, made by the prepass; grid sites: the last-bounce grid's "
+              "sites taken from the last frame and sampled afresh, at -ab 2):", "",
+              "| case | frame | render s | pose s | kept | dropped | remade | made | grid sites kept / sampled | "
+              "alone s | ghost 4x4 | alone 4x4 | flicker | alone flicker |",
+              "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         flick = f"{r['seq_flicker']:.2e}" if "seq_flicker" in r else "-"
         aflick = f"{r['alone_flicker']:.2e}" if "alone_flicker" in r else "-"
-        lines.append(f"| {r['case']} | {r['frame']} | {r['seq_render_s']:.2f} | {r['seq_pose_s']:.2f} | {r['kept']} | "
-                     f"{r['dropped']} | {r['made']} | {r['alone_render_s']:.2f} | {r['seq_vs_ref_4x4']:.2e} | "
+        lines.append(f"| {r['case']} | {r['frame']} | {r['seq_render_s']:.2f} | {r['seq_pose_s']:.2f} | "
+                     f"{r['kept']} | {r['dropped']} | {r['remade']} | {r['made']} | "
+                     f"{r['grid_sites_kept']} / {r['grid_sites_sampled']} | "
+                     f"{r['alone_render_s']:.2f} | {r['seq_vs_ref_4x4']:.2e} | "
                      f"{r['alone_vs_ref_4x4']:.2e} | {flick} | {aflick} |")
     with open(os.path.join(DOCS, "FRAMES.md"), "w") as f:
         f.write("\n".join(lines) + "\n")
@@ -300,7 +315,8 @@ def main():
     parser.add_argument("--size", default="320x180", help="image size WxH (default 320x180)")
     parser.add_argument("--options", default="", help="more render options, e.g. \"-ab 2\"")
     parser.add_argument("--quick", action="store_true", help="3 frames")
-    parser.add_argument("--cases", default="crate,lamp", help="which scenes (default crate,lamp)")
+    parser.add_argument("--cases", default=",".join(c[0] for c in CASES),
+                        help="which cases, comma-separated (default all: " + ", ".join(c[0] for c in CASES) + ")")
     args = parser.parse_args()
     if args.quick:
         args.count = 3
@@ -311,7 +327,8 @@ def main():
     width, height = args.size.split("x")
     options = ["-x", width, "-y", height] + args.options.split()
     numbers = list(range(args.first, args.first + args.count))
-    cases = {what: run_case(what, numbers, options) for what in args.cases.split(",")}
+    wanted = args.cases.split(",")
+    cases = {label: run_case(label, what, numbers, options + extra) for label, what, extra in CASES if label in wanted}
     write_page(args, cases, time.monotonic() - start)
 
 

@@ -306,6 +306,10 @@ pub struct RenderStats {
     /// The seconds this frame spent placing the meshes again and building their BVH.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub pose_s: Option<f64>,
+    /// Of the records dropped, those made again at their own points by the prepass before its
+    /// rounds (`irradiance::record_origins`; counted in `records_computed` too).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub records_remade: Option<u64>,
     /// With -ab 2 and up, the last-bounce grid's sites this frame took from the last one (the
     /// moves did not reach them) and sampled afresh.
     #[serde(skip_serializing_if = "Option::is_none")]

@@ -109,6 +109,7 @@ pub fn run(args: &RenderArgs, frames: Frames) -> CommandResult {
         .is_some_and(|(_, plan)| plan.meshes_animated || plan.lights_animated);
     if scene_moves && let Some(cache) = job.cache.as_mut() {
         cache.remember_grid_sites();
+        cache.remember_origins();
     }
     let style = progress::Style::chosen(args.progress == ProgressArg::Json, args.quiet);
     crate::sys::signals::catch_termination().map_err(CommandError::failed)?;
@@ -199,6 +200,7 @@ pub fn run(args: &RenderArgs, frames: Frames) -> CommandResult {
         if scene_moves {
             stats.records_invalidated = Some(invalidation.map_or(0, |i| i.invalidated));
             stats.pose_s = Some(pose_s);
+            stats.records_remade = Some(rendered.prepass.as_ref().map_or(0, |p| p.records_remade));
             if let Some(memory) = job.cache.as_ref().and_then(|c| c.grid_memory()) {
                 let (kept, sampled) = memory.counts();
                 stats.last_bounce_sites_kept = Some(kept);
@@ -226,9 +228,11 @@ pub fn run(args: &RenderArgs, frames: Frames) -> CommandResult {
                 args.width,
                 args.height,
                 stats.records_computed,
-                stats
-                    .records_invalidated
-                    .map_or(String::new(), |i| format!(", {i} dropped where things moved")),
+                match (stats.records_invalidated, stats.records_remade) {
+                    (Some(i), Some(r)) =>
+                        format!(", {i} dropped where things moved, {r} of them made again where they were"),
+                    _ => String::new(),
+                },
                 100.0 * stats.hits as f64 / stats.lookups.max(1) as f64,
                 outputs.exr.display()
             );

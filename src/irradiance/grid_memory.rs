@@ -70,7 +70,31 @@ impl GridMemory {
         if disturbance.everywhere {
             sites.clear();
         } else if !disturbance.is_empty() {
-            sites.retain(|_, s| !disturbance.disturbs_point(s.position, s.normal, 0.0));
+            // A frame's grid has some 10^5 sites, each tested against every region: on every
+            // core (0.16 s a frame on one for the conference room's 48 lamps).
+            let ends: Vec<((u64, u32), Vec3, Vec3)> = sites.iter().map(|(k, s)| (*k, s.position, s.normal)).collect();
+            let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+            let chunk = ends.len().div_ceil(threads).max(1);
+            let disturbed: Vec<(u64, u32)> = std::thread::scope(|scope| {
+                let workers: Vec<_> = ends
+                    .chunks(chunk)
+                    .map(|part| {
+                        scope.spawn(move || {
+                            part.iter()
+                                .filter(|(_, p, n)| disturbance.disturbs_point(*p, *n, 0.0))
+                                .map(|(k, _, _)| *k)
+                                .collect::<Vec<_>>()
+                        })
+                    })
+                    .collect();
+                workers
+                    .into_iter()
+                    .flat_map(|w| w.join().expect("a grid test thread panicked"))
+                    .collect()
+            });
+            for key in disturbed {
+                sites.remove(&key);
+            }
         }
         *self.reused.get_mut() = 0;
         *self.sampled.get_mut() = 0;

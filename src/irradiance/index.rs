@@ -148,19 +148,19 @@ impl RecordIndex {
         true
     }
 
-    /// Keeps the records `keep` says to and drops the rest; how many were dropped.
-    pub fn retain(&mut self, mut keep: impl FnMut(&Record) -> bool) -> usize {
-        let mut dropped = 0;
+    /// Keeps the records `keep` says to and returns the rest, dropped.
+    pub fn retain(&mut self, mut keep: impl FnMut(&Record) -> bool) -> Vec<Record> {
+        let mut dropped = Vec::new();
         for shard in &mut self.shards {
             let map = shard.get_mut().unwrap_or_else(|e| e.into_inner());
             map.retain(|_, records| {
-                let before = records.len();
-                records.retain(&mut keep);
-                dropped += before - records.len();
+                let (kept, gone): (Vec<Record>, Vec<Record>) = std::mem::take(records).into_iter().partition(&mut keep);
+                *records = kept;
+                dropped.extend(gone);
                 !records.is_empty()
             });
         }
-        self.count.fetch_sub(dropped, Ordering::Relaxed);
+        self.count.fetch_sub(dropped.len(), Ordering::Relaxed);
         dropped
     }
 

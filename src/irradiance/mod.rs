@@ -10,6 +10,7 @@ pub mod index;
 pub mod last_bounce;
 pub mod persist;
 pub mod record;
+pub mod record_origins;
 pub mod temporal;
 pub mod trace;
 pub mod validation;
@@ -195,6 +196,8 @@ pub struct IrradianceCache {
     gaps: Mutex<Vec<Record>>,
     /// The last-bounce grid's sites kept for the next frame (`remember_grid_sites`).
     grid_memory: Option<grid_memory::GridMemory>,
+    /// Where each record was made, to make it again after a move (`remember_origins`).
+    origins: Option<record_origins::RecordOrigins>,
 }
 
 impl IrradianceCache {
@@ -215,7 +218,19 @@ impl IrradianceCache {
             last_bounce: OnceLock::new(),
             gaps: Mutex::new(Vec::new()),
             grid_memory: None,
+            origins: None,
         }
+    }
+
+    /// From now on each prepass record's point and random state are kept, and a record the
+    /// moves drop is made again from them (`record_origins`): for frames of scenes whose meshes
+    /// or lights move.
+    pub fn remember_origins(&mut self) {
+        self.origins.get_or_insert_with(Default::default);
+    }
+
+    pub fn origins(&self) -> Option<&record_origins::RecordOrigins> {
+        self.origins.as_ref()
     }
 
     /// From now on the last-bounce grid's sites are kept for the next frame, which takes those
@@ -284,14 +299,30 @@ impl IrradianceCache {
             memory.forget_disturbed(disturbance);
         }
         let before = self.index.len() as u64;
-        let invalidated = if disturbance.is_empty() {
-            0
+        let dropped = if disturbance.is_empty() {
+            Vec::new()
         } else {
-            self.index.retain(|r| !disturbance.disturbs(r)) as u64
+            self.index.retain(|r| !disturbance.disturbs(r))
         };
+        if let Some(origins) = &mut self.origins {
+            origins.dropped(&dropped, disturbance);
+        }
+        let invalidated = dropped.len() as u64;
         temporal::Invalidation {
             kept: before - invalidated,
             invalidated,
+        }
+    }
+
+    /// Adds records made again at their own points after a move (`record_origins`), in an
+    /// order of their own (the thread that made each does not matter), and keeps their origins.
+    pub fn insert_remade(&self, mut remade: Vec<(Record, record_origins::RecordOrigin)>) {
+        remade.sort_by_key(|(r, _)| r.identity());
+        for (record, origin) in remade {
+            if let Some(origins) = &self.origins {
+                origins.keep(&record, origin);
+            }
+            self.insert(record);
         }
     }
 

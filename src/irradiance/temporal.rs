@@ -100,6 +100,8 @@ pub struct Disturbance {
     /// Per moved mesh, per pose (before, after): its regions, each with the share of the
     /// light from it that may change.
     moves: Vec<[PoseRegions; 2]>,
+    /// The moved meshes' boxes, before and after.
+    moved: Vec<Aabb>,
 }
 
 /// One pose's regions, and what the faintest of them (left out) may add together: their
@@ -115,9 +117,6 @@ struct PoseRegions {
 /// of `TOLERANCE`: counted whole instead.
 const LEFT_OUT_SHARE: f32 = 0.25;
 
-/// Regions changing less than this share of `TOLERANCE` each are tested as one.
-const FAINT: f32 = 0.5;
-
 impl PoseRegions {
     fn of(mut regions: Vec<(Aabb, f32)>) -> PoseRegions {
         regions.sort_by(|a, b| b.1.total_cmp(&a.1));
@@ -128,21 +127,6 @@ impl PoseRegions {
             }
             left_out += change;
             regions.pop();
-        }
-        // The faint ones left (each changing less than the tolerance: the shadows of the many
-        // lamps of a lit room) as one region, their box's, changing what they add up to: it
-        // covers at least the share each covers, so the sum is bounded as before, and a frame's
-        // sites and records are tested against a few regions instead of one per lamp.
-        let faint_from = regions.partition_point(|r| r.1 >= FAINT * TOLERANCE);
-        if regions.len() - faint_from > 1 {
-            let faint = regions.split_off(faint_from);
-            let change = faint.iter().map(|r| r.1).sum();
-            let region = faint
-                .iter()
-                .map(|r| r.0)
-                .reduce(|a, b| a.union(&b))
-                .expect("two or more");
-            regions.push((region, change));
         }
         PoseRegions { regions, left_out }
     }
@@ -289,10 +273,12 @@ impl Disturbance {
     /// The regions `change` may have changed the light of, in `scene` as now placed (its
     /// lights cast the shadows; its bounds clip them).
     pub fn of(change: &PoseChange, scene: &Scene) -> Disturbance {
+        let moved = change.moved.iter().flat_map(|(a, b)| [*a, *b]).collect();
         if change.lights_moved {
             return Disturbance {
                 everywhere: true,
                 moves: Vec::new(),
+                moved,
             };
         }
         let bounds = Aabb {
@@ -317,6 +303,7 @@ impl Disturbance {
         };
         Disturbance {
             everywhere: false,
+            moved,
             moves: (change.moved.iter())
                 .map(|(before, after)| [PoseRegions::of(regions(before)), PoseRegions::of(regions(after))])
                 .collect(),
@@ -325,6 +312,15 @@ impl Disturbance {
 
     pub fn is_empty(&self) -> bool {
         !self.everywhere && self.moves.is_empty()
+    }
+
+    /// Whether `p` lies on or in a moved mesh, where it was or where it is (its box grown by a
+    /// thousandth of its size: a point on its surface is in).
+    pub fn on_moved_mesh(&self, p: Vec3) -> bool {
+        self.moved.iter().any(|b| {
+            let grown = grown(b, 1e-3 * (b.hi - b.lo).max_element());
+            grown.lo.cmple(p).all() && p.cmple(grown.hi).all()
+        })
     }
 
     /// Whether the moves may have changed `record`'s value by more than `TOLERANCE`. A mesh's

@@ -31,6 +31,7 @@ use crate::irradiance::IrradianceCache;
 use crate::irradiance::index::FrozenIndex;
 use crate::irradiance::last_bounce::{self, LastBounceGrid};
 use crate::irradiance::record::Record;
+use crate::irradiance::record_origins::RecordOrigin;
 use crate::render::edges;
 use crate::render::pixel::{RenderSettings, ThreadClock, ThreadStats, eye_spread, pixel_offset};
 use crate::sampling::Rng;
@@ -87,6 +88,9 @@ pub struct PrepassOutcome {
     /// The rays those samples traced (of every kind: their sites' camera rays, their paths'
     /// segments and shadow rays), counted in `threads` too.
     pub last_bounce_rays: RayCounts,
+    /// Records a sequence's moves dropped that were made again at their own points
+    /// (`remake_records`), counted in `threads`' records too.
+    pub records_remade: u64,
     /// The pixels an edge crosses (`edge_map`), when `--edge-samples` asked for them: the final
     /// pass takes them from here (`RenderSettings::edge_map`) instead of tracing the corners
     /// again.
@@ -387,6 +391,27 @@ fn on_sites<T: Send>(
     all.into_inner().unwrap_or_else(|e| e.into_inner())
 }
 
+/// Makes again, on one thread per entry of `stats`, the records a sequence's moves dropped
+/// whose points still stand (`record_origins`), each at its point from its random state, and
+/// adds them to the cache: before a frame's rounds, which then find them. How many were made.
+fn remake_records(integrator: &Integrator<'_>, cache: &IrradianceCache, stats: &mut [ThreadStats]) -> u64 {
+    let Some(origins) = cache.origins() else {
+        return 0;
+    };
+    let queue = origins.take_to_remake();
+    let indices: Vec<u32> = (0..queue.len() as u32).collect();
+    let remade = on_sites(&indices, stats, |i, counts, out: &mut Vec<(Record, RecordOrigin)>| {
+        let origin = queue[i as usize].clone();
+        let mut rng = origin.rng.clone();
+        let mut work = Work::new(counts);
+        let record = integrator.eye_record(cache, &origin.hit, &mut rng, &mut work);
+        out.push((record, origin));
+    });
+    let made = remade.len() as u64;
+    cache.insert_remade(remade);
+    made
+}
+
 /// What a site's visit does with the points on its eye path that no record covers.
 enum Visit<'r> {
     /// Only finds whether there is one (counting every lookup on the path).
@@ -445,7 +470,13 @@ fn site_visit(
         missed = true;
         // `Find` looks on to the path's end, so that it counts every lookup the site makes.
         if let Visit::Make { records, .. } = &mut visit {
-            records.push((index, integrator.eye_record(cache, &hit, &mut rng, &mut work)));
+            // Its origin, where a sequence will make it again after a move (`record_origins`).
+            let origin = cache.origins().map(|_| RecordOrigin { hit, rng: rng.clone() });
+            let record = integrator.eye_record(cache, &hit, &mut rng, &mut work);
+            if let (Some(origins), Some(origin)) = (cache.origins(), origin) {
+                origins.keep(&record, origin);
+            }
+            records.push((index, record));
         }
     }
     missed
@@ -635,6 +666,9 @@ fn run_watched<P: Pool>(
         outcome.last_bounce_samples = grid.samples();
         cache.set_last_bounce(grid);
     }
+    // A sequence's records that the moves dropped, made again where they were (with the grid
+    // of this frame), before the rounds look for what is missing.
+    outcome.records_remade = remake_records(integrator, cache, &mut outcome.threads);
     // Only the region's pixels (the whole image without --region) will be shaded.
     let area = settings.area(camera);
     let mut set = RecordSet::new(cache, area);
