@@ -12,7 +12,8 @@ animation's keys in a small .bin of its own.
     python3 bench/frames.py              # about 2 minutes on 2 cores
 
 Prints, per frame, the render time (prepass and tiles) and the records made, carried and
-alone, and writes bench/out/frames/frames.csv. Asserts nothing.
+alone, and writes bench/out/frames/frames.csv. Asserts nothing. Scenes where meshes and lights
+move (the temporal cache): bench/frames_moving.py.
 """
 
 import argparse

@@ -337,6 +337,39 @@ fn a_region_of_a_moving_scene_s_frames_is_that_region_of_its_frames() {
 }
 
 #[test]
+fn each_frame_s_line_says_what_the_moves_did_and_the_estimated_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let scene = hall(d, "push", None);
+    let out = d.join("l.####.exr");
+    let mut args = vec![
+        "render",
+        s(&scene),
+        "--no-preview",
+        "--frames",
+        "0-1",
+        "--fps",
+        "4",
+        "-o",
+        s(&out),
+    ];
+    args.extend_from_slice(&SIZE);
+    let e = stderr(&run_ok(&args));
+    let line = e
+        .lines()
+        .find(|l| l.starts_with("icrender: frame 1 "))
+        .unwrap_or_else(|| panic!("{e}"));
+    assert!(
+        line.contains("records made")
+            && line.contains("carried")
+            && line.contains("dropped where things moved")
+            && line.contains("made again where they were")
+            && line.contains("estimated relMSE"),
+        "{line}"
+    );
+}
+
+#[test]
 fn frames_of_a_still_scene_are_the_same_image() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();

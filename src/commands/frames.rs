@@ -224,7 +224,7 @@ pub fn run(args: &RenderArgs, frames: Frames) -> CommandResult {
         if !args.quiet {
             eprintln!(
                 "icrender: frame {n} ({time:.4} s): {}x{} in {render_s:.2} s ({} records made, {records_before} carried{}, \
-                 {:.0}% of lookups hit) -> {}",
+                 {:.0}% of lookups hit){} -> {}",
                 args.width,
                 args.height,
                 stats.records_computed,
@@ -234,6 +234,10 @@ pub fn run(args: &RenderArgs, frames: Frames) -> CommandResult {
                     _ => String::new(),
                 },
                 100.0 * stats.hits as f64 / stats.lookups.max(1) as f64,
+                stats
+                    .error_estimate
+                    .as_ref()
+                    .map_or(String::new(), |e| format!(", estimated relMSE {:.2e}", e.relmse)),
                 outputs.exr.display()
             );
         }
