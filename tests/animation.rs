@@ -370,6 +370,93 @@ fn each_frame_s_line_says_what_the_moves_did_and_the_estimated_error() {
 }
 
 #[test]
+fn step_and_cubic_spline_keys_place_a_mesh_as_a_still_placed_by_hand() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    // The crate held by STEP at its first key until t = 1, and turned by a CUBICSPLINE with zero
+    // tangents from no turn to a quarter turn about +Y over t = 0..1 (at t = 0.5: an eighth).
+    let keyed = |name: &str, animated: bool| {
+        let mut b = GltfBuilder::new();
+        let grey = b.material(lambertian("grey", [0.6, 0.6, 0.6]));
+        inward_box(&mut b, [-3.0, 0.0, -3.0], [3.0, 3.0, 3.0], grey);
+        b.point_light([0.0, 2.8, 0.0], 20.0);
+        let camera = b.perspective_camera(1.1);
+        b.node(json!({"camera": camera, "translation": [0.0, 1.5, 2.8]}));
+        let paint = b.material(lambertian("paint", [0.8, 0.3, 0.2]));
+        let cube = crate_mesh(&mut b, paint, 0.8);
+        let eighth = std::f64::consts::PI / 8.0;
+        if animated {
+            let node = b.node(json!({"mesh": cube, "translation": [-1.0, 0.0, -1.0]}));
+            let h = std::f32::consts::FRAC_PI_4;
+            b.animation(
+                "keys",
+                &[
+                    (
+                        node,
+                        "translation",
+                        "STEP",
+                        &[0.0, 1.0],
+                        &[-1.0, 0.0, -1.0, 1.0, 0.0, 1.0],
+                    ),
+                    (
+                        node,
+                        "rotation",
+                        "CUBICSPLINE",
+                        &[0.0, 1.0],
+                        &[
+                            0.0,
+                            0.0,
+                            0.0,
+                            0.0,
+                            0.0,
+                            0.0,
+                            0.0,
+                            1.0,
+                            0.0,
+                            0.0,
+                            0.0,
+                            0.0, // key 0
+                            0.0,
+                            0.0,
+                            0.0,
+                            0.0,
+                            0.0,
+                            h.sin(),
+                            0.0,
+                            h.cos(),
+                            0.0,
+                            0.0,
+                            0.0,
+                            0.0, // key 1
+                        ],
+                    ),
+                ],
+            );
+        } else {
+            b.node(json!({"mesh": cube, "translation": [-1.0, 0.0, -1.0],
+                "rotation": [0.0, eighth.sin(), 0.0, eighth.cos()]}));
+        }
+        b.write(d, name)
+    };
+    let (animated, by_hand) = (keyed("keys", true), keyed("by_hand", false));
+    // Frame 1 at 2 fps: t = 0.5.
+    render(&animated, &["--frame", "1", "--fps", "2", "-o", s(&d.join("k.exr"))]);
+    render(&by_hand, &["-o", s(&d.join("h.exr"))]);
+    let (frame, still) = (read_exr(&d.join("k.exr")), read_exr(&d.join("h.exr")));
+    // The spline's rotation and the one written by hand agree to float rounding, not bits.
+    let [a, _, _] = rgb(&frame, "direct");
+    let [b, _, _] = rgb(&still, "direct");
+    let worst = a
+        .iter()
+        .zip(&b)
+        .map(|(x, y)| (x - y).abs() / y.abs().max(1e-3))
+        .fold(0.0f32, f32::max);
+    assert!(worst < 1e-2, "direct light differs by {worst} at worst");
+    let e = relmse(&frame, &still);
+    assert!(e < 2e-3, "frame against the still placed by hand: relMSE {e:.2e}");
+}
+
+#[test]
 fn frames_of_a_still_scene_are_the_same_image() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();

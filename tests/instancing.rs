@@ -461,6 +461,19 @@ fn dequantized(q: [f32; 4]) -> [f64; 4] {
 /// turned) either with EXT_mesh_gpu_instancing or, with `as_nodes`, by one child node per
 /// instance carrying the instance's transform.
 fn grove_scene(dir: &Path, as_nodes: bool) -> PathBuf {
+    let name = if as_nodes { "grove_nodes" } else { "grove" };
+    grove_scene_with(dir, as_nodes, name, [0.5, 0.0, -0.5], None)
+}
+
+/// The grove with its node at `translation`, and with `moved_to`, a STEP animation that moves
+/// the node there at t = 1.
+fn grove_scene_with(
+    dir: &Path,
+    as_nodes: bool,
+    name: &str,
+    translation: [f32; 3],
+    moved_to: Option<[f32; 3]>,
+) -> PathBuf {
     let mut b = GltfBuilder::new();
     let floor = b.material(lambertian("floor", [0.6, 0.6, 0.6]));
     let painted = b.material(lambertian("painted", [0.7, 0.4, 0.2]));
@@ -468,7 +481,7 @@ fn grove_scene(dir: &Path, as_nodes: bool) -> PathBuf {
     let floor_mesh = flat_quad(&mut b, 12.0, 1.0, floor);
     b.node(json!({"name": "floor", "mesh": floor_mesh}));
     let block = block(&mut b, painted);
-    let node_transform = json!({"translation": [0.5, 0.0, -0.5], "rotation": rotation([0.0, 1.0, 0.0], 25.0)});
+    let node_transform = json!({"translation": translation, "rotation": rotation([0.0, 1.0, 0.0], 25.0)});
     let mut grove_node = json!({"name": "grove"});
     for (k, v) in node_transform.as_object().unwrap() {
         grove_node[k] = v.clone();
@@ -491,12 +504,41 @@ fn grove_scene(dir: &Path, as_nodes: bool) -> PathBuf {
         b.use_extension("EXT_mesh_gpu_instancing");
         b.extensions_required.push("EXT_mesh_gpu_instancing".into());
     }
-    b.node(grove_node);
+    let grove = b.node(grove_node);
+    if let Some(to) = moved_to {
+        let keys: Vec<f32> = translation.into_iter().chain(to).collect();
+        b.animation("move", &[(grove, "translation", "STEP", &[0.0, 1.0], &keys)]);
+    }
     let lamp_mesh = flat_quad(&mut b, 1.0, -1.0, lamp);
     b.node(json!({"name": "lamp_a", "mesh": lamp_mesh, "translation": [-1.5, 4.0, 0.5]}));
     b.node(json!({"name": "lamp_b", "mesh": lamp_mesh, "translation": [1.5, 4.0, -0.5]}));
-    let name = if as_nodes { "grove_nodes" } else { "grove" };
     b.write_edited(dir, name, roots_only)
+}
+
+/// An animation of an EXT_mesh_gpu_instancing node moves all its instances with it: a frame
+/// after the move is the still render of the node placed there, within float rounding (the
+/// frame's placements are the node's new world matrix times each instance's transform under
+/// the node, recovered from the rest pose's).
+#[test]
+fn an_animated_gpu_instancing_node_moves_its_instances() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let to = [-0.5f32, 0.0, 0.5];
+    let animated = grove_scene_with(d, false, "grove_moving", [0.5, 0.0, -0.5], Some(to));
+    let still = grove_scene_with(d, false, "grove_there", to, None);
+    let a = args("-ab 1 --aovs albedo");
+    let mut a: Vec<&str> = a.iter().map(String::as_str).collect();
+    let (placed, _) = render_to(d, &still, "there", &a);
+    a.extend(["--frame", "2", "--fps", "1"]);
+    let (frame, _) = render_to(d, &animated, "moved", &a);
+    let diff = difference(&frame, &placed, &channels("direct"));
+    assert!(
+        diff.worst < 1e-3,
+        "direct light of the moved instances: {:.2e}",
+        diff.worst
+    );
+    let e = relmse(&frame, &placed);
+    assert!(e < 2e-3, "the frame against the still: relMSE {e:.2e}");
 }
 
 /// EXT_mesh_gpu_instancing places the mesh once per instance at node world * (T * R * S) of
