@@ -533,6 +533,69 @@ fn a_moved_light_s_indirect_light_follows_it() {
     );
 }
 
+#[test]
+fn a_moved_emissive_mesh_is_a_moved_light() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    // A room lit by a glowing panel that the animation `slide` carries across the ceiling.
+    let lit = |name: &str, x: Option<f32>| {
+        let mut b = GltfBuilder::new();
+        let grey = b.material(lambertian("grey", [0.6, 0.6, 0.6]));
+        inward_box(&mut b, [-3.0, 0.0, -3.0], [3.0, 3.0, 3.0], grey);
+        let camera = b.perspective_camera(1.1);
+        b.node(json!({"camera": camera, "translation": [0.0, 1.5, 2.8]}));
+        let glow = b.material(emissive_lambertian("glow", [1.0; 3], 10.0));
+        let panel = b.mesh(
+            &[[-0.4, 2.9, -0.4], [0.4, 2.9, -0.4], [0.4, 2.9, 0.4], [-0.4, 2.9, 0.4]],
+            &[[0, 2, 1], [0, 3, 2]],
+            Some(glow),
+        );
+        let node = b.node(json!({"name": "panel", "mesh": panel, "translation": [x.unwrap_or(-2.0), 0.0, 0.0]}));
+        if x.is_none() {
+            b.animation(
+                "slide",
+                &[(
+                    node,
+                    "translation",
+                    "LINEAR",
+                    &[0.0, 1.0],
+                    &[-2.0, 0.0, 0.0, 2.0, 0.0, 0.0],
+                )],
+            );
+        }
+        b.write(d, name)
+    };
+    let scene = lit("slide", None);
+    let stats = d.join("e.####.json");
+    render(
+        &scene,
+        &[
+            "--frames",
+            "0-2",
+            "--fps",
+            "2",
+            "-o",
+            s(&d.join("e.####.exr")),
+            "--stats",
+            s(&stats),
+        ],
+    );
+    for (n, x) in [(1, 0.0), (2, 2.0)] {
+        let st = stats_of(&d.join(format!("e.000{n}.json")));
+        // Every record is dropped: the light moved.
+        assert_eq!(st["records_before"], 0, "frame {n}");
+        let still_scene = lit(&format!("panel{n}"), Some(x));
+        let out = d.join(format!("panel{n}.exr"));
+        render(&still_scene, &["-o", s(&out)]);
+        let (frame, still) = (read_exr(&d.join(format!("e.000{n}.exr"))), read_exr(&out));
+        assert!(mean(&rgb(&frame, "direct")[0]) > 0.01, "frame {n}: the panel lights the room");
+        assert_eq!(rgb(&frame, "direct"), rgb(&still, "direct"), "frame {n}: direct light");
+        assert_eq!(rgb(&frame, "emission"), rgb(&still, "emission"), "frame {n}: emission");
+        let e = relmse(&frame, &still);
+        assert!(e < 2e-3, "frame {n} against its still: relMSE {e:.2e}");
+    }
+}
+
 /// Runs a small render with `extra`, which must be refused as bad input (exit 2) with one line
 /// and no output written; returns what it said.
 fn refused(scene: &Path, out: &Path, extra: &[&str]) -> String {
