@@ -29,17 +29,17 @@ import json
 import math
 import os
 import struct
-import subprocess
 import time
 
 import common
+import frames as walk
 
 import numpy as np  # noqa: E402
 
 SCENE = os.path.join(common.SHARED_SCENES, "conference_room", "conference.gltf")
 OUT = os.path.join(common.ROOT, "bench", "out", "frames_moving")
 DOCS = os.path.join(common.ROOT, "docs")
-FPS = 24
+FPS = walk.FPS
 # The still camera: at the room's east end, head height, looking west down its length.
 CAMERA = (1550.0, 320.0, -190.0)
 HEADING = 90.0
@@ -146,19 +146,9 @@ def author(path, what):
 
 
 def render(scene, frames, out, stats, options):
-    """One icrender process; returns its wall time."""
-    cmd = [common.BINARY, "render", scene, "--allow-outside-refs", "-q", "--no-preview", "--overwrite",
-           "--fps", str(FPS), "-o", out, "--stats", stats, "--aovs", "position"] + frames + options
-    start = time.monotonic()
-    result = subprocess.run(cmd, capture_output=True, text=True)
-    if result.returncode != 0:
-        raise RuntimeError(f"icrender failed: {' '.join(cmd)}\n{result.stderr}")
-    return time.monotonic() - start
-
-
-def load(path):
-    with open(path) as f:
-        return json.load(f)
+    """One icrender process (as bench/frames.py runs it, with the position layer); returns its wall
+    time."""
+    return walk.render(scene, frames, out, stats, options + ["--aovs", "position"])
 
 
 def read(path):
@@ -211,8 +201,8 @@ def run_case(label, what, numbers, options):
         ref_exr = os.path.join(OUT, f"{tag}.ref.{n:04d}.exr")
         alone_wall = render(scene, ["--frame", str(n)], alone_exr, alone_exr.replace(".exr", ".json"), options)
         render(scene, ["--frame", str(n), "--spp", "4"], ref_exr, ref_exr.replace(".exr", ".json"), options)
-        seq = load(os.path.join(OUT, f"{tag}.seq.{n:04d}.json"))
-        alone = load(alone_exr.replace(".exr", ".json"))
+        seq = walk.load(os.path.join(OUT, f"{tag}.seq.{n:04d}.json"))
+        alone = walk.load(alone_exr.replace(".exr", ".json"))
         (s_rgb, position), (a_rgb, _), (r_rgb, _) = (
             read(os.path.join(OUT, f"{tag}.seq.{n:04d}.exr")), read(alone_exr), read(ref_exr))
         row = {
