@@ -11,11 +11,12 @@
 //!   the light, clipped to the scene's bounds).
 //!
 //! A region changes a record by at most the share of the record's cosine-weighted hemisphere it
-//! covers, times how much the light from it changes. A record is dropped when its regions' shares
-//! (each weighted by the change it may bring) add up to more than `TOLERANCE`, or when its disc
-//! reaches into one; the rest are kept unchanged, so where no move reaches, frames read the same records and
-//! give the same pixels (no flicker). A moved light (a punctual light, or an emissive mesh)
-//! changes the direct light on every surface: every record is dropped.
+//! covers, times how much the light from it changes. A record is dropped when its regions'
+//! shares (each weighted by the change it may bring) add up to more than `TOLERANCE`, or when its
+//! disc reaches into one; the rest are kept unchanged, so where no move reaches, frames read the
+//! same records and give the same pixels (no flicker). A moved light (a punctual light, or an
+//! emissive mesh) changes the direct light on every surface: every record is dropped. A dropped
+//! record is made again at its own point (`record_origins`) unless a moved mesh took its place.
 //!
 //! Each bound holds against the records made for the pose before, so a record kept for many
 //! frames is off by at most two regions' shares: the pose it was made for and the current one.
@@ -28,12 +29,12 @@ use glam::Vec3;
 /// Largest weighted share of a record's hemisphere the moves may cover before it is made again:
 /// 5 % of its value, within the noise two renders of one frame differ by (relMSE 5e-4 to 3.5e-3
 /// on a Cornell box's ceiling, 2-6 % rms). Measured by bench/frames_moving.py (a crate pushed
-/// through the conference room, 320x180): at 0.005, 0.02, 0.05 and 0.2 the frames after the
-/// first kept 24 %, 71 %, 83 % and 87 % of the records, and their 4x4 relMSE against the frame
-/// rendered alone at 4 samples a pixel was 4.9e-4, 5.7e-4, 5.3e-4 and 5.3e-4 (the frame alone:
-/// 4.8e-4): a record made again lands elsewhere than the one it replaces, which differs from the
-/// frame alone more than the kept records' staleness does; far from the crate the frames
-/// differed by 8e-5, 1.4e-4, 9e-8 and 1e-8 (relMSE).
+/// through the conference room, 320x180, 3 frames), when a dropped record was still placed
+/// anew by the prepass (not yet made again at its point): at 0.005, 0.02, 0.05 and 0.2 the
+/// frames after the first kept 24 %, 71 %, 83 % and 87 % of the records, and their 4x4 relMSE
+/// against the frame rendered alone at 4 samples a pixel was 4.9e-4, 5.7e-4, 5.3e-4 and 5.3e-4
+/// (the frame alone: 4.8e-4); far from the crate the frames differed by 8e-5, 1.4e-4, 9e-8 and
+/// 1e-8 (relMSE). The latest run with this value: docs/FRAMES.md.
 pub const TOLERANCE: f32 = 0.05;
 
 /// The near region: the box grown on every side by this many times its largest side.
