@@ -2,8 +2,8 @@
 //! where the animations put them at a frame's time, and what moved since the last pose (which
 //! the irradiance cache needs to know, `irradiance::temporal`).
 //!
-//! The renderer's coordinates keep the first pose's origin for the whole sequence (records and
-//! views are stored in them), and a node nothing animates keeps the loader's own world matrix,
+//! The renderer's coordinates keep the rest pose's origin (the loader's) for the whole sequence
+//! (records and views are stored in them), and a node nothing animates keeps the loader's own world matrix,
 //! bit for bit: a frame's static meshes are exactly the still render's.
 
 use super::animation::{Mat4, Rig};
