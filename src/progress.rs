@@ -201,6 +201,17 @@ impl Progress {
     /// frame of a sequence, event `frame_done` with the frame and its EXR (a farm manager may
     /// pick the file up now: it is whole).
     pub fn done(&self, output: &std::path::Path, estimate: Option<&ErrorEstimate>) {
+        self.done_with(output, estimate, None);
+    }
+
+    /// As `done`, with `records` (a frame's records kept, dropped, made again and made) in the
+    /// line.
+    pub fn done_with(
+        &self,
+        output: &std::path::Path,
+        estimate: Option<&ErrorEstimate>,
+        records: Option<serde_json::Value>,
+    ) {
         if self.style != Style::Json {
             return;
         }
@@ -222,6 +233,9 @@ impl Progress {
         };
         if let Some(estimate) = estimate {
             line["error_estimate"] = serde_json::to_value(estimate).unwrap_or_default();
+        }
+        if let Some(records) = records {
+            line["records"] = records;
         }
         print_line(&line);
     }

@@ -335,7 +335,7 @@ fn a_region_of_a_moving_scene_s_frames_is_that_region_of_its_frames() {
 }
 
 #[test]
-fn each_frame_s_line_says_what_the_moves_did_and_the_estimated_error() {
+fn each_frame_s_lines_say_what_the_moves_did_and_the_estimated_error() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     let scene = hall(d, "push", None);

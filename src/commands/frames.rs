@@ -219,7 +219,16 @@ pub fn run(args: &RenderArgs, frames: Frames) -> CommandResult {
             std::fs::write(done_marker(dir, n), outputs.exr.as_os_str().as_encoded_bytes())
                 .map_err(|e| CommandError::failed(format!("{}: {e}", done_marker(dir, n).display())))?;
         }
-        progress.done(&outputs.exr, stats.error_estimate.as_ref());
+        // Where meshes or lights move, what the moves did to the records, for a farm's log.
+        let records = stats.records_invalidated.map(|dropped| {
+            serde_json::json!({
+                "kept": records_before,
+                "dropped": dropped,
+                "remade": stats.records_remade.unwrap_or(0),
+                "made": stats.records_computed - stats.records_remade.unwrap_or(0),
+            })
+        });
+        progress.done_with(&outputs.exr, stats.error_estimate.as_ref(), records);
         written.push(n);
         if !args.quiet {
             eprintln!(
