@@ -302,10 +302,16 @@ impl IrradianceCache {
         let dropped = if disturbance.is_empty() {
             Vec::new()
         } else {
-            self.index.retain(|r| !disturbance.disturbs(r))
+            // As lookups read it: over its radii widened by the blend.
+            let blend = self.settings.blend;
+            self.index.retain(|r| !disturbance.disturbs(&r.widened(blend)))
         };
         if let Some(origins) = &mut self.origins {
             origins.dropped(&dropped, disturbance);
+            // And those of records a round made but did not keep (covered by another of its
+            // records), which nothing will drop.
+            let held: std::collections::HashSet<_> = self.index.all().iter().map(Record::identity).collect();
+            origins.keep_only(&held);
         }
         let invalidated = dropped.len() as u64;
         temporal::Invalidation {

@@ -14,7 +14,7 @@ use super::record::{Record, RecordIdentity};
 use super::temporal::Disturbance;
 use crate::sampling::Rng;
 use crate::tracer::SurfaceHit;
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 use std::sync::Mutex;
 
 /// The point a record was made at and the random state its hemisphere began from.
@@ -50,6 +50,12 @@ impl RecordOrigins {
                 to_remake.push(origin);
             }
         }
+    }
+
+    /// Forgets the origins of records not in `held` (the cache's).
+    pub fn keep_only(&mut self, held: &HashSet<RecordIdentity>) {
+        let by_record = self.by_record.get_mut().unwrap_or_else(|e| e.into_inner());
+        by_record.retain(|id, _| held.contains(id));
     }
 
     /// The origins of the records to make again (made once: the queue empties).
