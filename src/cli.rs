@@ -333,10 +333,11 @@ pub struct RenderArgs {
     /// moment and started again with the same command resumes instead of starting over.
     #[arg(long = "checkpoint", value_name = "DIR")]
     pub checkpoint: Option<PathBuf>,
-    /// Render frames A to B (both included) of the scene's glTF animation of its camera, each to
-    /// its own EXR: `-o out.####.exr` (or `%04d`) takes the zero-padded frame number; a name
-    /// without one gets `.####` before its extension. Frame N is at time N / --fps. The
-    /// irradiance cache is carried from frame to frame. One process only.
+    /// Render frames A to B (both included) of the scene's glTF animations (cameras, meshes and
+    /// lights), each to its own EXR: `-o out.####.exr` (or `%04d`) takes the zero-padded frame
+    /// number; a name without one gets `.####` before its extension. Frame N is at time N /
+    /// --fps. The irradiance cache is carried from frame to frame, less the records moving
+    /// meshes or lights changed. One process only.
     #[arg(long = "frames", value_name = "A-B", value_parser = crate::frames::parse_range, conflicts_with = "frame")]
     pub frames: Option<crate::frames::FrameRange>,
     /// Render frame N of the animation alone (as --frames N-N).
