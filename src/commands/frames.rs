@@ -198,8 +198,11 @@ pub fn run(args: &RenderArgs, frames: Frames) -> CommandResult {
         stats.frame_time_s = Some(time);
         stats.records_before = Some(records_before);
         if scene_moves {
-            stats.records_invalidated = Some(invalidation.map_or(0, |i| i.invalidated));
             stats.pose_s = Some(pose_s);
+        }
+        // What the moves did to the records (nothing to say without a cache).
+        if let (true, Some(invalidation)) = (scene_moves, invalidation) {
+            stats.records_invalidated = Some(invalidation.invalidated);
             stats.records_remade = Some(rendered.prepass.as_ref().map_or(0, |p| p.records_remade));
             if let Some(memory) = job.cache.as_ref().and_then(|c| c.grid_memory()) {
                 let (kept, sampled) = memory.counts();
