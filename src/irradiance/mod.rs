@@ -299,18 +299,26 @@ impl IrradianceCache {
             memory.forget_disturbed(disturbance);
         }
         let before = self.index.len() as u64;
+        let mut held = std::collections::HashSet::new();
         let dropped = if disturbance.is_empty() {
             Vec::new()
         } else {
             // As lookups read it: over its radii widened by the blend.
-            let blend = self.settings.blend;
-            self.index.retain(|r| !disturbance.disturbs(&r.widened(blend)))
+            let (blend, remember) = (self.settings.blend, self.origins.is_some());
+            self.index.retain(|r| {
+                let keep = !disturbance.disturbs(r, blend);
+                if keep && remember {
+                    held.insert(r.identity());
+                }
+                keep
+            })
         };
-        if let Some(origins) = &mut self.origins {
+        if let Some(origins) = &mut self.origins
+            && !disturbance.is_empty()
+        {
             origins.dropped(&dropped, disturbance);
             // And those of records a round made but did not keep (covered by another of its
             // records), which nothing will drop.
-            let held: std::collections::HashSet<_> = self.index.all().iter().map(Record::identity).collect();
             origins.keep_only(&held);
         }
         let invalidated = dropped.len() as u64;

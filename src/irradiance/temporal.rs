@@ -140,41 +140,6 @@ pub struct Invalidation {
     pub invalidated: u64,
 }
 
-fn grown(b: &Aabb, by: f32) -> Aabb {
-    Aabb {
-        lo: b.lo - Vec3::splat(by),
-        hi: b.hi + Vec3::splat(by),
-    }
-}
-
-fn corners(b: &Aabb) -> [Vec3; 8] {
-    std::array::from_fn(|i| {
-        Vec3::new(
-            if i & 1 == 0 { b.lo.x } else { b.hi.x },
-            if i & 2 == 0 { b.lo.y } else { b.hi.y },
-            if i & 4 == 0 { b.lo.z } else { b.hi.z },
-        )
-    })
-}
-
-fn clipped(b: &Aabb, to: &Aabb) -> Option<Aabb> {
-    let c = Aabb {
-        lo: b.lo.max(to.lo),
-        hi: b.hi.min(to.hi),
-    };
-    (c.lo.cmple(c.hi).all()).then_some(c)
-}
-
-fn box_of(points: impl IntoIterator<Item = Vec3>) -> Option<Aabb> {
-    points
-        .into_iter()
-        .filter(|p| p.is_finite())
-        .fold(None, |b: Option<Aabb>, p| {
-            let point = Aabb { lo: p, hi: p };
-            Some(b.map_or(point, |b| b.union(&point)))
-        })
-}
-
 /// How far along `d` from `from` (inside `scene`) the scene's box ends, in units of `d`.
 fn exit_along(from: Vec3, d: Vec3, scene: &Aabb) -> f32 {
     let mut t = f32::INFINITY;
@@ -196,27 +161,27 @@ fn exit_along(from: Vec3, d: Vec3, scene: &Aabb) -> f32 {
 /// them may cut a sliver off; a box of light points projects through each mesh corner onto the
 /// walls as its corners do.)
 fn shadow_box(b: &Aabb, light: LightPlace, scene: &Aabb) -> Option<Aabb> {
-    let mut points: Vec<Vec3> = corners(b).to_vec();
+    let mut points: Vec<Vec3> = b.corners().to_vec();
     match light {
         LightPlace::Direction(d) => {
-            for s in corners(b) {
+            for s in b.corners() {
                 points.push(s + d * exit_along(s, d, scene));
             }
         }
         LightPlace::Box(l) => {
             // The light's box reaching into the mesh's: its shadow may be anywhere.
-            if l.lo.cmple(b.hi).all() && b.lo.cmple(l.hi).all() {
+            if l.meets(b) {
                 return Some(*scene);
             }
-            for lc in corners(&l) {
-                for s in corners(b) {
+            for lc in l.corners() {
+                for s in b.corners() {
                     let d = s - lc;
                     points.push(s + d * exit_along(s, d, scene));
                 }
             }
         }
     }
-    box_of(points).and_then(|s| clipped(&s, scene))
+    Aabb::around(points).and_then(|s| s.clipped(scene))
 }
 
 /// The scene's lights as shadow casters: its punctual lights, and its emitting triangles one
@@ -259,7 +224,7 @@ fn shadow_casters(scene: &Scene) -> Vec<ShadowCaster> {
         groups.push(rest);
     }
     for group in groups {
-        let Some(place) = box_of(group.iter().flat_map(|t| [t.p0, t.p0 + t.e1, t.p0 + t.e2])) else {
+        let Some(place) = Aabb::around(group.iter().flat_map(|t| [t.p0, t.p0 + t.e1, t.p0 + t.e2])) else {
             continue;
         };
         casters.push(ShadowCaster {
@@ -289,7 +254,7 @@ impl Disturbance {
         let casters = shadow_casters(scene);
         let regions = |b: &Aabb| {
             let side = (b.hi - b.lo).max_element();
-            let mut out = vec![(*b, MESH_CHANGE), (grown(b, NEAR_GROWTH * side), NEAR_CHANGE)];
+            let mut out = vec![(*b, MESH_CHANGE), (b.grown(NEAR_GROWTH * side), NEAR_CHANGE)];
             // A light's shadow changes the light of the surfaces it falls on by at most that
             // light's share of what reaches them; taken where the mesh is (its shadow's start).
             let given: Vec<f32> = casters.iter().map(|c| c.irradiance_at(b.centre())).collect();
@@ -318,18 +283,16 @@ impl Disturbance {
     /// Whether `p` lies on or in a moved mesh, where it was or where it is (its box grown by a
     /// thousandth of its size: a point on its surface is in).
     pub fn on_moved_mesh(&self, p: Vec3) -> bool {
-        self.moved.iter().any(|b| {
-            let grown = grown(b, 1e-3 * (b.hi - b.lo).max_element());
-            grown.lo.cmple(p).all() && p.cmple(grown.hi).all()
-        })
+        (self.moved.iter()).any(|b| b.grown(1e-3 * (b.hi - b.lo).max_element()).contains(p))
     }
 
     /// Whether the moves may have changed `record`'s value by more than `TOLERANCE`. A mesh's
     /// effect on the record is its effect in the pose the record was made for less its effect
     /// now; both darken or both brighten the same surfaces, so the change is at most the larger
     /// of the two, not their sum. Several meshes' changes add.
-    pub fn disturbs(&self, record: &Record) -> bool {
-        self.disturbs_point(record.position, record.normal, record.reach())
+    /// `record` is read over its radii widened by `blend` (`CacheSettings::blend`).
+    pub fn disturbs(&self, record: &Record, blend: f32) -> bool {
+        self.disturbs_point(record.position, record.normal, record.reach() * blend)
     }
 
     /// Whether the moves may have changed by more than `TOLERANCE` the light arriving at
@@ -444,17 +407,17 @@ mod tests {
         let d = Disturbance::of(&change, &scene);
         let up = Vec3::Y;
         // On the floor beside the mesh, and on the floor far away.
-        assert!(d.disturbs(&record_at(Vec3::new(2.5, -50.0, 0.0), up)));
-        assert!(!d.disturbs(&record_at(Vec3::new(40.0, -50.0, 40.0), up)));
+        assert!(d.disturbs(&record_at(Vec3::new(2.5, -50.0, 0.0), up), 1.0));
+        assert!(!d.disturbs(&record_at(Vec3::new(40.0, -50.0, 40.0), up), 1.0));
         // A record facing away from the mesh, close to it, on a wall behind which it is.
-        assert!(!d.disturbs(&record_at(Vec3::new(10.0, -45.0, 0.0), Vec3::X)));
+        assert!(!d.disturbs(&record_at(Vec3::new(10.0, -45.0, 0.0), Vec3::X), 1.0));
         // Seen from across the room at a distance where it covers more than the tolerance.
-        assert!(d.disturbs(&record_at(Vec3::new(5.0, -45.0, 0.0), -Vec3::X)));
+        assert!(d.disturbs(&record_at(Vec3::new(5.0, -45.0, 0.0), -Vec3::X), 1.0));
         // A moved light takes every record.
         let lit = PoseChange {
             moved: Vec::new(),
             lights_moved: true,
         };
-        assert!(Disturbance::of(&lit, &scene).disturbs(&record_at(Vec3::new(40.0, 40.0, 40.0), up)));
+        assert!(Disturbance::of(&lit, &scene).disturbs(&record_at(Vec3::new(40.0, 40.0, 40.0), up), 1.0));
     }
 }

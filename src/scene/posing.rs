@@ -19,6 +19,17 @@ pub struct Aabb {
 }
 
 impl Aabb {
+    /// The box of the finite points among `points` (None without one).
+    pub fn around(points: impl IntoIterator<Item = Vec3>) -> Option<Aabb> {
+        points
+            .into_iter()
+            .filter(|p| p.is_finite())
+            .fold(None, |b: Option<Aabb>, p| {
+                let point = Aabb { lo: p, hi: p };
+                Some(b.map_or(point, |b| b.union(&point)))
+            })
+    }
+
     pub fn centre(&self) -> Vec3 {
         0.5 * (self.lo + self.hi)
     }
@@ -28,6 +39,41 @@ impl Aabb {
             lo: self.lo.min(other.lo),
             hi: self.hi.max(other.hi),
         }
+    }
+
+    /// The box grown by `by` on every side.
+    pub fn grown(&self, by: f32) -> Aabb {
+        Aabb {
+            lo: self.lo - Vec3::splat(by),
+            hi: self.hi + Vec3::splat(by),
+        }
+    }
+
+    /// The part of the box inside `to` (None where they do not meet).
+    pub fn clipped(&self, to: &Aabb) -> Option<Aabb> {
+        let c = Aabb {
+            lo: self.lo.max(to.lo),
+            hi: self.hi.min(to.hi),
+        };
+        c.lo.cmple(c.hi).all().then_some(c)
+    }
+
+    pub fn contains(&self, p: Vec3) -> bool {
+        self.lo.cmple(p).all() && p.cmple(self.hi).all()
+    }
+
+    pub fn meets(&self, other: &Aabb) -> bool {
+        self.lo.cmple(other.hi).all() && other.lo.cmple(self.hi).all()
+    }
+
+    pub fn corners(&self) -> [Vec3; 8] {
+        std::array::from_fn(|i| {
+            Vec3::new(
+                if i & 1 == 0 { self.lo.x } else { self.hi.x },
+                if i & 2 == 0 { self.lo.y } else { self.hi.y },
+                if i & 4 == 0 { self.lo.z } else { self.hi.z },
+            )
+        })
     }
 }
 
@@ -114,21 +160,14 @@ impl PoseSource {
     fn instance_box(&self, i: usize, world: &[f64; 16], origin: DVec3) -> Option<Aabb> {
         let (lo, hi) = self.mesh_bounds[self.gltf.instances[i].mesh]?;
         let m = DMat4::from_cols_array(world);
-        let mut b: Option<Aabb> = None;
-        for corner in 0..8 {
+        Aabb::around((0..8).map(|corner| {
             let local = DVec3::new(
                 if corner & 1 == 0 { lo.x } else { hi.x },
                 if corner & 2 == 0 { lo.y } else { hi.y },
                 if corner & 4 == 0 { lo.z } else { hi.z },
             );
-            let p = (m.transform_point3(local) - origin).as_vec3();
-            if !p.is_finite() {
-                continue;
-            }
-            let point = Aabb { lo: p, hi: p };
-            b = Some(b.map_or(point, |b| b.union(&point)));
-        }
-        b
+            (m.transform_point3(local) - origin).as_vec3()
+        }))
     }
 }
 
