@@ -239,6 +239,10 @@ impl Disturbance {
     /// The regions `change` may have changed the light of, in `scene` as now placed (its
     /// lights cast the shadows; its bounds clip them).
     pub fn of(change: &PoseChange, scene: &Scene) -> Disturbance {
+        if change.is_empty() {
+            // A camera's frame: nothing to look at (not even the lights).
+            return Disturbance::default();
+        }
         let moved = change.moved.iter().flat_map(|(a, b)| [*a, *b]).collect();
         if change.lights_moved {
             return Disturbance {

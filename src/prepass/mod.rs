@@ -401,11 +401,11 @@ fn remake_records(integrator: &Integrator<'_>, cache: &IrradianceCache, stats: &
     let queue = origins.take_to_remake();
     let indices: Vec<u32> = (0..queue.len() as u32).collect();
     let remade = on_sites(&indices, stats, |i, counts, out: &mut Vec<(Record, RecordOrigin)>| {
-        let origin = queue[i as usize].clone();
+        let origin = &queue[i as usize];
         let mut rng = origin.rng.clone();
         let mut work = Work::new(counts);
         let record = integrator.eye_record(cache, &origin.hit, &mut rng, &mut work);
-        out.push((record, origin));
+        out.push((record, origin.clone()));
     });
     let made = remade.len() as u64;
     cache.insert_remade(remade);
@@ -471,10 +471,11 @@ fn site_visit(
         // `Find` looks on to the path's end, so that it counts every lookup the site makes.
         if let Visit::Make { records, .. } = &mut visit {
             // Its origin, where a sequence will make it again after a move (`record_origins`).
-            let origin = cache.origins().map(|_| RecordOrigin { hit, rng: rng.clone() });
+            let origins = cache.origins();
+            let start = origins.map(|_| rng.clone());
             let record = integrator.eye_record(cache, &hit, &mut rng, &mut work);
-            if let (Some(origins), Some(origin)) = (cache.origins(), origin) {
-                origins.keep(&record, origin);
+            if let (Some(origins), Some(rng)) = (origins, start) {
+                origins.keep(&record, RecordOrigin { hit, rng });
             }
             records.push((index, record));
         }
