@@ -189,11 +189,12 @@ pub struct RenderArgs {
     /// setting, and what the MPI modes do).
     #[arg(long = "ic-build", value_enum)]
     pub ic_build: Option<CacheBuildArg>,
-    /// Indirect light beyond a record's own bounce (-ab 2 and more). grid (the default): each of
-    /// a record's hemisphere rays continues as a path whose last bounce's surface reads the light
-    /// it receives, direct and indirect, from a world-space grid sampled before the prepass
-    /// (without a prepass, as paths); paths: the last bounce traced too (unbiased, no deeper
-    /// records); records: deeper bounces are cached records too, as in Radiance.
+    /// The light at a record's hemisphere hits and beyond. grid (the default): each of a
+    /// record's hemisphere rays continues as a path whose last bounce's surface reads the light
+    /// it receives, direct and indirect, from a world-space grid sampled before the prepass (at
+    /// -ab 1 the hits read their direct light from it; without a prepass, as paths); paths:
+    /// the last bounce traced too, every hit its own shadow ray (unbiased, no deeper records);
+    /// records: deeper bounces are cached records too, as in Radiance.
     #[arg(long = "ic-deep", value_enum, default_value_t = DeepArg::Grid)]
     pub ic_deep: DeepArg,
     /// How ranks share the work under mpirun (serial without mpirun).

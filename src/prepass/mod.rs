@@ -164,7 +164,6 @@ fn last_bounce_grid<P: Pool>(
     stats: &mut [ThreadStats],
 ) -> Result<LastBounceGrid, P::Error> {
     let Pass { integrator, camera, .. } = pass;
-    let cell = integrator.scene.size() / last_bounce::CELLS_PER_SIZE;
     let stride = last_bounce::site_stride(camera.width, camera.height);
     let mine = pool.share().indices(camera.height.div_ceil(stride) as usize);
     let next = AtomicUsize::new(0);
@@ -182,9 +181,14 @@ fn last_bounce_grid<P: Pool>(
     });
     let mut rows = pool.grid_rows(rows.into_inner().unwrap_or_else(|e| e.into_inner()))?;
     rows.sort_unstable_by_key(|(y, _)| *y);
+    let positions = rows
+        .iter()
+        .flat_map(|(_, row)| row.iter().map(|sample| sample.position));
+    let cell = last_bounce::cell_side(integrator.scene.size(), positions);
     Ok(LastBounceGrid::from_samples(
         cell,
         rows.into_iter().flat_map(|(_, row)| row),
+        integrator.last_bounce_reads(),
     ))
 }
 

@@ -404,7 +404,7 @@ mod tests {
                 }
             }
         }
-        LastBounceGrid::from_samples(cell, samples)
+        LastBounceGrid::from_samples(cell, samples, crate::irradiance::last_bounce::Reads::CoarserToo)
     }
 
     #[test]
