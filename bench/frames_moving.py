@@ -281,7 +281,7 @@ def write_page(args, cases, seconds):
                      f"{s['worst_alone_flicker']:.2e} |")
     lines += ["", "Per frame (kept, dropped, remade, made: records kept from the last frame, dropped by the "
               "moves, made again at their own points, made by the prepass; grid sites: the last-bounce grid's "
-              "sites taken from the last frame and sampled afresh, at -ab 2):", "",
+              "sites taken from the last frame and sampled afresh):", "",
               "| case | frame | render s | pose s | kept | dropped | remade | made | grid sites kept / sampled | "
               "alone s | ghost 4x4 | alone 4x4 | flicker | alone flicker |",
               "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
