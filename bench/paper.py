@@ -600,6 +600,35 @@ def records_sweep(args):
     print(text)
     with open(os.path.join(args.out, "records-sweep.md"), "w") as f:
         f.write(text + "\n")
+    write_sweep_page(args, rows, text, time.perf_counter() - started)
+
+
+def write_sweep_page(args, rows, table_text, elapsed):
+    """docs/RECORDS_SWEEP.md (under --docs): the command as run, when and how long, the table
+    and its verdict; every run in records_sweep/runs.csv beside it."""
+    folder = os.path.join(args.docs, "records_sweep")
+    os.makedirs(folder, exist_ok=True)
+    write_csv(os.path.join(folder, "runs.csv"), rows)
+    command = " ".join(["python3 bench/paper.py"] + sys.argv[1:])
+    page = [
+        "# Records sweep: progressive mode, every mode at its defaults",
+        "",
+        f"Written by `{command}` on {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())} "
+        f"({elapsed / 60:.1f} min, 2 shared cores, every mpirun oversubscribed); every run in "
+        "[records_sweep/runs.csv](records_sweep/runs.csv). Do not edit by hand: rerun the command. The "
+        f"full sweep (`python3 bench/paper.py --records-sweep`: {', '.join(map(str, SWEEP_RANKS))} "
+        f"processes, {', '.join(map(str, SWEEP_SIZES))} pixels, the three scenes, {SWEEP_REPEAT} seeds "
+        "each) takes hours here.",
+        "",
+        "Component mode should make the fewest records in every configuration: its PRs send their "
+        "misses to the PAs, where the other modes' ranks each make records side by side. \"fewest?\" "
+        "compares medians; the interval is a 95 % bootstrap over the seeds.",
+        "",
+        table_text,
+    ]
+    with open(os.path.join(args.docs, "RECORDS_SWEEP.md"), "w") as f:
+        f.write("\n".join(page) + "\n")
+    say(f"wrote {rel(os.path.join(args.docs, 'RECORDS_SWEEP.md'))}")
 
 
 def main():
@@ -640,7 +669,8 @@ def main():
     parser.add_argument("--records-sweep", action="store_true",
                         help="only the records sweep: every mode at its defaults in progressive mode over "
                              "--sweep-ranks, --sweep-sizes and --scenes, with --sweep-repeat seeds each; whether "
-                             "component mode made the fewest records everywhere (records-sweep.md in --out)")
+                             "component mode made the fewest records everywhere (records-sweep.md in --out, "
+                             "RECORDS_SWEEP.md in --docs)")
     parser.add_argument("--sweep-ranks", default=",".join(map(str, SWEEP_RANKS)))
     parser.add_argument("--sweep-sizes", default=",".join(map(str, SWEEP_SIZES)), help="square image sizes")
     parser.add_argument("--sweep-repeat", type=int, default=SWEEP_REPEAT, help="seeds per configuration")

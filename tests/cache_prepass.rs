@@ -250,6 +250,25 @@ fn the_ceiling_above_a_hanging_plate_is_not_lit_by_the_open_ceilings_records() {
     );
 }
 
+/// The ceiling room in `dir`, the arguments that look up at its ceiling at 96x96 with `bounces`
+/// (-ab) and -ad 256 on two threads, and the mean of brute force's indirect layer there.
+fn ceiling_room_looking_up(dir: &Path, bounces: &'static str) -> (PathBuf, Vec<&'static str>, f64) {
+    let scene = ceiling_room(dir);
+    let common = [
+        &["-x", "96", "-y", "96", "-ab", bounces, "-ad", "256", "--threads", "2"][..],
+        &LOOK_UP[..],
+    ]
+    .concat();
+    let (brute, _) = render_to(dir, &scene, "brute", &[&common[..], &["-aa", "0"]].concat());
+    let truth = indirect_mean(&brute);
+    (scene, common, truth)
+}
+
+/// The mean of an image's indirect layer over its pixels and channels.
+fn indirect_mean(image: &ImageData) -> f64 {
+    mean(&rgb(image, "indirect").concat())
+}
+
 /// At -ab 2 a record's hemisphere rays end on surfaces whose own light is the last bounce's:
 /// by default read from the last bounce's grid (`irradiance::last_bounce`: the light those
 /// surfaces receive, direct and indirect) instead of a light pick, a shadow ray and one more
@@ -273,15 +292,7 @@ fn the_ceiling_above_a_hanging_plate_is_not_lit_by_the_open_ceilings_records() {
 fn the_last_bounce_grid_keeps_the_indirect_light_for_fewer_rays() {
     const SEEDS: usize = 8;
     let dir = tempfile::tempdir().unwrap();
-    let scene = ceiling_room(dir.path());
-    let common = [
-        &["-x", "96", "-y", "96", "-ab", "2", "-ad", "256", "--threads", "2"][..],
-        &LOOK_UP[..],
-    ]
-    .concat();
-    let (brute, _) = render_to(dir.path(), &scene, "brute", &[&common[..], &["-aa", "0"]].concat());
-    let indirect = |image: &ImageData| mean(&rgb(image, "indirect").concat());
-    let truth = indirect(&brute);
+    let (scene, common, truth) = ceiling_room_looking_up(dir.path(), "2");
     let kinds = |rays: &Value| rays["ambient"].as_u64().unwrap() + rays["shadow"].as_u64().unwrap();
     let mut per_record_by_method = Vec::new();
     for deep in ["paths", "grid"] {
@@ -306,7 +317,7 @@ fn the_last_bounce_grid_keeps_the_indirect_light_for_fewer_rays() {
             rays += kinds(&stats["rays"]);
             records_rays += kinds(&stats["rays"]) - grid_rays - lookups;
             records += stats["records_computed"].as_u64().unwrap();
-            biases.push(indirect(&image) / truth - 1.0);
+            biases.push(indirect_mean(&image) / truth - 1.0);
         }
         let bias = biases.iter().sum::<f64>() / SEEDS as f64;
         let per_record = records_rays as f64 / records as f64;
@@ -347,15 +358,7 @@ fn the_last_bounce_grid_keeps_the_indirect_light_for_fewer_rays() {
 fn at_one_bounce_the_grid_answers_the_hits_direct_light_with_fewer_shadow_rays() {
     const SEEDS: usize = 4;
     let dir = tempfile::tempdir().unwrap();
-    let scene = ceiling_room(dir.path());
-    let common = [
-        &["-x", "96", "-y", "96", "-ab", "1", "-ad", "256", "--threads", "2"][..],
-        &LOOK_UP[..],
-    ]
-    .concat();
-    let (brute, _) = render_to(dir.path(), &scene, "brute", &[&common[..], &["-aa", "0"]].concat());
-    let indirect = |image: &ImageData| mean(&rgb(image, "indirect").concat());
-    let truth = indirect(&brute);
+    let (scene, common, truth) = ceiling_room_looking_up(dir.path(), "1");
     let count = |rays: &Value, kind: &str| rays[kind].as_u64().unwrap();
     let mut shadow_by_method = Vec::new();
     for deep in ["paths", "grid"] {
@@ -375,7 +378,7 @@ fn at_one_bounce_the_grid_answers_the_hits_direct_light_with_fewer_shadow_rays()
             let lookups = stats["lookups"].as_u64().unwrap();
             hemisphere += count(rays, "ambient") - count(grid, "ambient") - lookups;
             shadow += count(rays, "shadow") - count(grid, "shadow");
-            bias += (indirect(&image) / truth - 1.0) / SEEDS as f64;
+            bias += (indirect_mean(&image) / truth - 1.0) / SEEDS as f64;
         }
         let per_ray = shadow as f64 / hemisphere as f64;
         println!(

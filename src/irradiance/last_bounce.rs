@@ -561,16 +561,22 @@ mod tests {
         assert_eq!(cell_side(300.0, [Vec3::NAN, Vec3::INFINITY]), 300.0 / CELLS_PER_SIZE);
     }
 
-    #[test]
-    fn reading_own_cells_leaves_a_sparse_cell_unanswered() {
-        // The same samples as `a_sparse_cell_reads_the_coarser_cell_around_it`: the cells with
-        // enough samples answer alike, the sparse one and an empty one not at all.
+    /// Enough samples in the 2x2x2 block [0, 2)^3 (y in [0.5, 2.5): the lattice lies half a
+    /// cell behind surfaces facing +y), each unit cell too few alone but two.
+    fn two_full_cells_and_a_sparse_one() -> Vec<GridSample> {
         let mut samples: Vec<_> = (0..MIN_SAMPLES)
             .map(|_| at(Vec3::new(0.5, 1.0, 0.5), Vec3::Y, 4.0))
             .collect();
         samples.extend((0..MIN_SAMPLES).map(|_| at(Vec3::new(1.5, 2.0, 1.5), Vec3::Y, 0.0)));
         samples.push(at(Vec3::new(1.5, 1.0, 0.5), Vec3::Y, 2.0));
-        let grid = LastBounceGrid::from_samples(1.0, samples, Reads::OwnCell);
+        samples
+    }
+
+    #[test]
+    fn reading_own_cells_leaves_a_sparse_cell_unanswered() {
+        // The cells with enough samples answer as with coarser cells read too, the sparse one
+        // and an empty one not at all.
+        let grid = LastBounceGrid::from_samples(1.0, two_full_cells_and_a_sparse_one(), Reads::OwnCell);
         let read = |p: Vec3| grid.lookup(p, Vec3::Y).map(|l| l.indirect);
         assert_eq!(read(Vec3::new(0.4, 0.9, 0.4)), Some(Vec3::splat(4.0)));
         assert_eq!(read(Vec3::new(1.4, 1.9, 1.4)), Some(Vec3::splat(0.0)));
@@ -581,14 +587,7 @@ mod tests {
 
     #[test]
     fn a_sparse_cell_reads_the_coarser_cell_around_it() {
-        // Enough samples in the 2x2x2 block [0, 2)^3 (y in [0.5, 2.5): the lattice lies half a
-        // cell behind surfaces facing +y), each unit cell too few alone but one.
-        let mut samples: Vec<_> = (0..MIN_SAMPLES)
-            .map(|_| at(Vec3::new(0.5, 1.0, 0.5), Vec3::Y, 4.0))
-            .collect();
-        samples.extend((0..MIN_SAMPLES).map(|_| at(Vec3::new(1.5, 2.0, 1.5), Vec3::Y, 0.0)));
-        samples.push(at(Vec3::new(1.5, 1.0, 0.5), Vec3::Y, 2.0));
-        let grid = LastBounceGrid::from_samples(1.0, samples, Reads::CoarserToo);
+        let grid = LastBounceGrid::from_samples(1.0, two_full_cells_and_a_sparse_one(), Reads::CoarserToo);
         assert_eq!(
             grid.lookup(Vec3::new(0.4, 0.9, 0.4), Vec3::Y).map(|l| l.indirect),
             Some(Vec3::splat(4.0))
