@@ -386,6 +386,39 @@ def verdict_cell(name, rows, metric, peer_names, ours_name):
     return f"above from {losing_from:.2f} s, {ratio:.2f}x at {at:.2f} s"
 
 
+def time_ratio(rows, metric, clock, peer_names, ours_name="icrender", horizon=30.0):
+    """Issue 58's measure, time at equal error: for each run on icrender's frontier from its
+    fastest to `horizon` seconds, its time over the time the fastest of `peer_names` takes to
+    reach the same error (log-log interpolated along each peer's frontier). Returns the worst
+    (largest) ratio with that run's time and error, or None. Where no peer run reached the error,
+    the peers' slowest run stands in for the time they would take: the ratio is then an upper
+    bound."""
+    ours = [r for r in frontier([r for r in rows if r["renderer"] == ours_name], metric, clock)
+            if r[clock] <= horizon]
+    peers = [frontier([r for r in rows if r["renderer"] == p], metric, clock) for p in peer_names]
+    peers = [rs for rs in peers if rs]
+    if not ours or not peers:
+        return None
+    slowest = max(r[clock] for rs in peers for r in rs)
+    worst = None
+    for run in ours:
+        reach = [t for t in (interpolate_time(rs, run[metric], metric, clock) for rs in peers) if t]
+        ratio = run[clock] / (min(reach) if reach else slowest)
+        if worst is None or ratio > worst[0]:
+            worst = (ratio, run[clock], run[metric], bool(reach))
+    return worst
+
+
+def time_ratio_cell(rows, metric, peer_names):
+    """One cell of the third table: the worst time ratio (CPU time over the cores) and where."""
+    worst = time_ratio(rows, metric, "core_seconds", peer_names)
+    if worst is None:
+        return "not measured"
+    ratio, at, error, reached = worst
+    bound = "" if reached else " (at most: no peer run reached it)"
+    return f"{ratio:.2f}x{bound} at {at:.2f} s ({error:.1e})"
+
+
 # The page that holds the two tables, between these markers (the rest of the page is prose).
 TABLES_PAGE = os.path.join(common.ROOT, "docs", "benchmarks.md")
 TABLES_BEGIN = "<!-- peers-tables:begin -->"
@@ -406,8 +439,10 @@ def write_tables(page, tables):
 
 
 def tables_markdown(plots):
-    """docs/benchmarks.md's two tables of verdicts (issue 18's against the peers, issue 21's of the
-    denoised curve), from the CSVs in `plots`, as Markdown."""
+    """docs/benchmarks.md's three tables (issue 18's verdicts against the peers, issue 21's of the
+    denoised curve, issue 58's time at equal error), from the CSVs in `plots`, as Markdown."""
+    third = ["| scene, view | relMSE: time over the best peer's, worst | 4x4 relMSE: time over the best peer's, "
+             "worst |", "|---|---|---|"]
     first = ["| scene, view | relMSE vs raw path tracers | relMSE vs every peer | 4x4 relMSE vs raw | "
              "4x4 relMSE vs every peer |", "|---|---|---|---|---|"]
     second = ["| scene, view | relMSE vs icrender raw | relMSE vs Cycles + OIDN | 4x4 relMSE vs icrender raw | "
@@ -421,7 +456,10 @@ def tables_markdown(plots):
                     for metric in ("relmse", "relmse_4x4") for peers in (("icrender",), ("cycles+oidn",))]
         first.append(f"| {title} | " + " | ".join(against_peers) + " |")
         second.append(f"| {title} | " + " | ".join(denoised) + " |")
-    return "\n".join(first) + "\n\n" + "\n".join(second)
+        every_peer = ("mitsuba", "cycles", "cycles+oidn")
+        third.append(f"| {title} | " + " | ".join(time_ratio_cell(rows, metric, every_peer)
+                                                  for metric in ("relmse", "relmse_4x4")) + " |")
+    return "\n".join(first) + "\n\n" + "\n".join(second) + "\n\n" + "\n".join(third)
 
 
 def plot(name, cfg, rows, path):
@@ -474,7 +512,7 @@ def main():
     parser.add_argument("--report-only", action="store_true",
                         help="re-read docs/peers/peers-SCENE.csv, print the targets and redraw the plot")
     parser.add_argument("--tables", action="store_true",
-                        help="write the two tables of verdicts from docs/peers/*.csv (all six views) into "
+                        help="write the three tables (verdicts and time at equal error) from docs/peers/*.csv (all six views) into "
                              "docs/benchmarks.md, print them, and stop")
     parser.add_argument("--no-denoise", action="store_true", help="no icrender+oidn curve (icrender --denoise)")
     parser.add_argument("--denoise-quality", default="fast", choices=("fast", "balanced", "high"),

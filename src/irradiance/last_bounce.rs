@@ -53,7 +53,21 @@ pub fn cell_side(scene_size: f32, positions: impl IntoIterator<Item = Vec3>) -> 
         true => spanned.min(scene_size),
         false => scene_size,
     };
-    size.max(f32::MIN_POSITIVE) / CELLS_PER_SIZE
+    snapped(size.max(f32::MIN_POSITIVE) / CELLS_PER_SIZE)
+}
+
+/// Steps of the cells' side per octave (`snapped`): 1.1 % apart.
+const SIDE_STEPS_PER_OCTAVE: f32 = 64.0;
+
+/// `side` moved to the nearest of the sizes 1/64 of an octave apart (2^(k/64), at most 0.55 %
+/// away): the samples' box, and so the side, moves by a rounding when the same surfaces are
+/// placed another way (an instance's hits are intersected in its own space), and every cell
+/// boundary with it, so two renders that should agree to a rounding read different cells
+/// everywhere (tests/instancing.rs, the instances far from the origin: the indirect layer's
+/// means 1.6e-4 apart). On the steps only a side within a rounding of a step's midpoint tips.
+fn snapped(side: f32) -> f32 {
+    let steps = (SIDE_STEPS_PER_OCTAVE * side.log2()).round();
+    (steps / SIDE_STEPS_PER_OCTAVE).exp2()
 }
 
 /// Most pixels that start sites: a larger image starts them on a sparser lattice
@@ -551,14 +565,24 @@ mod tests {
     #[test]
     fn cells_are_sized_by_what_the_samples_span_at_most_the_scene() {
         // Samples in a room of diagonal 3 (a 1 x 2 x 2 box) in a scene of diagonal 300.
+        // Sides are snapped to 1/64 octaves: within 0.55 % of the size over CELLS_PER_SIZE.
+        let near = |side: f32, size: f32| {
+            let ratio = side / (size / CELLS_PER_SIZE);
+            let steps = SIDE_STEPS_PER_OCTAVE * side.log2();
+            ratio > 0.9945 && ratio < 1.0055 && (steps - steps.round()).abs() < 1e-3
+        };
         let room = [Vec3::ZERO, Vec3::new(1.0, 2.0, 2.0), Vec3::new(0.5, 1.0, 0.2)];
-        assert!((cell_side(300.0, room) - 3.0 / CELLS_PER_SIZE).abs() < 1e-6);
+        assert!(near(cell_side(300.0, room), 3.0));
         // Samples wider than the scene's box (a point past it by a rounding): the scene's.
-        assert_eq!(cell_side(2.0, room), 2.0 / CELLS_PER_SIZE);
+        assert_eq!(cell_side(2.0, room), cell_side(2.0, []));
+        assert!(near(cell_side(2.0, []), 2.0));
         // No samples, one, or none finite: the scene's.
-        assert_eq!(cell_side(300.0, []), 300.0 / CELLS_PER_SIZE);
-        assert_eq!(cell_side(300.0, [Vec3::ONE]), 300.0 / CELLS_PER_SIZE);
-        assert_eq!(cell_side(300.0, [Vec3::NAN, Vec3::INFINITY]), 300.0 / CELLS_PER_SIZE);
+        assert!(near(cell_side(300.0, []), 300.0));
+        assert_eq!(cell_side(300.0, [Vec3::ONE]), cell_side(300.0, []));
+        assert_eq!(cell_side(300.0, [Vec3::NAN, Vec3::INFINITY]), cell_side(300.0, []));
+        // A box moved by roundings gives the same side.
+        let moved = room.map(|p| p * (1.0 + 3e-7) + Vec3::splat(1e-6));
+        assert_eq!(cell_side(300.0, moved), cell_side(300.0, room));
     }
 
     /// Enough samples in the 2x2x2 block [0, 2)^3 (y in [0.5, 2.5): the lattice lies half a
