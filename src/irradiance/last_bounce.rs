@@ -126,11 +126,11 @@ struct LevelMeans {
 
 impl LevelMeans {
     /// The means of `samples` in cells of side `cell` and its coarser levels (`levels` in all,
-    /// at most `LEVELS`), summed in the order given; cells with fewer than `MIN_SAMPLES` are
+    /// at most `LEVELS`), summed in the order given; cells with fewer than `least` samples are
     /// left out, and non-finite samples. With one level no finest cell's keys are kept (no
     /// coarser level is searched): building the grid is serial, and at -ab 1 (four samples a
     /// site) the levels a lookup never reads were 1.5 % of the render's samples (perf).
-    fn of(cell: f32, samples: impl IntoIterator<Item = GridSample>, levels: usize) -> LevelMeans {
+    fn of(cell: f32, samples: impl IntoIterator<Item = GridSample>, levels: usize, least: u32) -> LevelMeans {
         type Sums = HashMap<CellKey, (DVec3, DVec3, u32), BuildHasherDefault<KeyHasher>>;
         let mut sums: Vec<Sums> = (0..levels.clamp(1, LEVELS)).map(|_| Sums::default()).collect();
         let mut ancestors: HashMap<CellKey, [CellKey; LEVELS], BuildHasherDefault<KeyHasher>> = HashMap::default();
@@ -159,7 +159,7 @@ impl LevelMeans {
             .into_iter()
             .map(|sums| {
                 sums.into_iter()
-                    .filter(|(_, (_, _, n))| *n >= MIN_SAMPLES)
+                    .filter(|(_, (_, _, n))| *n >= least)
                     .map(|(key, (direct, indirect, n))| {
                         let mean = |sum: DVec3| (sum / n as f64).as_vec3();
                         let received = Received {
@@ -210,8 +210,13 @@ pub enum Reads {
     /// one shadow ray (-ab 1, the grid holding direct light alone), a coarser cell's blur is
     /// not worth saving it. Measured (8 Dec, conference room 168x128, -ab 1, 10 seeds against
     /// brute force): with coarser cells too the indirect layer's relMSE 2.66e-3 (median), the
-    /// finest alone 2.35e-3, no grid 2.33e-3.
-    OwnCell,
+    /// finest alone 2.35e-3, no grid 2.33e-3. Each sample is the mean of `draws` draws taken at
+    /// its point (a site's direct light samples), and a cell answers from `MIN_SAMPLES` draws:
+    /// one sample a site instead of one a draw holds the same means in a quarter of the memory
+    /// (a region task of a 20000x20000 frame, whose grid is the whole frame's, peaked at
+    /// 184 MiB with a sample a draw and 149 MiB with one a site, against 131 MiB for a 32x32
+    /// image, tests/regions.rs; the images agree within 2e-6, the order of the sums apart).
+    OwnCell { draws: u32 },
 }
 
 /// One sample of the light a surface at the last bounce's level receives: where it was taken,
@@ -227,15 +232,15 @@ impl LastBounceGrid {
     /// The grid with finest cells of side `cell` from `samples`, summed in the order given;
     /// cells with fewer than `MIN_SAMPLES` are left out. Non-finite samples are dropped.
     pub fn from_samples(cell: f32, samples: impl IntoIterator<Item = GridSample>, reads: Reads) -> LastBounceGrid {
-        let levels_read = match reads {
-            Reads::CoarserToo => LEVELS,
-            Reads::OwnCell => 1,
+        let (levels_read, least) = match reads {
+            Reads::CoarserToo => (LEVELS, MIN_SAMPLES),
+            Reads::OwnCell { draws } => (1, MIN_SAMPLES.div_ceil(draws.max(1))),
         };
         let LevelMeans {
             mut levels,
             ancestors,
             samples,
-        } = LevelMeans::of(cell, samples, levels_read);
+        } = LevelMeans::of(cell, samples, levels_read, least);
         if levels_read == 1 {
             let finest = levels.remove(0);
             return LastBounceGrid {
@@ -527,7 +532,7 @@ mod tests {
             }
         }
         let grid = LastBounceGrid::from_samples(0.25, samples.iter().copied(), Reads::CoarserToo);
-        let means = LevelMeans::of(0.25, samples.iter().copied(), LEVELS);
+        let means = LevelMeans::of(0.25, samples.iter().copied(), LEVELS, MIN_SAMPLES);
         let by_levels = |p: Vec3, n: Vec3| means.search(0.25, p, n);
         let mut answered = [0; 2];
         for k in 0..20_000 {
@@ -600,13 +605,21 @@ mod tests {
     fn reading_own_cells_leaves_a_sparse_cell_unanswered() {
         // The cells with enough samples answer as with coarser cells read too, the sparse one
         // and an empty one not at all.
-        let grid = LastBounceGrid::from_samples(1.0, two_full_cells_and_a_sparse_one(), Reads::OwnCell);
+        let grid = LastBounceGrid::from_samples(1.0, two_full_cells_and_a_sparse_one(), Reads::OwnCell { draws: 1 });
         let read = |p: Vec3| grid.lookup(p, Vec3::Y).map(|l| l.indirect);
         assert_eq!(read(Vec3::new(0.4, 0.9, 0.4)), Some(Vec3::splat(4.0)));
         assert_eq!(read(Vec3::new(1.4, 1.9, 1.4)), Some(Vec3::splat(0.0)));
         assert_eq!(read(Vec3::new(1.5, 1.0, 0.5)), None);
         assert_eq!(read(Vec3::new(0.5, 1.9, 1.5)), None);
         assert_eq!(grid.cells(), 2);
+        // Samples that each stand for 4 draws: two make a cell's mean, one does not.
+        let p = Vec3::new(0.5, 1.0, 0.5);
+        let pair = [at(p, Vec3::Y, 1.0), at(p, Vec3::Y, 3.0)];
+        let grid = LastBounceGrid::from_samples(1.0, pair, Reads::OwnCell { draws: 4 });
+        let near = Vec3::new(0.4, 0.9, 0.4);
+        assert_eq!(grid.lookup(near, Vec3::Y).map(|l| l.indirect), Some(Vec3::splat(2.0)));
+        let grid = LastBounceGrid::from_samples(1.0, [pair[0]], Reads::OwnCell { draws: 4 });
+        assert_eq!(grid.lookup(near, Vec3::Y), None);
     }
 
     #[test]

@@ -88,7 +88,9 @@ impl Integrator<'_> {
     /// grid holds direct light alone, else coarser cells too.
     pub fn last_bounce_reads(&self) -> Reads {
         match self.grid_holds_direct_alone() {
-            true => Reads::OwnCell,
+            true => Reads::OwnCell {
+                draws: DIRECT_SAMPLES_PER_SITE,
+            },
             false => Reads::CoarserToo,
         }
     }
@@ -169,22 +171,33 @@ impl Integrator<'_> {
                 albedo_chain: false,
                 spread: 0.0,
             };
-            let (per_site, direct_alone) = match self.grid_holds_direct_alone() {
-                true => (DIRECT_SAMPLES_PER_SITE, true),
-                false => (SAMPLES_PER_SITE, false),
-            };
-            for _ in 0..per_site {
-                let indirect = match direct_alone {
-                    true => self.options.ambient_value,
-                    false => self.brute_force_ambient(&hit, state, &mut rng, counts),
-                };
-                let strata = LightStrata::alone(1, &mut rng);
-                let direct = direct_light(self, &hit, hit.normal, &WHITE, strata, &mut rng, counts).total();
+            if self.grid_holds_direct_alone() {
+                // Direct light alone: the site's draws, averaged into one sample that stands for
+                // all of them (`Reads::OwnCell`).
+                let mut direct = Vec3::ZERO;
+                for _ in 0..DIRECT_SAMPLES_PER_SITE {
+                    let strata = LightStrata::alone(1, &mut rng);
+                    direct += direct_light(self, &hit, hit.normal, &WHITE, strata, &mut rng, counts).total();
+                }
                 out.push(GridSample {
                     position: hit.position,
                     normal: hit.normal,
-                    received: Received { direct, indirect },
+                    received: Received {
+                        direct: direct / DIRECT_SAMPLES_PER_SITE as f32,
+                        indirect: self.options.ambient_value,
+                    },
                 });
+            } else {
+                for _ in 0..SAMPLES_PER_SITE {
+                    let indirect = self.brute_force_ambient(&hit, state, &mut rng, counts);
+                    let strata = LightStrata::alone(1, &mut rng);
+                    let direct = direct_light(self, &hit, hit.normal, &WHITE, strata, &mut rng, counts).total();
+                    out.push(GridSample {
+                        position: hit.position,
+                        normal: hit.normal,
+                        received: Received { direct, indirect },
+                    });
+                }
             }
             if let Some(memory) = memory {
                 memory.keep(key, hit.position, hit.normal, &out[first_sample..], &rng);
