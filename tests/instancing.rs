@@ -240,19 +240,7 @@ fn channels(layer: &str) -> Vec<String> {
 /// most 0.14 %). So the indirect layer may differ by more than 0.1 % in at most 0.5 % of its
 /// values, and by at most 3 % anywhere.
 fn assert_same_image(instanced: &ImageData, flattened: &ImageData, what: &str) {
-    for layer in ["emission", "direct", "indirect", "", "albedo", "normal", "depth"] {
-        let d = difference(instanced, flattened, &channels(layer));
-        println!(
-            "{what}, layer '{layer}': worst {:.2e}, {:.3} % above 1e-4, means {:.2e}",
-            d.worst,
-            100.0 * d.share_above,
-            d.means
-        );
-        assert!(
-            d.means < 1e-4,
-            "{what}: layer '{layer}' means differ by {:.2e}",
-            d.means
-        );
+    for (layer, d) in same_means_by_layer(instanced, flattened, what) {
         if layer == "indirect" {
             assert!(d.worst < 3e-2, "{what}: indirect differs by {:.2e}", d.worst);
             let loose = difference_above(instanced, flattened, &channels(layer), 1e-3);
@@ -319,20 +307,30 @@ fn assert_same_means_with_the_grid(dir: &Path, scene: &Path, offset: [f64; 3], w
     );
     let f = [&a[..], &["--flatten"]].concat();
     let (flattened, _) = render_to(dir, scene, &format!("{what}-grid-flattened"), &f);
-    for layer in ["emission", "direct", "indirect", "", "albedo", "normal", "depth"] {
-        let d = difference(&instanced, &flattened, &channels(layer));
-        println!(
-            "{what} with the grid, layer '{layer}': worst {:.2e}, {:.3} % above 1e-4, means {:.2e}",
-            d.worst,
-            100.0 * d.share_above,
-            d.means
-        );
-        assert!(
-            d.means < 1e-4,
-            "{what} with the grid: layer '{layer}' means differ by {:.2e}",
-            d.means
-        );
-    }
+    same_means_by_layer(&instanced, &flattened, &format!("{what} with the grid"));
+}
+
+/// Every layer's difference between the two images, printed, each layer's means within 1e-4.
+fn same_means_by_layer(instanced: &ImageData, flattened: &ImageData, what: &str) -> Vec<(&'static str, Difference)> {
+    let layers = ["emission", "direct", "indirect", "", "albedo", "normal", "depth"];
+    layers
+        .into_iter()
+        .map(|layer| {
+            let d = difference(instanced, flattened, &channels(layer));
+            println!(
+                "{what}, layer '{layer}': worst {:.2e}, {:.3} % above 1e-4, means {:.2e}",
+                d.worst,
+                100.0 * d.share_above,
+                d.means
+            );
+            assert!(
+                d.means < 1e-4,
+                "{what}: layer '{layer}' means differ by {:.2e}",
+                d.means
+            );
+            (layer, d)
+        })
+        .collect()
 }
 
 /// Far from glTF's origin (map coordinates) the instances are placed relative to the tracing
