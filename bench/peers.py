@@ -402,7 +402,7 @@ def time_ratio(rows, metric, clock, peer_names, ours_name="icrender", horizon=30
     slowest = max(r[clock] for rs in peers for r in rs)
     worst = None
     for run in ours:
-        reach = [t for t in (interpolate_time(rs, run[metric], metric, clock) for rs in peers) if t]
+        reach = [t for t in (interpolate_time(rs, run[metric], metric, clock) for rs in peers) if t is not None]
         ratio = run[clock] / (min(reach) if reach else slowest)
         if worst is None or ratio > worst[0]:
             worst = (ratio, run[clock], run[metric], bool(reach))

@@ -229,8 +229,9 @@ pub struct GridSample {
 }
 
 impl LastBounceGrid {
-    /// The grid with finest cells of side `cell` from `samples`, summed in the order given;
-    /// cells with fewer than `MIN_SAMPLES` are left out. Non-finite samples are dropped.
+    /// The grid with finest cells of side `cell` from `samples`, summed in the order given,
+    /// read as `reads` says; cells with fewer than `MIN_SAMPLES` draws are left out (a sample is
+    /// one draw but where `Reads::OwnCell` says). Non-finite samples are dropped.
     pub fn from_samples(cell: f32, samples: impl IntoIterator<Item = GridSample>, reads: Reads) -> LastBounceGrid {
         let (levels_read, least) = match reads {
             Reads::CoarserToo => (LEVELS, MIN_SAMPLES),

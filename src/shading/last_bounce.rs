@@ -19,13 +19,14 @@ use glam::Vec3;
 /// (-ab 2, 320x240): see `irradiance::last_bounce`.
 pub const SAMPLES_PER_SITE: u32 = 2;
 
-/// Samples taken at each site where the grid holds direct light alone (-ab 1): each is one
-/// light pick and shadow ray, no path, so a site's point takes more of them. Measured (8 Dec,
+/// Draws of direct light taken at each site where the grid holds direct light alone (-ab 1),
+/// kept as one sample, their mean: each draw is one light pick and shadow ray, no path, so a
+/// site's point takes more of them than the samples of -ab 2. Measured (8 Dec, one sample a draw,
 /// -ab 1 against brute force, 10 seeds, the grid reading own cells): conference room 168x128
 /// indirect bias +0.51 % (sd 0.58) with 2, +0.26 % (sd 0.40) with 4, +0.16 % (sd 0.48) with 8,
 /// no grid +0.34 % (sd 0.66), relMSE 2.33-2.36e-3 in all four; 512x384 renders 4.57 s with 4
 /// against 4.81 s with 8.
-pub const DIRECT_SAMPLES_PER_SITE: u32 = 4;
+pub const DIRECT_DRAWS_PER_SITE: u32 = 4;
 
 /// -ad from which every pixel starts two sites instead of one (`sites_per_pixel`).
 const TWO_SITES_FROM_DIVISIONS: u32 = 256;
@@ -89,7 +90,7 @@ impl Integrator<'_> {
     pub fn last_bounce_reads(&self) -> Reads {
         match self.grid_holds_direct_alone() {
             true => Reads::OwnCell {
-                draws: DIRECT_SAMPLES_PER_SITE,
+                draws: DIRECT_DRAWS_PER_SITE,
             },
             false => Reads::CoarserToo,
         }
@@ -175,7 +176,7 @@ impl Integrator<'_> {
                 // Direct light alone: the site's draws, averaged into one sample that stands for
                 // all of them (`Reads::OwnCell`).
                 let mut direct = Vec3::ZERO;
-                for _ in 0..DIRECT_SAMPLES_PER_SITE {
+                for _ in 0..DIRECT_DRAWS_PER_SITE {
                     let strata = LightStrata::alone(1, &mut rng);
                     direct += direct_light(self, &hit, hit.normal, &WHITE, strata, &mut rng, counts).total();
                 }
@@ -183,7 +184,7 @@ impl Integrator<'_> {
                     position: hit.position,
                     normal: hit.normal,
                     received: Received {
-                        direct: direct / DIRECT_SAMPLES_PER_SITE as f32,
+                        direct: direct / DIRECT_DRAWS_PER_SITE as f32,
                         indirect: self.options.ambient_value,
                     },
                 });
